@@ -1,0 +1,85 @@
+"""The agent's end of the world link: liveliness, attach, sensor frames, commands.
+
+A `WorldLink` declares the agent's liveliness token, subscribes to its own sensor frames
+("latest wins": a ring of one, so a slow agent always acts on the newest frame), attaches
+by id (retrying until a world answers) and publishes commands. It holds no agent logic;
+the scripted test controller and the agent process both drive a body through it.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+
+import zenoh
+
+from protocol import keys
+from protocol.codec import ProtocolError, decode, encode
+from protocol.messages import AgentCommand, Hello, SensorFrame, Welcome
+
+
+class AttachError(RuntimeError):
+    """No world answered the attach request in time."""
+
+
+class WorldLink:
+    def __init__(self, session: zenoh.Session, world_id: str, agent_id: str):
+        self.session, self.world_id, self.agent_id = session, world_id, agent_id
+        self.bad_frames = 0
+        self._frames = threading.Condition()
+        self._latest: SensorFrame | None = None
+        self._token = session.liveliness().declare_token(keys.agent_token(world_id, agent_id))
+        self._sub = session.declare_subscriber(keys.sensors(world_id, agent_id), self._on_frame)
+        self._pub = session.declare_publisher(keys.command(world_id, agent_id), express=True)
+
+    def _on_frame(self, sample: zenoh.Sample) -> None:
+        try:
+            frame = decode(sample.payload.to_bytes(), SensorFrame)
+        except ProtocolError:
+            self.bad_frames += 1
+            return
+        with self._frames:
+            if self._latest is None or frame.tick >= self._latest.tick:
+                self._latest = frame
+            self._frames.notify_all()
+
+    def attach(self, timeout: float = 10.0, retry: float = 0.05) -> Welcome:
+        """Ask the world for this agent's body; retry until it answers or `timeout` passes."""
+        hello = encode(Hello(self.agent_id, os.getpid()))
+        deadline = time.monotonic() + timeout
+        last_error = "no world answered"
+        while time.monotonic() < deadline:
+            for reply in self.session.get(keys.attach(self.world_id, self.agent_id), payload=hello,
+                                          timeout=min(1.0, max(deadline - time.monotonic(), 0.05))):
+                if reply.ok is not None:
+                    try:
+                        return decode(reply.ok.payload.to_bytes(), Welcome)
+                    except ProtocolError as exc:
+                        last_error = f"bad Welcome: {exc}"
+                else:
+                    last_error = reply.err.payload.to_bytes().decode(errors="replace")
+            time.sleep(retry)
+        raise AttachError(f"agent {self.agent_id} could not attach to world {self.world_id}: {last_error}")
+
+    def next_frame(self, after_tick: int = -1, timeout: float = 5.0) -> SensorFrame | None:
+        """The newest frame with tick > `after_tick`, waiting up to `timeout`; None if none came."""
+        deadline = time.monotonic() + timeout
+        with self._frames:
+            while self._latest is None or self._latest.tick <= after_tick:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    return None
+                self._frames.wait(remaining)
+            return self._latest
+
+    def send(self, tick: int, speed: float = 0.0, turn: float = 0.0, action: str = "none") -> None:
+        self._pub.put(encode(AgentCommand(self.agent_id, tick, speed, turn, action)))
+
+    def close(self) -> None:
+        """Undeclare everything; the world sees the token go and stops this body."""
+        for entity in (self._pub, self._sub, self._token):
+            try:
+                entity.undeclare()
+            except Exception:  # the session may be closing already
+                pass

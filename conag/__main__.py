@@ -1,0 +1,5 @@
+"""`python -m conag ...` is the same as the `conag` console script."""
+
+from conag.cli import main
+
+raise SystemExit(main())

@@ -1,0 +1,67 @@
+"""How every ConAg process opens its zenoh session.
+
+One host, no server to install (the default): the world listens on DEFAULT_ENDPOINT in
+peer mode and every other process connects to it as a peer, listening on a free
+loopback port so that peers can also reach each other (gossip scouting, no multicast).
+Several hosts: pass `--zenoh-config deploy/multi-host/client.json5` (or `--connect
+tcp/ROUTER:7447 --mode client`) to every process and run a zenoh router.
+Sessions are opened inside the process that uses them, never before a fork.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+
+DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+MODES = ("peer", "client", "router")
+
+
+@dataclass(frozen=True)
+class BusOptions:
+    """What the command line says about the bus; `None` means the role's default."""
+
+    zenoh_config: str | None = None
+    connect: tuple[str, ...] = ()
+    listen: tuple[str, ...] = ()
+    mode: str | None = None
+
+
+def make_config(opts: BusOptions, *, serve: bool = False):
+    """A zenoh.Config for a process; `serve` is True for the world (it listens by default)."""
+    import zenoh
+
+    if opts.zenoh_config:
+        config = zenoh.Config.from_file(opts.zenoh_config)
+        if opts.connect:
+            config.insert_json5("connect/endpoints", json.dumps(list(opts.connect)))
+        if opts.listen:
+            config.insert_json5("listen/endpoints", json.dumps(list(opts.listen)))
+        if opts.mode:
+            config.insert_json5("mode", json.dumps(opts.mode))
+        return config
+    mode = opts.mode or "peer"
+    if mode not in MODES:
+        raise ValueError(f"unknown zenoh mode {mode!r}; expected one of {', '.join(MODES)}")
+    if serve:
+        listen = list(opts.listen) or ([] if opts.connect else [DEFAULT_ENDPOINT])
+        connect = list(opts.connect)
+    else:
+        listen = list(opts.listen) or (["tcp/127.0.0.1:0"] if mode == "peer" else [])
+        connect = list(opts.connect) or [DEFAULT_ENDPOINT]
+    config = zenoh.Config()
+    config.insert_json5("mode", json.dumps(mode))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    config.insert_json5("listen/endpoints", json.dumps(listen))
+    config.insert_json5("connect/endpoints", json.dumps(connect))
+    if mode == "client":
+        config.insert_json5("listen/endpoints", "[]")
+    return config
+
+
+def open_session(opts: BusOptions, *, serve: bool = False):
+    """Open a zenoh session (quiet logs unless RUST_LOG says otherwise)."""
+    import zenoh
+
+    zenoh.init_log_from_env_or("error")
+    return zenoh.open(make_config(opts, serve=serve))

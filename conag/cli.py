@@ -1,0 +1,257 @@
+"""The `conag` command line: one console script, one subcommand per thing a user does.
+
+    conag world SCENARIO      serve a world (loopback peer mode by default)
+    conag status              print what a running world reports
+    conag perturb OP ...      remove, add or move a disc in a running world
+    conag render SCENARIO     draw a scenario as a bird's-eye PNG
+    conag router              run a zenoh router (for several hosts)
+
+Every process that touches the bus takes --zenoh-config FILE, --connect ENDPOINT,
+--listen ENDPOINT and --mode. Ctrl-C and SIGTERM stop a process cleanly.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import signal
+import sys
+import threading
+import time
+from contextlib import contextmanager
+from dataclasses import asdict
+
+from conag.bus import MODES, BusOptions, open_session
+
+EXIT_USAGE = 2
+
+
+def _bus_args(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("bus")
+    g.add_argument("--zenoh-config", metavar="FILE", help="a zenoh JSON5 configuration file")
+    g.add_argument("--connect", metavar="ENDPOINT", action="append", default=[],
+                   help="zenoh endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)")
+    g.add_argument("--listen", metavar="ENDPOINT", action="append", default=[],
+                   help="zenoh endpoint to listen on (repeatable)")
+    g.add_argument("--mode", choices=MODES, help="zenoh mode (default peer)")
+    g.add_argument("--world-id", default="w0", help="which world on the bus (default w0)")
+
+
+def _bus(args) -> BusOptions:
+    return BusOptions(args.zenoh_config, tuple(args.connect), tuple(args.listen), args.mode)
+
+
+@contextmanager
+def _stop_on_signals():
+    """An Event set by SIGINT or SIGTERM, so loops finish their tick and close the session."""
+    stop = threading.Event()
+
+    def handler(signum, _frame):
+        stop.set()
+
+    previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield stop
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
+
+
+def _status_line(st) -> str:
+    return (f"tick {st.tick:>7}  sites {st.sites_filled}/{st.sites_total}  bricks {st.bricks_total}  "
+            f"agents alive {st.agents_alive}/{len(st.agent_ids)}  bad {st.bad_messages}"
+            + ("  COMPLETE" if st.completed else ""))
+
+
+def cmd_world(args) -> int:
+    import numpy as np
+
+    from world_server.scenario import load_scenario
+    from world_server.server import WorldServer
+    from world_server.world import World
+
+    scenario = load_scenario(args.scenario)
+    seed = scenario.seed if args.seed is None else args.seed
+    world = World(scenario, np.random.default_rng(seed), world_id=args.world_id)
+    on_status = None if args.quiet else (lambda st: print(_status_line(st), flush=True))
+    session = open_session(_bus(args), serve=True)
+    try:
+        with _stop_on_signals() as stop:
+            print(f"world {args.world_id}: {scenario.name} ({scenario.cols}x{scenario.rows} cells, "
+                  f"{len(world.sites_xy)} sites, {world.discs.bricks_total()} bricks), "
+                  f"{args.mode_tick or scenario.tick_mode} mode", flush=True)
+            server = WorldServer(world, session, mode=args.mode_tick, max_ticks=args.ticks,
+                                 stop_when_complete=args.stop_when_complete, on_status=on_status)
+            final = server.run(stop)
+    finally:
+        session.close()
+    print("final: " + _status_line(final), flush=True)
+    if args.summary:
+        with open(args.summary, "w", encoding="utf-8") as fh:
+            json.dump(asdict(final), fh, indent=2)
+    return 0
+
+
+def _query(session, key: str, payload: bytes | None, timeout: float):
+    replies = list(session.get(key, payload=payload, timeout=timeout))
+    for r in replies:
+        if r.ok is not None:
+            return r.ok.payload.to_bytes(), None
+        return None, r.err.payload.to_bytes().decode(errors="replace")
+    return None, None
+
+
+def cmd_status(args) -> int:
+    from protocol import keys
+    from protocol.codec import ProtocolError, decode
+    from protocol.messages import WorldStatus
+
+    def show(st):
+        print(json.dumps(asdict(st)) if args.json else _status_line(st), flush=True)
+
+    session = open_session(_bus(args))
+    try:
+        deadline = time.monotonic() + args.timeout
+        data = None
+        while data is None and time.monotonic() < deadline:
+            data, _ = _query(session, keys.status(args.world_id), None, min(1.0, args.timeout))
+        if data is None:
+            print(f"error: no world {args.world_id!r} answered within {args.timeout:g} s", file=sys.stderr)
+            return 1
+        try:
+            show(decode(data, WorldStatus))
+        except ProtocolError as exc:
+            print(f"error: the world sent a bad status: {exc}", file=sys.stderr)
+            return 1
+        if args.watch:
+            with _stop_on_signals() as stop:
+                sub = session.declare_subscriber(keys.status(args.world_id),
+                                                 lambda s: show(decode(s.payload.to_bytes(), WorldStatus)))
+                stop.wait()
+                sub.undeclare()
+        return 0
+    finally:
+        session.close()
+
+
+def _point(text: str) -> tuple[float, float]:
+    try:
+        x, y = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected X,Y (two numbers), got {text!r}") from None
+    return x, y
+
+
+def cmd_perturb(args) -> int:
+    from protocol import keys
+    from protocol.codec import ProtocolError, decode, encode
+    from protocol.messages import Perturbation, PerturbResult
+
+    if args.op == "move" and args.to is None:
+        print("error: move needs --to X,Y", file=sys.stderr)
+        return EXIT_USAGE
+    to = args.to or (0.0, 0.0)
+    msg = Perturbation(args.op, args.at[0], args.at[1], args.kind, to[0], to[1])
+    session = open_session(_bus(args))
+    try:
+        deadline = time.monotonic() + args.timeout
+        data = err = None
+        while data is None and err is None and time.monotonic() < deadline:
+            data, err = _query(session, keys.perturb(args.world_id), encode(msg), min(1.0, args.timeout))
+    finally:
+        session.close()
+    if err:
+        print(f"error: {err}", file=sys.stderr)
+        return 1
+    if data is None:
+        print(f"error: no world {args.world_id!r} answered within {args.timeout:g} s", file=sys.stderr)
+        return 1
+    try:
+        result = decode(data, PerturbResult)
+    except ProtocolError as exc:
+        print(f"error: bad reply: {exc}", file=sys.stderr)
+        return 1
+    print(f"tick {result.tick}: {result.message}")
+    return 0 if result.ok else 1
+
+
+def cmd_render(args) -> int:
+    from world_server.render import render_scenario
+    from world_server.scenario import load_scenario
+
+    out = render_scenario(load_scenario(args.scenario), args.out)
+    print(f"wrote {out}")
+    return 0
+
+
+def cmd_router(args) -> int:
+    opts = BusOptions(args.zenoh_config, tuple(args.connect),
+                      tuple(args.listen) or ("tcp/127.0.0.1:7447",), "router")
+    session = open_session(opts, serve=True)
+    try:
+        with _stop_on_signals() as stop:
+            print(f"zenoh router listening on {', '.join(opts.listen)}", flush=True)
+            stop.wait()
+    finally:
+        session.close()
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="conag", description="ConAg: agents that build structures from a blueprint.")
+    p.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    w = sub.add_parser("world", help="serve a world from a scenario file")
+    w.add_argument("scenario", help="scenario TOML file, e.g. scenarios/quick_wall.toml")
+    w.add_argument("--ticks", type=int, help="stop after this many ticks")
+    w.add_argument("--tick-mode", dest="mode_tick", choices=("lockstep", "realtime"),
+                   help="override the scenario's tick mode")
+    w.add_argument("--seed", type=int, help="override the scenario's seed")
+    w.add_argument("--stop-when-complete", action="store_true", help="stop once every site holds a brick")
+    w.add_argument("--summary", metavar="PATH", help="write the final status as JSON")
+    w.add_argument("--quiet", action="store_true", help="do not print periodic status lines")
+    _bus_args(w)
+    w.set_defaults(func=cmd_world)
+
+    s = sub.add_parser("status", help="print what a running world reports")
+    s.add_argument("--watch", action="store_true", help="keep printing each status update")
+    s.add_argument("--json", action="store_true", help="print the status as JSON")
+    s.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the world")
+    _bus_args(s)
+    s.set_defaults(func=cmd_status)
+
+    q = sub.add_parser("perturb", help="remove, add or move a disc in a running world")
+    q.add_argument("op", choices=("remove", "add", "move"))
+    q.add_argument("--at", type=_point, required=True, metavar="X,Y", help="world position (cell centres are at .5)")
+    q.add_argument("--to", type=_point, metavar="X,Y", help="target position for move")
+    q.add_argument("--kind", choices=("food", "water", "brick"), default="brick", help="kind for add")
+    q.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the world")
+    _bus_args(q)
+    q.set_defaults(func=cmd_perturb)
+
+    r = sub.add_parser("render", help="draw a scenario as a bird's-eye PNG")
+    r.add_argument("scenario")
+    r.add_argument("--out", default="world.png", help="output PNG path")
+    r.set_defaults(func=cmd_render)
+
+    z = sub.add_parser("router", help="run a zenoh router for several hosts")
+    z.add_argument("--zenoh-config", metavar="FILE")
+    z.add_argument("--listen", action="append", default=[], metavar="ENDPOINT")
+    z.add_argument("--connect", action="append", default=[], metavar="ENDPOINT")
+    z.set_defaults(func=cmd_router)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    level = [logging.WARNING, logging.INFO, logging.DEBUG][min(args.verbose, 2)]
+    logging.basicConfig(level=level, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    from world_server.scenario import ScenarioError
+
+    try:
+        return args.func(args)
+    except (ScenarioError, FileNotFoundError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_USAGE

@@ -1,0 +1,30 @@
+"""The bus protocol shared by every ConAg process: key expressions, message types, codec.
+
+This is the only code the world server, the agents and the teacher share. It imports
+no zenoh: key expressions are plain strings and messages are plain bytes.
+"""
+
+from protocol.codec import MAX_MESSAGE_BYTES, ProtocolError, decode, encode
+from protocol.messages import (
+    ACTIONS,
+    CHANNELS,
+    DISC_KINDS,
+    MESSAGE_TYPES,
+    PERTURB_OPS,
+    SCHEMA_VERSION,
+    AgentCommand,
+    Decision,
+    Hello,
+    Perturbation,
+    PerturbResult,
+    Reinforcement,
+    SensorFrame,
+    Welcome,
+    WorldStatus,
+)
+
+__all__ = [
+    "ACTIONS", "CHANNELS", "DISC_KINDS", "MAX_MESSAGE_BYTES", "MESSAGE_TYPES", "PERTURB_OPS",
+    "SCHEMA_VERSION", "AgentCommand", "Decision", "Hello", "Perturbation", "PerturbResult",
+    "ProtocolError", "Reinforcement", "SensorFrame", "Welcome", "WorldStatus", "decode", "encode",
+]

@@ -1,0 +1,101 @@
+"""Key expressions of the ConAg bus, as functions of world and agent ids.
+
+Everything lives under one versioned root so that two incompatible protocol versions
+never see each other's traffic. Ids are validated here: a `/`, `*`, `$`, `?` or `#` in
+an id would silently widen or break a key expression.
+"""
+
+from __future__ import annotations
+
+import re
+
+ROOT = "conag/v1"
+
+# \Z, not $: `$` also matches before a trailing newline, which would let "a1\n" through.
+_ID = re.compile(r"^[A-Za-z0-9_.\-]{1,64}\Z")
+
+
+def check_id(value: str, what: str = "id") -> str:
+    """Return `value` if it is a valid world/agent id, else raise ValueError."""
+    if not isinstance(value, str) or not _ID.match(value):
+        raise ValueError(
+            f"invalid {what} {value!r}: expected 1-64 characters from A-Z a-z 0-9 _ . -"
+        )
+    return value
+
+
+def world_root(world: str) -> str:
+    return f"{ROOT}/world/{check_id(world, 'world id')}"
+
+
+def status(world: str) -> str:
+    """Periodic WorldStatus publications (and a queryable answering the latest)."""
+    return f"{world_root(world)}/status"
+
+
+def perturb(world: str) -> str:
+    """Queryable: a Perturbation in, a PerturbResult back."""
+    return f"{world_root(world)}/perturb"
+
+
+def attach(world: str, agent: str) -> str:
+    """Queryable: a Hello in, a Welcome back."""
+    return f"{world_root(world)}/agent/{check_id(agent, 'agent id')}/attach"
+
+
+def sensors(world: str, agent: str) -> str:
+    """SensorFrame publications for one agent ("latest wins")."""
+    return f"{world_root(world)}/agent/{check_id(agent, 'agent id')}/sensors"
+
+
+def command(world: str, agent: str) -> str:
+    """AgentCommand publications from one agent."""
+    return f"{world_root(world)}/agent/{check_id(agent, 'agent id')}/command"
+
+
+def decision(world: str, agent: str) -> str:
+    """Decision publications (state nodes and chosen outputs) for the teacher."""
+    return f"{world_root(world)}/agent/{check_id(agent, 'agent id')}/decision"
+
+
+def reinforcement(world: str, agent: str) -> str:
+    """Reinforcement publications from the teacher to one student (reliable, never dropped)."""
+    return f"{world_root(world)}/agent/{check_id(agent, 'agent id')}/reinforcement"
+
+
+def all_agents(world: str, leaf: str) -> str:
+    """Wildcard over every agent's `leaf` key, e.g. all_agents(w, "command")."""
+    return f"{world_root(world)}/agent/*/{leaf}"
+
+
+def agent_of(key: str) -> str | None:
+    """The agent id inside a per-agent key expression, or None if it is not one."""
+    parts = str(key).split("/")
+    try:
+        i = parts.index("agent")
+    except ValueError:
+        return None
+    if i + 1 >= len(parts):
+        return None
+    return parts[i + 1] if _ID.match(parts[i + 1]) else None
+
+
+# Liveliness tokens: the world declares one, every agent and teacher declares its own.
+def world_token(world: str) -> str:
+    return f"{world_root(world)}/alive/world"
+
+
+def agent_token(world: str, agent: str) -> str:
+    return f"{world_root(world)}/alive/agent/{check_id(agent, 'agent id')}"
+
+
+def all_agent_tokens(world: str) -> str:
+    return f"{world_root(world)}/alive/agent/*"
+
+
+def teacher_token(world: str, teacher: str) -> str:
+    return f"{world_root(world)}/alive/teacher/{check_id(teacher, 'teacher id')}"
+
+
+def all_teacher_tokens(world: str) -> str:
+    return f"{world_root(world)}/alive/teacher/*"

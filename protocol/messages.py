@@ -1,0 +1,266 @@
+"""Frozen dataclasses for every message on the ConAg bus.
+
+Each message checks its own domain in `__post_init__` (enumerations, signs, lengths,
+finite numbers), so a bad message cannot be built locally any more than it can be
+decoded from the wire. The codec adds the wire-level checks (types, version, size).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+from protocol.keys import check_id
+
+SCHEMA_VERSION = 1
+
+# Sensor channels, in the order of SensorFrame.ranges (channel-major).
+CHANNELS = ("food", "water", "brick", "agent")
+# Disc kinds a scenario or a perturbation can name.
+DISC_KINDS = ("food", "water", "brick")
+# Gripper / consummatory actions an AgentCommand can carry besides the motors.
+ACTIONS = ("none", "grab", "drop", "eat", "drink")
+PERTURB_OPS = ("remove", "add", "move")
+TICK_MODES = ("lockstep", "realtime")
+NO_READING = -1.0  # a sector that senses nothing of its colour
+
+MAX_SECTORS = 64
+MAX_SITES = 4096
+MAX_AGENTS_IN_STATUS = 1024
+MAX_STRING = 256  # longest string the codec accepts; free-text fields are bounded here too
+
+
+def _finite(msg: object) -> None:
+    """Reject NaN and infinity in any float or float tuple field."""
+    for f in fields(msg):  # type: ignore[arg-type]
+        value = getattr(msg, f.name)
+        values = value if isinstance(value, tuple) else (value,)
+        for v in values:
+            if isinstance(v, float) and not math.isfinite(v):
+                raise ValueError(f"{type(msg).__name__}.{f.name} is not finite: {v!r}")
+
+
+def _require(condition: bool, message: str) -> None:
+    if not condition:
+        raise ValueError(message)
+
+
+@dataclass(frozen=True)
+class Hello:
+    """Agent -> world (as an attach query): attach me to my body, creating it if new."""
+
+    agent_id: str
+    pid: int
+
+    def __post_init__(self) -> None:
+        check_id(self.agent_id, "agent id")
+        _require(self.pid >= 0, "Hello.pid must be >= 0")
+
+
+@dataclass(frozen=True)
+class Welcome:
+    """World -> agent: the body it got, its pose now, the blueprint and the sensor layout.
+
+    Site coordinates are world coordinates (x east, y north, one unit = one cell).
+    The agent seeds its configuration map from them and its pose, once, at attach.
+    """
+
+    world_id: str
+    agent_id: str
+    body: int
+    tick: int
+    x: float
+    y: float
+    heading: float
+    holding: bool
+    restarts: int
+    sectors: int
+    sensor_range: float
+    cell_size: float
+    site_xs: tuple[float, ...]
+    site_ys: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        check_id(self.world_id, "world id")
+        check_id(self.agent_id, "agent id")
+        _finite(self)
+        _require(len(self.site_xs) == len(self.site_ys), "Welcome site_xs/site_ys differ in length")
+        _require(len(self.site_xs) <= MAX_SITES, "Welcome has too many sites")
+        _require(1 <= self.sectors <= MAX_SECTORS, "Welcome.sectors out of range")
+        _require(self.sensor_range > 0 and self.cell_size > 0, "Welcome ranges must be > 0")
+        _require(self.body >= 0 and self.tick >= 0 and self.restarts >= 0, "Welcome counts must be >= 0")
+
+
+@dataclass(frozen=True)
+class SensorFrame:
+    """World -> agent, once per tick: what the agent's sensors report.
+
+    `ranges` holds len(CHANNELS) x sectors distances, channel-major; sector k covers
+    compass angles [k, k+1) * 2*pi/sectors counter-clockwise from east. NO_READING (-1)
+    means nothing of that colour in range. Odometry is the displacement of the last
+    tick in the compass frame, as the wheel encoders and compass report it (noisy).
+    The flags report the outcome of the action the agent sent for the previous tick.
+    """
+
+    agent_id: str
+    tick: int
+    heading: float
+    odom_dx: float
+    odom_dy: float
+    sectors: int
+    ranges: tuple[float, ...]
+    holding: bool
+    grabbed: bool = False
+    dropped: bool = False
+    ate: bool = False
+    drank: bool = False
+
+    def __post_init__(self) -> None:
+        check_id(self.agent_id, "agent id")
+        _finite(self)
+        _require(self.tick >= 0, "SensorFrame.tick must be >= 0")
+        _require(1 <= self.sectors <= MAX_SECTORS, "SensorFrame.sectors out of range")
+        _require(
+            len(self.ranges) == len(CHANNELS) * self.sectors,
+            f"SensorFrame.ranges must hold {len(CHANNELS)} x sectors values",
+        )
+        _require(all(r == NO_READING or r >= 0 for r in self.ranges), "SensorFrame range < 0")
+
+
+@dataclass(frozen=True)
+class AgentCommand:
+    """Agent -> world: motor command (forward speed, turn angle) and one action, for `tick`."""
+
+    agent_id: str
+    tick: int
+    speed: float
+    turn: float
+    action: str = "none"
+
+    def __post_init__(self) -> None:
+        check_id(self.agent_id, "agent id")
+        _finite(self)
+        _require(self.tick >= 0, "AgentCommand.tick must be >= 0")
+        _require(self.action in ACTIONS, f"AgentCommand.action must be one of {ACTIONS}")
+
+
+@dataclass(frozen=True)
+class WorldStatus:
+    """World -> anyone, periodically: progress of the build and per-agent counters."""
+
+    world_id: str
+    scenario: str
+    seed: int
+    mode: str
+    tick: int
+    sites_filled: int
+    sites_total: int
+    bricks_total: int
+    agents_alive: int
+    bad_messages: int
+    completed: bool
+    agent_ids: tuple[str, ...] = ()
+    agent_alive: tuple[bool, ...] = ()
+    agent_distance: tuple[float, ...] = ()
+    agent_grabs: tuple[int, ...] = ()
+    agent_drops: tuple[int, ...] = ()
+    agent_restarts: tuple[int, ...] = ()
+
+    def __post_init__(self) -> None:
+        check_id(self.world_id, "world id")
+        _finite(self)
+        _require(self.mode in TICK_MODES, f"WorldStatus.mode must be one of {TICK_MODES}")
+        _require(0 <= self.sites_filled <= self.sites_total, "WorldStatus sites out of range")
+        _require(min(self.tick, self.bricks_total, self.agents_alive, self.bad_messages) >= 0,
+                 "WorldStatus counts must be >= 0")
+        n = len(self.agent_ids)
+        _require(n <= MAX_AGENTS_IN_STATUS, "WorldStatus lists too many agents")
+        _require(len(self.scenario) <= MAX_STRING, "WorldStatus.scenario too long")
+        for name in ("agent_alive", "agent_distance", "agent_grabs", "agent_drops", "agent_restarts"):
+            _require(len(getattr(self, name)) == n, f"WorldStatus.{name} must match agent_ids")
+        for a in self.agent_ids:
+            check_id(a, "agent id")
+
+
+@dataclass(frozen=True)
+class Perturbation:
+    """Anyone -> world (as a query): remove, add or move a disc while the world runs.
+
+    `remove` and `move` act on the disc nearest (x, y) within one cell; `add` puts a
+    disc of `kind` at (x, y); `move` puts the removed disc at (to_x, to_y).
+    """
+
+    op: str
+    x: float
+    y: float
+    kind: str = "brick"
+    to_x: float = 0.0
+    to_y: float = 0.0
+
+    def __post_init__(self) -> None:
+        _finite(self)
+        _require(self.op in PERTURB_OPS, f"Perturbation.op must be one of {PERTURB_OPS}")
+        _require(self.kind in DISC_KINDS, f"Perturbation.kind must be one of {DISC_KINDS}")
+
+
+@dataclass(frozen=True)
+class PerturbResult:
+    """World -> perturber: whether the perturbation was applied, and at which tick."""
+
+    ok: bool
+    message: str
+    tick: int
+
+    def __post_init__(self) -> None:
+        _require(self.tick >= 0, "PerturbResult.tick must be >= 0")
+        _require(len(self.message) <= MAX_STRING, "PerturbResult.message too long")
+
+
+@dataclass(frozen=True)
+class Decision:
+    """Student -> teacher, once per step: its internal state nodes and what it chose.
+
+    `state` holds the six state nodes (Holding-Brick, At-Drop-Site, At-Brick,
+    Near-Brick, Brick-Available, Drop-Site-Available); `outputs` the activations of
+    the seven construction outputs; `arm` and `motor` the output chosen for each.
+    """
+
+    agent_id: str
+    tick: int
+    state: tuple[float, ...]
+    outputs: tuple[float, ...]
+    arm: str
+    motor: str
+
+    def __post_init__(self) -> None:
+        check_id(self.agent_id, "agent id")
+        _finite(self)
+        _require(len(self.state) == 6, "Decision.state must hold 6 state nodes")
+        _require(len(self.outputs) == 7, "Decision.outputs must hold 7 outputs")
+        _require(len(self.arm) <= 32 and len(self.motor) <= 32, "Decision output names too long")
+
+
+@dataclass(frozen=True)
+class Reinforcement:
+    """Teacher -> student: +1 or -1 for the arm and the motor choice of one decision.
+
+    `seq` increases by one per reinforcement to a student, so a student can tell a gap
+    (none is expected: these are sent reliably) from a teacher restart (seq back to 0).
+    """
+
+    agent_id: str
+    tick: int
+    seq: int
+    arm: int
+    motor: int
+
+    def __post_init__(self) -> None:
+        check_id(self.agent_id, "agent id")
+        _require(self.arm in (-1, 1) and self.motor in (-1, 1), "Reinforcement signals must be +1 or -1")
+        _require(self.tick >= 0 and self.seq >= 0, "Reinforcement counts must be >= 0")
+
+
+MESSAGE_TYPES: tuple[type, ...] = (
+    Hello, Welcome, SensorFrame, AgentCommand, WorldStatus,
+    Perturbation, PerturbResult, Decision, Reinforcement,
+)

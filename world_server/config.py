@@ -1,0 +1,69 @@
+"""World configuration: a frozen dataclass, loaded from a TOML table.
+
+Units: one world unit is one map cell, which is one disc diameter (MISSION W1). Time
+advances in ticks of `dt` simulated seconds.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class WorldConfig:
+    cell_size: float = 1.0          # one disc diameter; layout cells are this wide
+    disc_radius: float = 0.5
+    agent_radius: float = 0.3       # < disc_radius so an agent fits through a one-cell gap
+    agent_mass: float = 1.0
+    dt: float = 0.1                 # simulated seconds per tick
+    max_speed: float = 3.0          # world units per simulated second
+    max_turn: float = math.pi / 2   # radians per tick
+    inertia: float = 0.5            # fraction of the speed error closed per tick (1 = no inertia)
+    sensor_sectors: int = 16
+    sensor_range: float = 6.0
+    sensor_noise: float = 0.02      # noise std per unit of distance: far readings are worse
+    odometry_noise: float = 0.0     # noise std per unit of distance moved
+    grab_reach: float = 1.2         # agent centre to brick centre
+    touch_margin: float = 0.15      # eat/drink: surfaces closer than this count as touching
+    lockstep_timeout: float = 1.0   # wall seconds the world waits for a live agent's command
+    tick_rate: float = 50.0         # ticks per wall second in realtime mode
+    status_period: float = 0.5      # wall seconds between status publications
+
+    def __post_init__(self) -> None:
+        positive = ("cell_size", "disc_radius", "agent_radius", "agent_mass", "dt", "max_speed",
+                    "max_turn", "sensor_range", "grab_reach", "lockstep_timeout", "tick_rate",
+                    "status_period")
+        for name in positive:
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise ValueError(f"world.{name} must be a finite number > 0, got {value!r}")
+        for name in ("sensor_noise", "odometry_noise", "touch_margin"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"world.{name} must be >= 0")
+        if not 0 < self.inertia <= 1:
+            raise ValueError("world.inertia must be in (0, 1]")
+        if not (isinstance(self.sensor_sectors, int) and 1 <= self.sensor_sectors <= 64):
+            raise ValueError("world.sensor_sectors must be an integer from 1 to 64")
+
+    @classmethod
+    def from_mapping(cls, table: dict) -> "WorldConfig":
+        """Build from a TOML table, rejecting unknown keys (a typo must not pass silently)."""
+        known = {f.name: f.type for f in dataclasses.fields(cls)}
+        unknown = sorted(set(table) - set(known))
+        if unknown:
+            raise ValueError(f"unknown world setting(s): {', '.join(unknown)}; "
+                             f"known: {', '.join(known)}")
+        values = {}
+        for key, value in table.items():
+            default = getattr(cls, key)
+            if isinstance(default, int) and not isinstance(default, bool):
+                if not isinstance(value, int) or isinstance(value, bool):
+                    raise ValueError(f"world.{key} must be an integer")
+            elif isinstance(default, float):
+                if not isinstance(value, (int, float)) or isinstance(value, bool):
+                    raise ValueError(f"world.{key} must be a number")
+                value = float(value)
+            values[key] = value
+        return cls(**values)

@@ -1,0 +1,128 @@
+"""The pymunk side of the world: static discs and obstacles, agent bodies with inertia.
+
+Discs are static circles (agents bump into them, never push them: a structure must not
+drift). Agents are dynamic round bodies that cannot spin. All per-tick body access is
+batched through `pymunk.batch`, one call to read every agent and one to write them.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pymunk
+import pymunk.batch as batch
+
+from world_server.config import WorldConfig
+
+_READ = batch.BodyFields.BODY_ID | batch.BodyFields.POSITION | batch.BodyFields.VELOCITY
+
+
+class Physics:
+    def __init__(self, cfg: WorldConfig, size: tuple[float, float], obstacles_xy: np.ndarray):
+        self.cfg = cfg
+        self.space = pymunk.Space()
+        self.space.gravity = (0.0, 0.0)
+        self.space.collision_slop = 0.01  # contacts as tight as the map cares about
+        self._bodies: list[pymunk.Body] = []
+        self._discs: dict[int, pymunk.Circle] = {}
+        self._rows = np.zeros(0, np.int64)  # batch row of each agent body
+        self._nrows = 0
+        self._read = batch.Buffer()
+        self._write = batch.Buffer()
+        self._add_boundary(*size)
+        half = cfg.cell_size / 2
+        for x, y in np.asarray(obstacles_xy).reshape(-1, 2):
+            box = pymunk.Poly(self.space.static_body, [(x - half, y - half), (x + half, y - half),
+                                                       (x + half, y + half), (x - half, y + half)])
+            self.space.add(box)
+
+    def _add_boundary(self, width: float, height: float) -> None:
+        corners = [(0, 0), (width, 0), (width, height), (0, height)]
+        for a, b in zip(corners, corners[1:] + corners[:1]):
+            self.space.add(pymunk.Segment(self.space.static_body, a, b, 0.05))
+
+    # discs -------------------------------------------------------------------------
+    def add_disc(self, index: int, xy: tuple[float, float], group: int = 0) -> None:
+        shape = pymunk.Circle(self.space.static_body, self.cfg.disc_radius, (float(xy[0]), float(xy[1])))
+        shape.filter = pymunk.ShapeFilter(group=group)
+        self.space.add(shape)
+        self._discs[index] = shape
+
+    def remove_disc(self, index: int) -> None:
+        self.space.remove(self._discs.pop(index))
+
+    def release_disc(self, index: int) -> None:
+        """Let a just-dropped brick collide with the agent that dropped it again."""
+        self._discs[index].filter = pymunk.ShapeFilter(group=0)
+
+    # agents ------------------------------------------------------------------------
+    def add_agent(self, xy: tuple[float, float]) -> int:
+        """Add a round agent body; returns its index. Its collision group is index + 1,
+        which a brick it drops shares until the agent has moved off it."""
+        body = pymunk.Body(self.cfg.agent_mass, math.inf)
+        body.position = (float(xy[0]), float(xy[1]))
+        shape = pymunk.Circle(body, self.cfg.agent_radius)
+        shape.filter = pymunk.ShapeFilter(group=len(self._bodies) + 1)
+        self.space.add(body, shape)
+        self._bodies.append(body)
+        self._map_rows()
+        return len(self._bodies) - 1
+
+    def _map_rows(self) -> None:
+        # The batch iterates every body of the space (the static one too) in the space's
+        # own order; map each agent to its row once, whenever a body is added.
+        self._read.clear()
+        batch.get_space_bodies(self.space, batch.BodyFields.BODY_ID, self._read)
+        ids = np.frombuffer(self._read.int_buf(), dtype=np.uintp)
+        row_of = {int(i): r for r, i in enumerate(ids)}
+        self._rows = np.array([row_of[b.id] for b in self._bodies], dtype=np.int64)
+        self._nrows = len(ids)
+        self._force_rows = np.zeros((self._nrows, 2))
+
+    @property
+    def agent_count(self) -> int:
+        return len(self._bodies)
+
+    def state(self) -> tuple[np.ndarray, np.ndarray]:
+        """(positions, velocities) of every agent body, each (n, 2), in agent order."""
+        if not self._bodies:
+            return np.zeros((0, 2)), np.zeros((0, 2))
+        self._read.clear()
+        batch.get_space_bodies(self.space, _READ, self._read)
+        rows = np.frombuffer(self._read.float_buf()).reshape(self._nrows, 4)[self._rows]
+        return rows[:, :2].copy(), rows[:, 2:].copy()
+
+    def drive(self, velocity: np.ndarray, desired: np.ndarray) -> None:
+        """Make each body reach `desired` velocity during the next step, contacts permitting.
+
+        Chipmunk moves bodies with their current velocity *before* it solves contacts,
+        so writing velocities directly would push bodies into discs every tick. A force
+        enters after contact detection instead, and the solver keeps it out of obstacles.
+        """
+        if not self._bodies:
+            return
+        force = (desired - velocity) * (self.cfg.agent_mass / self.cfg.dt)
+        self._force_rows[self._rows] = force
+        self._write.set_float_buf(np.ascontiguousarray(self._force_rows.ravel()))
+        batch.set_space_bodies(self.space, batch.BodyFields.FORCE, self._write)
+
+    def teleport(self, index: int, xy: tuple[float, float]) -> None:
+        body = self._bodies[index]
+        body.position = (float(xy[0]), float(xy[1]))
+        body.velocity = (0.0, 0.0)
+        self.space.reindex_shapes_for_body(body)
+
+    def step(self) -> None:
+        self.space.step(self.cfg.dt)
+
+
+def motor_velocities(velocity: np.ndarray, heading: np.ndarray, speed: np.ndarray,
+                     inertia: float) -> np.ndarray:
+    """Velocities after one tick of inertia: close `inertia` of the gap to the target.
+
+    The target is `speed` along `heading`; the current velocity already includes what
+    collisions did to it, so a blocked agent does not build up speed it never had.
+    """
+    target = np.column_stack([np.cos(heading), np.sin(heading)]) * speed[:, None]
+    return velocity + inertia * (target - velocity)

@@ -1,0 +1,232 @@
+"""The world server: the zenoh shell around `world.World` (MISSION W7, S1, S2).
+
+Everything arriving on the bus (commands, liveliness changes, attach, perturb) is put on
+one queue by zenoh's callback threads and applied by the single loop thread, so the
+world itself is never touched concurrently. The loop:
+
+* lockstep: tick t is stepped once every live agent has sent its command for t, or
+  after `lockstep_timeout`; with no live agent it paces itself at `tick_rate`;
+* realtime: a tick every 1/tick_rate seconds, the latest command of each agent wins.
+
+Agents come and go: an agent is waited for only while its liveliness token exists.
+When the token disappears (process killed), its body stops and drops any brick where it
+stands; when a process with the same id attaches again, it gets the same body back.
+Bad input of any kind is counted in `WorldStatus.bad_messages` and otherwise ignored.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from typing import Callable
+
+import zenoh
+
+from protocol import keys
+from protocol.codec import ProtocolError, decode, encode
+from protocol.messages import AgentCommand, Hello, Perturbation, WorldStatus
+from world_server.world import World
+
+log = logging.getLogger("conag.world")
+
+
+class WorldServer:
+    def __init__(self, world: World, session: zenoh.Session, *, mode: str | None = None,
+                 max_ticks: int | None = None, stop_when_complete: bool = False,
+                 clock: Callable[[], float] = time.monotonic,
+                 on_status: Callable[[WorldStatus], None] | None = None):
+        self.world = world
+        self.session = session
+        self.mode = mode or world.scenario.tick_mode
+        self.max_ticks = max_ticks
+        self.stop_when_complete = stop_when_complete
+        self.clock = clock
+        self.on_status = on_status
+        self.cfg = world.cfg
+        self._events: queue.SimpleQueue = queue.SimpleQueue()
+        self._tokens: set[str] = set()
+        self._answered: set[str] = set()
+        self._publishers: dict[str, zenoh.Publisher] = {}
+        self._status_bytes = encode(world.status())
+        self._declared: list = []
+
+    # zenoh callbacks: decode if cheap, then hand over to the loop thread ------------------
+    def _on_command(self, sample: zenoh.Sample) -> None:
+        try:
+            cmd = decode(sample.payload.to_bytes(), AgentCommand)
+            if cmd.agent_id != keys.agent_of(str(sample.key_expr)):
+                raise ProtocolError("command agent_id does not match its key")
+            self._events.put(("cmd", cmd))
+        except ProtocolError as exc:
+            self._events.put(("bad", f"command on {sample.key_expr}: {exc}"))
+
+    def _on_token(self, sample: zenoh.Sample) -> None:
+        agent = str(sample.key_expr).rsplit("/", 1)[-1]
+        self._events.put(("live", agent, sample.kind == zenoh.SampleKind.PUT))
+
+    def _on_status_query(self, query: zenoh.Query) -> None:
+        query.reply(query.key_expr, self._status_bytes)  # the latest, swapped atomically
+
+    def _declare(self) -> None:
+        w, s = self.world.world_id, self.session
+        self._declared = [
+            s.liveliness().declare_token(keys.world_token(w)),
+            s.liveliness().declare_subscriber(keys.all_agent_tokens(w), self._on_token, history=True),
+            s.declare_subscriber(keys.all_agents(w, "command"), self._on_command),
+            s.declare_queryable(keys.all_agents(w, "attach"), lambda q: self._events.put(("attach", q))),
+            s.declare_queryable(keys.perturb(w), lambda q: self._events.put(("perturb", q))),
+            s.declare_queryable(keys.status(w), self._on_status_query),
+        ]
+        self._status_pub = s.declare_publisher(keys.status(w))
+
+    def _undeclare(self) -> None:
+        for entity in self._declared + [getattr(self, "_status_pub", None)] + list(self._publishers.values()):
+            try:
+                if entity is not None:
+                    entity.undeclare()
+            except Exception:  # the session may already be closing; nothing left to free
+                pass
+
+    # the loop --------------------------------------------------------------------------------
+    def run(self, stop: threading.Event) -> WorldStatus:
+        """Serve until `stop` is set, `max_ticks` is reached or (optionally) the build completes."""
+        self._declare()
+        try:
+            self._publish_status()
+            last_tick = last_status = self.clock()
+            while not stop.is_set():
+                self._wait_for_tick(last_tick, stop)
+                if stop.is_set():
+                    break
+                self.world.step()
+                last_tick = self.clock()
+                self._answered.clear()
+                self._publish_frames()
+                status = self.world.status()
+                done = (self.max_ticks is not None and self.world.tick >= self.max_ticks) or (
+                    self.stop_when_complete and status.completed)
+                if done or last_tick - last_status >= self.cfg.status_period:
+                    self._publish_status(status)
+                    last_status = last_tick
+                if done:
+                    break
+            return self._publish_status()
+        finally:
+            self._undeclare()
+
+    def _deadline(self, last_tick: float) -> float:
+        if self.mode == "lockstep" and self._live():
+            return last_tick + self.cfg.lockstep_timeout
+        return last_tick + 1.0 / self.cfg.tick_rate
+
+    def _live(self) -> list[str]:
+        return [a for a in self.world.live_agents() if a in self._tokens]
+
+    def _wait_for_tick(self, last_tick: float, stop: threading.Event) -> None:
+        while not stop.is_set():
+            live = self._live()
+            if self.mode == "lockstep" and live and self._answered.issuperset(live):
+                return
+            now = self.clock()
+            deadline = self._deadline(last_tick)
+            if now >= deadline:
+                if self.mode == "lockstep" and live:
+                    late = sorted(set(live) - self._answered)
+                    log.debug("tick %d: no command from %s in time", self.world.tick, ", ".join(late))
+                return
+            try:
+                event = self._events.get(timeout=min(deadline - now, 0.05))
+            except queue.Empty:
+                continue
+            self._handle(event)
+
+    def _handle(self, event: tuple) -> None:
+        kind = event[0]
+        if kind == "cmd":
+            cmd: AgentCommand = event[1]
+            if cmd.agent_id not in self._tokens or not self.world.set_command(
+                    cmd.agent_id, cmd.speed, cmd.turn, cmd.action):
+                self._bad(f"command from unattached agent {cmd.agent_id!r}")
+            elif cmd.tick == self.world.tick:
+                self._answered.add(cmd.agent_id)
+        elif kind == "live":
+            _, agent, alive = event
+            if alive:
+                self._tokens.add(agent)
+            else:
+                self._tokens.discard(agent)
+                if agent in self.world.agents and self.world.agents[agent].alive:
+                    log.info("agent %s is gone at tick %d; its body stops", agent, self.world.tick)
+                self.world.detach(agent)
+        elif kind == "attach":
+            self._attach(event[1])
+        elif kind == "perturb":
+            self._perturb(event[1])
+        elif kind == "bad":
+            self._bad(event[1])
+
+    def _bad(self, detail: str) -> None:
+        self.world.bad_messages += 1
+        log.debug("ignored bad message: %s", detail)
+
+    def _attach(self, query: zenoh.Query) -> None:
+        try:
+            payload = query.payload
+            hello = decode(payload.to_bytes() if payload is not None else b"", Hello)
+            if hello.agent_id != keys.agent_of(str(query.key_expr)):
+                raise ProtocolError("Hello agent_id does not match its key")
+        except ProtocolError as exc:
+            self._bad(f"attach: {exc}")
+            query.reply_err(f"bad attach request: {exc}".encode())
+            query.drop()
+            return
+        if hello.agent_id not in self._tokens:
+            # Waiting for a process that has no token would stall lockstep forever.
+            query.reply_err(b"declare your liveliness token before attaching, then retry")
+            query.drop()
+            return
+        welcome = self.world.attach(hello.agent_id)
+        query.reply(query.key_expr, encode(welcome))
+        query.drop()
+        log.info("agent %s (pid %d) attached to body %d%s", hello.agent_id, hello.pid, welcome.body,
+                 f", restart {welcome.restarts}" if welcome.restarts else "")
+        self._publish_frame(self.world.frame(hello.agent_id))
+
+    def _perturb(self, query: zenoh.Query) -> None:
+        try:
+            payload = query.payload
+            p = decode(payload.to_bytes() if payload is not None else b"", Perturbation)
+        except ProtocolError as exc:
+            self._bad(f"perturb: {exc}")
+            query.reply_err(f"bad perturbation: {exc}".encode())
+            query.drop()
+            return
+        result = self.world.perturb(p)
+        log.info("perturbation at tick %d: %s", self.world.tick, result.message)
+        query.reply(query.key_expr, encode(result))
+        query.drop()
+
+    def _publish_frame(self, frame) -> None:
+        pub = self._publishers.get(frame.agent_id)
+        if pub is None:
+            # Sensor frames are "latest wins": drop rather than queue behind a slow agent.
+            pub = self.session.declare_publisher(keys.sensors(self.world.world_id, frame.agent_id),
+                                                 congestion_control=zenoh.CongestionControl.DROP,
+                                                 express=True)
+            self._publishers[frame.agent_id] = pub
+        pub.put(encode(frame))
+
+    def _publish_frames(self) -> None:
+        for frame in self.world.frames():
+            if frame.agent_id in self._tokens:
+                self._publish_frame(frame)
+
+    def _publish_status(self, status: WorldStatus | None = None) -> WorldStatus:
+        status = status or self.world.status()
+        self._status_bytes = encode(status)
+        self._status_pub.put(self._status_bytes)
+        if self.on_status:
+            self.on_status(status)
+        return status

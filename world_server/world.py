@@ -1,0 +1,278 @@
+"""The world core (paper §3): discs, agent bodies, sensors, gripper, eat/drink, perturbation.
+
+No bus here: the server decodes commands, calls `set_command`, `step`, `frames`, and
+encodes what comes back. One tick: apply each agent's one-shot action (grab, drop, eat,
+drink) where it stands, turn, close part of the gap to the commanded speed (inertia),
+step the physics, measure odometry, sense. Randomness (sensor and odometry noise) comes
+from the injected generator, so the same seed and the same commands give the same run.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from protocol.messages import ACTIONS, CHANNELS, DISC_KINDS, Perturbation, PerturbResult, SensorFrame, Welcome, WorldStatus
+from world_server.discs import BRICK, CARRIED, FOOD, GONE, IN_WORLD, WATER, DiscStore
+from world_server.physics import Physics, motor_velocities
+from world_server.scenario import Scenario
+from world_server.sensors import add_noise, sense
+
+GRAB, DROP, EAT, DRINK = (ACTIONS.index(a) for a in ("grab", "drop", "eat", "drink"))
+FLAGS = ("grabbed", "dropped", "ate", "drank")
+_LAYOUT_KINDS = {"F": FOOD, "W": WATER, "b": BRICK, "B": BRICK}
+
+
+@dataclass
+class AgentRecord:
+    agent_id: str
+    index: int
+    alive: bool = True
+    holding: int = -1       # disc index of the carried brick, or -1
+    restarts: int = 0
+    grabs: int = 0
+    drops: int = 0
+
+
+class World:
+    def __init__(self, scenario: Scenario, rng: np.random.Generator | None = None, world_id: str = "w0"):
+        self.scenario = scenario
+        self.cfg = scenario.world
+        self.world_id = world_id
+        self.rng = rng if rng is not None else np.random.default_rng(scenario.seed)
+        self.tick = 0
+        self.size = scenario.size
+        cells = {ch: scenario.cells(ch) for ch in "FWbB#A+"}
+        disc_cells = np.vstack([cells[ch] for ch in "FWbB"])
+        kinds = np.concatenate([np.full(len(cells[ch]), _LAYOUT_KINDS[ch]) for ch in "FWbB"])
+        self.discs = DiscStore(scenario.to_world(disc_cells), kinds)
+        self.physics = Physics(self.cfg, self.size, scenario.to_world(cells["#"]))
+        for i in range(len(self.discs)):
+            self.physics.add_disc(i, self.discs.xy[i])
+        self.sites_xy = scenario.to_world(np.vstack([cells["+"], cells["B"]]))
+        self._site_codes = self._cell_code(self.sites_xy)
+        self._starts = scenario.to_world(cells["A"])
+        self.agents: dict[str, AgentRecord] = {}
+        self._order: list[AgentRecord] = []
+        n = 0
+        self.heading = np.zeros(n)
+        self.speed = np.zeros(n)
+        self.turn = np.zeros(n)
+        self.action = np.zeros(n, np.int64)
+        self.alive = np.zeros(n, bool)
+        self.odometry = np.zeros((n, 2))
+        self.distance = np.zeros(n)
+        self.flags = np.zeros((n, len(FLAGS)), bool)
+        self._ranges = np.zeros((n, len(CHANNELS), self.cfg.sensor_sectors))
+        self._pending_release: dict[int, int] = {}  # dropped brick -> agent index
+        self.bad_messages = 0
+
+    def _cell_code(self, xy: np.ndarray) -> np.ndarray:
+        cells = self.scenario.to_cell(xy)
+        return cells[:, 0] * (self.scenario.rows + 1) + cells[:, 1]
+
+    # agents come and go --------------------------------------------------------------
+    def attach(self, agent_id: str) -> Welcome:
+        """Give `agent_id` its body: the same one as before, or a new one at a start."""
+        rec = self.agents.get(agent_id)
+        if rec is None:
+            index = self.physics.add_agent(self._free_start())
+            rec = AgentRecord(agent_id, index)
+            self.agents[agent_id] = rec
+            self._order.append(rec)
+            self._grow_arrays()
+        else:
+            rec.restarts += 1
+            rec.alive = True
+        self.alive[rec.index] = True
+        self.speed[rec.index] = self.turn[rec.index] = 0.0
+        self.action[rec.index] = 0
+        pos, _ = self.physics.state()
+        self._sense()
+        return Welcome(
+            world_id=self.world_id, agent_id=agent_id, body=rec.index, tick=self.tick,
+            x=float(pos[rec.index, 0]), y=float(pos[rec.index, 1]), heading=float(self.heading[rec.index]),
+            holding=rec.holding >= 0, restarts=rec.restarts, sectors=self.cfg.sensor_sectors,
+            sensor_range=self.cfg.sensor_range, cell_size=self.cfg.cell_size,
+            site_xs=tuple(self.sites_xy[:, 0].tolist()), site_ys=tuple(self.sites_xy[:, 1].tolist()))
+
+    def detach(self, agent_id: str) -> None:
+        """The agent's process is gone: its body stops and drops what it held, where it stands."""
+        rec = self.agents.get(agent_id)
+        if rec is None or not rec.alive:
+            return
+        rec.alive = False
+        self.alive[rec.index] = False
+        self.speed[rec.index] = self.turn[rec.index] = 0.0
+        self.action[rec.index] = 0
+        if rec.holding >= 0:
+            pos, _ = self.physics.state()
+            self._drop(rec, pos[rec.index])
+
+    def live_agents(self) -> list[str]:
+        return [r.agent_id for r in self._order if r.alive]
+
+    def _grow_arrays(self) -> None:
+        for name in ("heading", "speed", "turn", "action", "alive", "distance"):
+            arr = getattr(self, name)
+            setattr(self, name, np.append(arr, np.zeros(1, arr.dtype)))
+        self.odometry = np.vstack([self.odometry, np.zeros((1, 2))])
+        self.flags = np.vstack([self.flags, np.zeros((1, len(FLAGS)), bool)])
+        self._ranges = np.vstack([self._ranges, np.zeros((1,) + self._ranges.shape[1:])])
+
+    def _free_start(self) -> np.ndarray:
+        """First `A` start not taken by a body, else the first clear empty cell (reading order)."""
+        taken, _ = self.physics.state()
+        clear = self.cfg.agent_radius * 2 + 0.1
+        candidates = [self._starts, self.scenario.to_world(self.scenario.cells("."))]
+        present = self.discs.xy[self.discs.present()]
+        for xy in np.vstack(candidates):
+            if taken.size and np.min(np.hypot(*(taken - xy).T)) < clear:
+                continue
+            if present.size and np.min(np.hypot(*(present - xy).T)) < self.cfg.disc_radius + self.cfg.agent_radius:
+                continue
+            return xy
+        raise RuntimeError("no free cell left for a new agent body")
+
+    # commands and ticks ----------------------------------------------------------------
+    def set_command(self, agent_id: str, speed: float, turn: float, action: str) -> bool:
+        """Record the latest command of a live agent; False if the agent is not attached."""
+        rec = self.agents.get(agent_id)
+        if rec is None or not rec.alive:
+            return False
+        i = rec.index
+        self.speed[i] = min(max(speed, 0.0), self.cfg.max_speed)
+        self.turn[i] = min(max(turn, -self.cfg.max_turn), self.cfg.max_turn)
+        self.action[i] = ACTIONS.index(action)
+        return True
+
+    def step(self) -> None:
+        """Advance one tick."""
+        self.flags[:] = False
+        pos, vel = self.physics.state()
+        for i in np.flatnonzero(self.action):
+            self._act(self._order[i], pos[i])
+        self.heading = np.mod(self.heading + self.turn * self.alive + np.pi, 2 * np.pi) - np.pi
+        # The turn and the action are one-shot; the speed is a set point that persists.
+        self.turn[:] = 0.0
+        self.action[:] = 0
+        desired = motor_velocities(vel, self.heading, self.speed * self.alive, self.cfg.inertia)
+        self.physics.drive(vel, desired * self.alive[:, None])
+        self.physics.step()
+        new_pos, _ = self.physics.state()
+        moved = new_pos - pos
+        self.distance += np.hypot(moved[:, 0], moved[:, 1])
+        self.odometry = moved
+        if self.cfg.odometry_noise > 0 and len(moved):
+            step_len = np.hypot(moved[:, 0], moved[:, 1])[:, None]
+            self.odometry = moved + self.rng.standard_normal(moved.shape) * self.cfg.odometry_noise * step_len
+        self._release_dropped(new_pos)
+        self.tick += 1
+        self._sense(new_pos)
+
+    def _sense(self, pos: np.ndarray | None = None) -> None:
+        if pos is None:
+            pos, _ = self.physics.state()
+        present = self.discs.present()
+        self._ranges = sense(pos, self.alive, self.discs.xy[present], self.discs.kind[present],
+                             self.cfg.sensor_sectors, self.cfg.sensor_range, self.size)
+        add_noise(self._ranges, self.cfg.sensor_noise, self.cfg.sensor_range, self.rng)
+
+    def _act(self, rec: AgentRecord, xy: np.ndarray) -> None:
+        action = self.action[rec.index]
+        touch = self.cfg.agent_radius + self.cfg.disc_radius + self.cfg.touch_margin
+        if action == GRAB and rec.holding < 0:
+            brick = self.discs.nearest(xy, self.cfg.grab_reach, (BRICK,))
+            if brick >= 0:
+                self.discs.state[brick] = CARRIED
+                self.physics.remove_disc(brick)
+                self._pending_release.pop(brick, None)
+                rec.holding, rec.grabs = brick, rec.grabs + 1
+                self.flags[rec.index, 0] = True
+        elif action == DROP and rec.holding >= 0:
+            self._drop(rec, xy)
+            self.flags[rec.index, 1] = True
+        elif action == EAT:
+            self.flags[rec.index, 2] = self.discs.nearest(xy, touch, (FOOD,)) >= 0
+        elif action == DRINK:
+            self.flags[rec.index, 3] = self.discs.nearest(xy, touch, (WATER,)) >= 0
+
+    def _drop(self, rec: AgentRecord, xy: np.ndarray) -> None:
+        # The brick lands under the agent (paper §3); it ignores that agent until the agent
+        # has moved off it, instead of the physics kicking the two apart.
+        brick = rec.holding
+        self.discs.xy[brick] = xy
+        self.discs.state[brick] = IN_WORLD
+        self.physics.add_disc(brick, xy, group=rec.index + 1)
+        self._pending_release[brick] = rec.index
+        rec.holding, rec.drops = -1, rec.drops + 1
+
+    def _release_dropped(self, pos: np.ndarray) -> None:
+        clear = self.cfg.agent_radius + self.cfg.disc_radius
+        for brick, agent in list(self._pending_release.items()):
+            if np.hypot(*(pos[agent] - self.discs.xy[brick])) >= clear:
+                self.physics.release_disc(brick)
+                del self._pending_release[brick]
+
+    # what the world reports ------------------------------------------------------------------
+    def frame(self, agent_id: str) -> SensorFrame:
+        rec = self.agents[agent_id]
+        i = rec.index
+        flags = dict(zip(FLAGS, self.flags[i].tolist()))
+        return SensorFrame(agent_id=agent_id, tick=self.tick, heading=float(self.heading[i]),
+                           odom_dx=float(self.odometry[i, 0]), odom_dy=float(self.odometry[i, 1]),
+                           sectors=self.cfg.sensor_sectors, ranges=tuple(self._ranges[i].ravel().tolist()),
+                           holding=rec.holding >= 0, **flags)
+
+    def frames(self) -> list[SensorFrame]:
+        """One frame per live agent, describing the world after the last tick."""
+        return [self.frame(r.agent_id) for r in self._order if r.alive]
+
+    def sites_filled(self) -> np.ndarray:
+        return self.discs.filled_sites(self._site_codes, self._cell_code)
+
+    def status(self) -> WorldStatus:
+        filled = int(self.sites_filled().sum())
+        total = len(self.sites_xy)
+        return WorldStatus(
+            world_id=self.world_id, scenario=self.scenario.name, seed=self.scenario.seed,
+            mode=self.scenario.tick_mode, tick=self.tick, sites_filled=filled, sites_total=total,
+            bricks_total=self.discs.bricks_total(), agents_alive=int(self.alive.sum()),
+            bad_messages=self.bad_messages, completed=total > 0 and filled == total,
+            agent_ids=tuple(r.agent_id for r in self._order), agent_alive=tuple(r.alive for r in self._order),
+            agent_distance=tuple(float(self.distance[r.index]) for r in self._order),
+            agent_grabs=tuple(r.grabs for r in self._order), agent_drops=tuple(r.drops for r in self._order),
+            agent_restarts=tuple(r.restarts for r in self._order))
+
+    def agent_poses(self) -> np.ndarray:
+        """(n, 3) x, y, heading of every body, in attach order (for pictures and tests)."""
+        pos, _ = self.physics.state()
+        return np.column_stack([pos, self.heading]) if len(pos) else np.zeros((0, 3))
+
+    # perturbation (paper §4.5, Fig. 6b/6c, Fig. 12) -------------------------------------------
+    def perturb(self, p: Perturbation) -> PerturbResult:
+        def inside(x: float, y: float) -> bool:
+            return 0 <= x <= self.size[0] and 0 <= y <= self.size[1]
+
+        if p.op == "add":
+            if not inside(p.x, p.y):
+                return PerturbResult(False, f"({p.x:g}, {p.y:g}) is outside the world", self.tick)
+            i = self.discs.add((p.x, p.y), DISC_KINDS.index(p.kind))
+            self.physics.add_disc(i, self.discs.xy[i])
+            return PerturbResult(True, f"added {p.kind} #{i} at ({p.x:g}, {p.y:g})", self.tick)
+        i = self.discs.nearest((p.x, p.y), self.cfg.cell_size * 0.75)
+        if i < 0:
+            return PerturbResult(False, f"no disc within {self.cfg.cell_size * 0.75:g} of ({p.x:g}, {p.y:g})",
+                                 self.tick)
+        kind = DISC_KINDS[self.discs.kind[i]]
+        if p.op == "move" and not inside(p.to_x, p.to_y):
+            return PerturbResult(False, f"({p.to_x:g}, {p.to_y:g}) is outside the world", self.tick)
+        self.physics.remove_disc(i)
+        self._pending_release.pop(i, None)
+        if p.op == "remove":
+            self.discs.state[i] = GONE
+            return PerturbResult(True, f"removed {kind} #{i} from ({p.x:g}, {p.y:g})", self.tick)
+        self.discs.xy[i] = (p.to_x, p.to_y)
+        self.physics.add_disc(i, self.discs.xy[i])
+        return PerturbResult(True, f"moved {kind} #{i} to ({p.to_x:g}, {p.to_y:g})", self.tick)
