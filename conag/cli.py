@@ -186,12 +186,14 @@ def cmd_render(args) -> int:
 
 
 def cmd_router(args) -> int:
-    opts = BusOptions(args.zenoh_config, tuple(args.connect),
-                      tuple(args.listen) or ("tcp/127.0.0.1:7447",), "router")
+    # The loopback default applies only without a config file: it must not replace the file's endpoints.
+    listen = tuple(args.listen) or (() if args.zenoh_config else ("tcp/127.0.0.1:7447",))
+    opts = BusOptions(args.zenoh_config, tuple(args.connect), listen, "router")
     session = open_session(opts, serve=True)
     try:
         with _stop_on_signals() as stop:
-            print(f"zenoh router listening on {', '.join(opts.listen)}", flush=True)
+            where = ", ".join(opts.listen) or f"the endpoints in {args.zenoh_config}"
+            print(f"zenoh router listening on {where}", flush=True)
             stop.wait()
     finally:
         session.close()

@@ -1,0 +1,209 @@
+"""The world server over real zenoh sessions: a scripted body senses, moves, grabs,
+carries, drops, eats and drinks; lockstep is deterministic; killed agents are survived;
+bad input is counted and ignored."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import time
+
+import msgpack
+import numpy as np
+import pytest
+
+from agent_runtime.link import WorldLink
+from protocol import keys
+from protocol.codec import decode, encode
+from world_server.scenario import load_scenario
+from world_server.world import World
+from protocol.messages import CHANNELS, NO_READING, AgentCommand, Hello, Perturbation, PerturbResult, SensorFrame
+from tests.conftest import ROOT, Bus, RunningWorld, free_port
+from tests.scripted import ScriptedBody
+
+SCRIPT_WORLD = '''
+name = "script"
+seed = 3
+agents = 1
+layout = """
+..........
+.F.....+..
+..A.b.....
+.W........
+..........
+"""
+[world]
+sensor_noise = 0.0
+'''
+
+
+def channel(frame, name):
+    return np.array(frame.ranges).reshape(len(CHANNELS), frame.sectors)[CHANNELS.index(name)]
+
+
+def wait_for(predicate, timeout=10.0, what="condition"):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return
+        time.sleep(0.02)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+def test_scripted_body_senses_moves_grabs_carries_drops_eats_and_drinks(bus, start_world):
+    rw = start_world(SCRIPT_WORLD)
+    body = ScriptedBody(WorldLink(bus.client_session(), "w0", "a1"))
+    assert (body.welcome.x, body.welcome.y) == (2.5, 2.5)
+    assert len(body.welcome.site_xs) == 1
+    # Sensing: the brick 2 cells east is in sector 0; food and water are seen too.
+    assert channel(body.frame, "brick")[0] == pytest.approx(2.0)
+    assert (channel(body.frame, "food") != NO_READING).any()
+    assert (channel(body.frame, "water") != NO_READING).any()
+    # Motion: dead reckoning from odometry agrees with the world's body.
+    assert body.drive_to(3.6, 2.5)
+    x, y, _ = rw.world.agent_poses()[0]
+    assert (body.x, body.y) == pytest.approx((x, y), abs=1e-6)
+    # Grab: the brick is carried, and a carried brick is invisible.
+    frame = body.act(action="grab")
+    assert frame.grabbed and frame.holding
+    assert (channel(frame, "brick") == NO_READING).all()
+    # Carry it to the drop site and drop it there: the site is filled.
+    assert body.drive_to(7.5, 3.5)
+    frame = body.act(action="drop")
+    assert frame.dropped and not frame.holding
+    wait_for(lambda: rw.world.status().completed, what="the site to be filled")
+    # Eat and drink by touching food and water.
+    assert body.drive_to(2.4, 3.5)
+    assert body.act(action="eat").ate
+    assert body.drive_to(2.4, 1.5)
+    assert body.act(action="drink").drank
+    status = rw.world.status()
+    assert (status.agent_grabs, status.agent_drops) == ((1,), (1,))
+    assert status.bricks_total == 1
+
+
+def _run_recorded(ticks=200):
+    """One lockstep run on a fresh bus, driven by a fixed command script: every frame's bytes."""
+    bus = Bus(f"tcp/127.0.0.1:{free_port()}")
+    try:
+        sc = load_scenario(ROOT / "scenarios/fig6.toml")
+        rw = RunningWorld(World(sc, np.random.default_rng(sc.seed)), bus.server_session())
+        session = bus.client_session()
+        raw = []
+        sub = session.declare_subscriber(keys.sensors("w0", "a1"), lambda s: raw.append(s.payload.to_bytes()))
+        body = ScriptedBody(WorldLink(session, "w0", "a1"))
+        script = np.random.default_rng(99)
+        actions = ["none", "none", "none", "grab", "drop"]
+        for _ in range(ticks):
+            body.act(float(script.uniform(0, 3)), float(script.uniform(-1, 1)), actions[script.integers(5)])
+        sub.undeclare()
+        rw.close()
+        return raw
+    finally:
+        bus.close()
+
+
+def test_lockstep_same_seed_gives_identical_encoded_frames():
+    first, second = _run_recorded(), _run_recorded()
+    assert len(first) == len(second) == 201  # the frame at attach, then one per tick
+    assert first == second
+    frames = [decode(b, SensorFrame) for b in first]
+    assert sum(abs(f.odom_dx) + abs(f.odom_dy) for f in frames) > 5.0  # the body really moved
+    assert any(f.grabbed for f in frames)
+
+
+def _spawn_agent(endpoint, agent_id, *extra):
+    return subprocess.Popen([sys.executable, "-m", "tests.scripted", "--connect", endpoint, "--id", agent_id,
+                             *extra], cwd=ROOT, stdout=subprocess.PIPE, text=True)
+
+
+@pytest.mark.slow
+def test_agent_killed_holding_a_brick_leaves_it_and_gets_its_body_back(bus, start_world, endpoint):
+    rw = start_world(SCRIPT_WORLD)
+    world = rw.world
+    bricks = world.discs.bricks_total()
+    proc = _spawn_agent(endpoint, "a1", "--grab-at", "4.5,2.5")
+    try:
+        assert proc.stdout.readline().strip() == "HOLDING"
+        assert world.agents["a1"].holding >= 0
+        # A second, live agent: lockstep must keep pace with it once a1 is gone.
+        other = ScriptedBody(WorldLink(bus.client_session(), "w0", "a2"))
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(10)
+        wait_for(lambda: not world.agents["a1"].alive, what="the killed agent to be noticed")
+        rec = world.agents["a1"]
+        assert rec.holding == -1
+        brick = int(np.flatnonzero(world.discs.kind == 2)[0])
+        assert world.discs.state[brick] == 0  # back in the world, where the body stands
+        x, y, _ = world.agent_poses()[rec.index]
+        assert np.hypot(*(world.discs.xy[brick] - (x, y))) < 1e-9
+        assert world.status().bricks_total == bricks
+        # Lockstep no longer waits for the dead agent: 50 ticks take far less than 50 timeouts.
+        t0 = time.monotonic()
+        for _ in range(50):
+            other.act()
+        assert time.monotonic() - t0 < 10 * world.cfg.lockstep_timeout
+        # The same id attaches again and gets the same body back.
+        again = _spawn_agent(endpoint, "a1")
+        try:
+            assert again.stdout.readline().strip() == "ATTACHED"
+            assert world.agents["a1"].alive and world.agents["a1"].index == rec.index
+            assert world.agents["a1"].restarts == 1
+            assert world.status().bricks_total == bricks
+        finally:
+            again.kill()
+            again.wait(10)
+    finally:
+        proc.kill()
+        proc.wait(10)
+
+
+def test_bad_messages_of_every_kind_are_counted_and_ignored(bus, start_world):
+    rw = start_world(SCRIPT_WORLD)
+    session = bus.client_session()
+    body = ScriptedBody(WorldLink(session, "w0", "a1"))
+    cmd_key = keys.command("w0", "a1")
+    envelope = lambda t, f: msgpack.packb({"v": 1, "t": t, "f": f})  # noqa: E731
+    bad_commands = [
+        b"\x00\xff garbage",                                           # not msgpack
+        msgpack.packb([1, 2, 3]),                                      # not an envelope
+        envelope("AgentCommand", ["a1", 0, "fast", 0.0, "none"]),      # wrong type
+        envelope("AgentCommand", ["a1", 0, float("nan"), 0.0, "none"]),  # NaN
+        envelope("AgentCommand", ["a1", 0, 1.0]),                      # missing fields
+        msgpack.packb({"v": 99, "t": "AgentCommand", "f": ["a1", 0, 1.0, 0.0, "none"]}),  # version
+        envelope("Teleport", []),                                      # unknown type
+        encode(AgentCommand("a2", 0, 1.0, 0.0)),                       # id does not match key
+        b"\x91" * 300_000,                                             # oversize
+        encode(Hello("a1", 1)),                                        # valid, but not a command
+    ]
+    for payload in bad_commands:
+        session.put(cmd_key, payload)
+    session.put(keys.command("w0", "ghost"), encode(AgentCommand("ghost", 0, 1.0, 0.0)))  # not attached
+    for payload in (b"junk", encode(Perturbation("remove", 1.0, 1.0))):  # attach without a Hello
+        replies = list(session.get(keys.attach("w0", "a1"), payload=payload, timeout=2.0))
+        assert replies and replies[0].err is not None
+    replies = list(session.get(keys.perturb("w0"), payload=b"\x01\x02", timeout=2.0))
+    assert replies and replies[0].err is not None
+    expected = len(bad_commands) + 1 + 2 + 1
+    # The world keeps ticking with its agent all along.
+    start_tick = body.frame.tick
+    deadline = time.monotonic() + 10
+    while rw.world.bad_messages < expected and time.monotonic() < deadline:
+        body.act(1.0, 0.1)
+    for _ in range(20):
+        body.act(1.0, 0.1)
+    assert body.frame.tick >= start_tick + 20
+    assert rw.world.bad_messages == expected
+    # And a good perturbation still works after all that.
+    reply = list(session.get(keys.perturb("w0"), payload=encode(Perturbation("add", 8.5, 0.5, "food")),
+                             timeout=2.0))
+    assert decode(reply[0].ok.payload.to_bytes(), PerturbResult).ok
+
+
+def test_realtime_mode_ticks_at_its_rate_without_agents(bus, start_world):
+    rw = start_world(SCRIPT_WORLD, mode="realtime")
+    time.sleep(1.0)
+    ticks = rw.world.tick
+    rate = rw.world.cfg.tick_rate
+    assert 0.6 * rate <= ticks <= 1.2 * rate
