@@ -75,17 +75,17 @@ def cmd_world(args) -> int:
     seed = scenario.seed if args.seed is None else args.seed
     world = World(scenario, np.random.default_rng(seed), world_id=args.world_id)
     on_status = None if args.quiet else (lambda st: print(_status_line(st), flush=True))
-    session = open_session(_bus(args), serve=True)
-    try:
-        with _stop_on_signals() as stop:
+    with _stop_on_signals() as stop:  # before the session opens: no signal finds us unprepared
+        session = open_session(_bus(args), serve=True)
+        try:
             print(f"world {args.world_id}: {scenario.name} ({scenario.cols}x{scenario.rows} cells, "
                   f"{len(world.sites_xy)} sites, {world.discs.bricks_total()} bricks), "
                   f"{args.mode_tick or scenario.tick_mode} mode", flush=True)
             server = WorldServer(world, session, mode=args.mode_tick, max_ticks=args.ticks,
                                  stop_when_complete=args.stop_when_complete, on_status=on_status)
             final = server.run(stop)
-    finally:
-        session.close()
+        finally:
+            session.close()
     print("final: " + _status_line(final), flush=True)
     if args.summary:
         with open(args.summary, "w", encoding="utf-8") as fh:
@@ -126,8 +126,13 @@ def cmd_status(args) -> int:
             return 1
         if args.watch:
             with _stop_on_signals() as stop:
-                sub = session.declare_subscriber(keys.status(args.world_id),
-                                                 lambda s: show(decode(s.payload.to_bytes(), WorldStatus)))
+                def on_status(sample):
+                    try:
+                        show(decode(sample.payload.to_bytes(), WorldStatus))
+                    except ProtocolError as exc:
+                        print(f"warning: ignored a bad status: {exc}", file=sys.stderr)
+
+                sub = session.declare_subscriber(keys.status(args.world_id), on_status)
                 stop.wait()
                 sub.undeclare()
         return 0
@@ -189,14 +194,14 @@ def cmd_router(args) -> int:
     # The loopback default applies only without a config file: it must not replace the file's endpoints.
     listen = tuple(args.listen) or (() if args.zenoh_config else ("tcp/127.0.0.1:7447",))
     opts = BusOptions(args.zenoh_config, tuple(args.connect), listen, "router")
-    session = open_session(opts, serve=True)
-    try:
-        with _stop_on_signals() as stop:
+    with _stop_on_signals() as stop:
+        session = open_session(opts, serve=True)
+        try:
             where = ", ".join(opts.listen) or f"the endpoints in {args.zenoh_config}"
             print(f"zenoh router listening on {where}", flush=True)
             stop.wait()
-    finally:
-        session.close()
+        finally:
+            session.close()
     return 0
 
 

@@ -9,6 +9,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from dataclasses import replace
 
@@ -79,31 +80,72 @@ def test_single_host_configs_match_the_built_in_defaults():
 
 # --- a router process between a world and an agent ------------------------------------------
 
-def _wait_for_port(proc: subprocess.Popen, port: int, timeout: float = 15.0) -> None:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if proc.poll() is not None:
-            raise AssertionError(f"router exited early with {proc.returncode}: {proc.stderr.read()}")
-        try:
-            with socket.create_connection(("127.0.0.1", port), timeout=0.2):
-                return
-        except OSError:
-            time.sleep(0.05)
-    raise AssertionError(f"router did not listen on port {port} within {timeout} s")
+class Process:
+    """A `conag` subprocess whose stdout and stderr are read by threads, so that a test can
+    wait for a line (the router prints its "listening" line once its signal handlers are in)."""
+
+    def __init__(self, *args: str):
+        self.proc = subprocess.Popen([sys.executable, "-m", "conag", *args], cwd=ROOT, text=True,
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        self._lines = {"out": [], "err": []}
+        self._cond = threading.Condition()
+        self._readers = [threading.Thread(target=self._read, args=(s, k), daemon=True)
+                         for s, k in ((self.proc.stdout, "out"), (self.proc.stderr, "err"))]
+        for t in self._readers:
+            t.start()
+
+    def _read(self, stream, kind: str) -> None:
+        for line in stream:
+            with self._cond:
+                self._lines[kind].append(line)
+                self._cond.notify_all()
+
+    @property
+    def out(self) -> str:
+        with self._cond:
+            return "".join(self._lines["out"])
+
+    @property
+    def err(self) -> str:
+        with self._cond:
+            return "".join(self._lines["err"])
+
+    def wait_for(self, text: str, timeout: float = 15.0) -> None:
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while not any(text in line for line in self._lines["out"]):
+                remaining = deadline - time.monotonic()
+                finished = self.proc.poll() is not None and not any(t.is_alive() for t in self._readers)
+                if remaining <= 0 or finished:
+                    raise AssertionError(f"no {text!r} from conag within {timeout} s (exit "
+                                         f"{self.proc.poll()}): {''.join(self._lines['err'])}")
+                self._cond.wait(min(remaining, 0.2))
+
+    def stop(self, sig=signal.SIGTERM, timeout: float = 5.0) -> int:
+        """Send `sig` and wait for the exit; returns the exit code."""
+        self.proc.send_signal(sig)
+        rc = self.proc.wait(timeout)
+        for t in self._readers:
+            t.join(5)
+        return rc
+
+    def kill(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+        self.proc.wait(10)
+        for t in self._readers:
+            t.join(5)
 
 
 @pytest.fixture
 def router():
-    port = free_port()
-    proc = subprocess.Popen([sys.executable, "-m", "conag", "router", "--listen", f"tcp/127.0.0.1:{port}"],
-                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    proc = Process("router", "--listen", ep)
     try:
-        _wait_for_port(proc, port)
-        yield proc, f"tcp/127.0.0.1:{port}"
+        proc.wait_for("zenoh router listening")
+        yield proc, ep
     finally:
-        if proc.poll() is None:
-            proc.kill()
-        proc.communicate(timeout=10)
+        proc.kill()
 
 
 @pytest.mark.slow
@@ -148,7 +190,22 @@ def test_world_and_agent_talk_through_a_router_process(router):
         for s in reversed(sessions):
             s.close()
 
-    proc.send_signal(signal.SIGTERM)
-    out, err = proc.communicate(timeout=5)
-    assert proc.returncode == 0, err
-    assert f"zenoh router listening on {ep}" in out
+    assert proc.stop(signal.SIGTERM) == 0, proc.err
+    assert f"zenoh router listening on {ep}" in proc.out
+
+
+def test_router_listens_where_its_config_file_says(tmp_path):
+    """`conag router --zenoh-config FILE` must keep the file's listen endpoints (no loopback default)."""
+    port = free_port()
+    text = (DEPLOY / "multi-host/router.json5").read_text(encoding="utf-8")
+    config = tmp_path / "router.json5"
+    config.write_text(text.replace("tcp/0.0.0.0:7447", f"tcp/127.0.0.1:{port}"), encoding="utf-8")
+    proc = Process("router", "--zenoh-config", str(config))
+    try:
+        proc.wait_for("zenoh router listening")
+        with socket.create_connection(("127.0.0.1", port), timeout=2):
+            pass  # the file's endpoint, not the loopback default 7447
+        assert proc.stop(signal.SIGTERM) == 0, proc.err
+        assert str(config) in proc.out
+    finally:
+        proc.kill()

@@ -23,7 +23,7 @@ class WorldConfig:
     inertia: float = 0.5            # fraction of the speed error closed per tick (1 = no inertia)
     sensor_sectors: int = 16
     sensor_range: float = 6.0
-    sensor_noise: float = 0.02      # noise std per unit of distance: far readings are worse
+    sensor_noise: float = 0.02      # noise std per unit of distance (uniform, zero mean): far readings are worse
     odometry_noise: float = 0.0     # noise std per unit of distance moved
     grab_reach: float = 1.2         # agent centre to brick centre
     touch_margin: float = 0.15      # eat/drink: surfaces closer than this count as touching
@@ -42,6 +42,11 @@ class WorldConfig:
         for name in ("sensor_noise", "odometry_noise", "touch_margin"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"world.{name} must be >= 0")
+        if self.max_speed * self.dt > self.agent_radius * (1 + 1e-9):
+            # The physics has no continuous collision detection: a body that moves further
+            # than its radius in one tick can jump through the world's boundary.
+            raise ValueError("world.max_speed * world.dt must be <= world.agent_radius "
+                             "(a body may move at most its radius per tick)")
         if not 0 < self.inertia <= 1:
             raise ValueError("world.inertia must be in (0, 1]")
         if not (isinstance(self.sensor_sectors, int) and 1 <= self.sensor_sectors <= 64):

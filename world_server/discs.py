@@ -20,31 +20,54 @@ class DiscStore:
         self.xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2).copy()
         self.kind = np.asarray(kinds, dtype=np.int64).copy()
         self.state = np.full(len(self.kind), IN_WORLD, dtype=np.int64)
+        self._present: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def __len__(self) -> int:
         return len(self.kind)
 
+    # Every change goes through these methods, so the arrays the sensors read each tick
+    # are gathered once per change instead of once per tick.
     def add(self, xy: tuple[float, float], kind: int) -> int:
         self.xy = np.vstack([self.xy, np.asarray(xy, dtype=np.float64).reshape(1, 2)])
         self.kind = np.append(self.kind, kind)
         self.state = np.append(self.state, IN_WORLD)
+        self._present = None
         return len(self.kind) - 1
+
+    def carry(self, index: int) -> None:
+        self.state[index] = CARRIED
+        self._present = None
+
+    def place(self, index: int, xy) -> None:
+        self.xy[index] = xy
+        self.state[index] = IN_WORLD
+        self._present = None
+
+    def remove(self, index: int) -> None:
+        self.state[index] = GONE
+        self._present = None
 
     def present(self) -> np.ndarray:
         """Indices of discs physically in the world."""
-        return np.flatnonzero(self.state == IN_WORLD)
+        return self.present_arrays()[0]
 
-    def nearest(self, xy: np.ndarray, max_dist: float, kinds: tuple[int, ...] | None = None) -> int:
-        """Index of the nearest present disc (of one of `kinds`) within `max_dist`, or -1."""
-        mask = self.state == IN_WORLD
-        if kinds is not None:
-            mask &= np.isin(self.kind, kinds)
-        idx = np.flatnonzero(mask)
-        if idx.size == 0:
+    def present_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(indices, positions, kinds) of the discs physically in the world."""
+        if self._present is None:
+            idx = np.flatnonzero(self.state == IN_WORLD)
+            self._present = (idx, np.ascontiguousarray(self.xy[idx]), self.kind[idx].copy())
+        return self._present
+
+    def nearest(self, xy, max_dist: float, kind: int | None = None) -> int:
+        """Index of the nearest present disc (of `kind`, if given) within `max_dist`, or -1."""
+        idx, pxy, pkind = self.present_arrays()
+        d2 = np.square(pxy[:, 0] - xy[0]) + np.square(pxy[:, 1] - xy[1])
+        if kind is not None:
+            d2 = np.where(pkind == kind, d2, np.inf)
+        if d2.size == 0:
             return -1
-        d = np.hypot(*(self.xy[idx] - np.asarray(xy, dtype=np.float64)).T)
-        best = int(np.argmin(d))
-        return int(idx[best]) if d[best] <= max_dist else -1
+        best = int(np.argmin(d2))
+        return int(idx[best]) if d2[best] <= max_dist * max_dist else -1
 
     def bricks_total(self) -> int:
         """Bricks that exist: in the world or carried. Only a perturbation changes this."""

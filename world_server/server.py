@@ -107,11 +107,11 @@ class WorldServer:
                 status = self.world.status()
                 done = (self.max_ticks is not None and self.world.tick >= self.max_ticks) or (
                     self.stop_when_complete and status.completed)
-                if done or last_tick - last_status >= self.cfg.status_period:
-                    self._publish_status(status)
-                    last_status = last_tick
                 if done:
                     break
+                if last_tick - last_status >= self.cfg.status_period:
+                    self._publish_status(status)
+                    last_status = last_tick
             return self._publish_status()
         finally:
             self._undeclare()

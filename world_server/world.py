@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from protocol.messages import ACTIONS, CHANNELS, DISC_KINDS, Perturbation, PerturbResult, SensorFrame, Welcome, WorldStatus
-from world_server.discs import BRICK, CARRIED, FOOD, GONE, IN_WORLD, WATER, DiscStore
+from world_server.discs import BRICK, FOOD, WATER, DiscStore
 from world_server.physics import Physics, motor_velocities
 from world_server.scenario import Scenario
 from world_server.sensors import add_noise, sense
@@ -141,11 +141,15 @@ class World:
         rec = self.agents.get(agent_id)
         if rec is None or not rec.alive:
             return False
-        i = rec.index
-        self.speed[i] = min(max(speed, 0.0), self.cfg.max_speed)
-        self.turn[i] = min(max(turn, -self.cfg.max_turn), self.cfg.max_turn)
-        self.action[i] = ACTIONS.index(action)
+        self.set_commands(np.array([rec.index]), np.array([speed]), np.array([turn]),
+                          np.array([ACTIONS.index(action)]))
         return True
+
+    def set_commands(self, index: np.ndarray, speed: np.ndarray, turn: np.ndarray, action: np.ndarray) -> None:
+        """Record commands for many bodies at once (body indices, action codes into ACTIONS)."""
+        self.speed[index] = np.clip(speed, 0.0, self.cfg.max_speed)
+        self.turn[index] = np.clip(turn, -self.cfg.max_turn, self.cfg.max_turn)
+        self.action[index] = action
 
     def step(self) -> None:
         """Advance one tick."""
@@ -174,18 +178,17 @@ class World:
     def _sense(self, pos: np.ndarray | None = None) -> None:
         if pos is None:
             pos, _ = self.physics.state()
-        present = self.discs.present()
-        self._ranges = sense(pos, self.alive, self.discs.xy[present], self.discs.kind[present],
-                             self.cfg.sensor_sectors, self.cfg.sensor_range, self.size)
+        _, disc_xy, disc_kind = self.discs.present_arrays()
+        self._ranges = sense(pos, self.alive, disc_xy, disc_kind, self.cfg.sensor_sectors, self.cfg.sensor_range, self.size)
         add_noise(self._ranges, self.cfg.sensor_noise, self.cfg.sensor_range, self.rng)
 
     def _act(self, rec: AgentRecord, xy: np.ndarray) -> None:
         action = self.action[rec.index]
         touch = self.cfg.agent_radius + self.cfg.disc_radius + self.cfg.touch_margin
         if action == GRAB and rec.holding < 0:
-            brick = self.discs.nearest(xy, self.cfg.grab_reach, (BRICK,))
+            brick = self.discs.nearest(xy, self.cfg.grab_reach, BRICK)
             if brick >= 0:
-                self.discs.state[brick] = CARRIED
+                self.discs.carry(brick)
                 self.physics.remove_disc(brick)
                 self._pending_release.pop(brick, None)
                 rec.holding, rec.grabs = brick, rec.grabs + 1
@@ -194,16 +197,15 @@ class World:
             self._drop(rec, xy)
             self.flags[rec.index, 1] = True
         elif action == EAT:
-            self.flags[rec.index, 2] = self.discs.nearest(xy, touch, (FOOD,)) >= 0
+            self.flags[rec.index, 2] = self.discs.nearest(xy, touch, FOOD) >= 0
         elif action == DRINK:
-            self.flags[rec.index, 3] = self.discs.nearest(xy, touch, (WATER,)) >= 0
+            self.flags[rec.index, 3] = self.discs.nearest(xy, touch, WATER) >= 0
 
     def _drop(self, rec: AgentRecord, xy: np.ndarray) -> None:
         # The brick lands under the agent (paper §3); it ignores that agent until the agent
         # has moved off it, instead of the physics kicking the two apart.
         brick = rec.holding
-        self.discs.xy[brick] = xy
-        self.discs.state[brick] = IN_WORLD
+        self.discs.place(brick, xy)
         self.physics.add_disc(brick, xy, group=rec.index + 1)
         self._pending_release[brick] = rec.index
         rec.holding, rec.drops = -1, rec.drops + 1
@@ -271,8 +273,8 @@ class World:
         self.physics.remove_disc(i)
         self._pending_release.pop(i, None)
         if p.op == "remove":
-            self.discs.state[i] = GONE
+            self.discs.remove(i)
             return PerturbResult(True, f"removed {kind} #{i} from ({p.x:g}, {p.y:g})", self.tick)
-        self.discs.xy[i] = (p.to_x, p.to_y)
+        self.discs.place(i, (p.to_x, p.to_y))
         self.physics.add_disc(i, self.discs.xy[i])
         return PerturbResult(True, f"moved {kind} #{i} to ({p.to_x:g}, {p.to_y:g})", self.tick)
