@@ -26,7 +26,8 @@ class WorldConfig:
     sensor_noise: float = 0.02      # noise std per unit of distance (uniform, zero mean): far readings are worse
     odometry_noise: float = 0.0     # noise std per unit of distance moved
     grab_reach: float = 1.2         # agent centre to brick centre
-    touch_margin: float = 0.15      # eat/drink: surfaces closer than this count as touching
+    touch_margin: float = 0.25      # eat/drink: surfaces closer than this count as touching (an
+                                    # agent on the centre of the next cell touches the disc)
     lockstep_timeout: float = 1.0   # wall seconds the world waits for a live agent's command
     tick_rate: float = 50.0         # ticks per wall second in realtime mode
     status_period: float = 0.5      # wall seconds between status publications

@@ -21,6 +21,7 @@ class DiscStore:
         self.kind = np.asarray(kinds, dtype=np.int64).copy()
         self.state = np.full(len(self.kind), IN_WORLD, dtype=np.int64)
         self._present: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._present_kind: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
     def __len__(self) -> int:
         return len(self.kind)
@@ -56,16 +57,22 @@ class DiscStore:
         if self._present is None:
             idx = np.flatnonzero(self.state == IN_WORLD)
             self._present = (idx, np.ascontiguousarray(self.xy[idx]), self.kind[idx].copy())
+            self._present_kind = {}
         return self._present
+
+    def _present_of_kind(self, kind: int) -> tuple[np.ndarray, np.ndarray]:
+        idx, xy, kinds = self.present_arrays()
+        if kind not in self._present_kind:
+            mine = kinds == kind
+            self._present_kind[kind] = (idx[mine], xy[mine])
+        return self._present_kind[kind]
 
     def nearest(self, xy, max_dist: float, kind: int | None = None) -> int:
         """Index of the nearest present disc (of `kind`, if given) within `max_dist`, or -1."""
-        idx, pxy, pkind = self.present_arrays()
-        d2 = np.square(pxy[:, 0] - xy[0]) + np.square(pxy[:, 1] - xy[1])
-        if kind is not None:
-            d2 = np.where(pkind == kind, d2, np.inf)
-        if d2.size == 0:
+        idx, pxy = self.present_arrays()[:2] if kind is None else self._present_of_kind(kind)
+        if idx.size == 0:
             return -1
+        d2 = np.square(pxy[:, 0] - xy[0]) + np.square(pxy[:, 1] - xy[1])
         best = int(np.argmin(d2))
         return int(idx[best]) if d2[best] <= max_dist * max_dist else -1
 

@@ -12,6 +12,7 @@ import math
 import numpy as np
 import pymunk
 import pymunk.batch as batch
+from numba import njit
 
 from world_server.config import WorldConfig
 
@@ -28,6 +29,7 @@ class Physics:
         self._discs: dict[int, pymunk.Circle] = {}
         self._rows = np.zeros(0, np.int64)  # batch row of each agent body
         self._nrows = 0
+        self._state: tuple[np.ndarray, np.ndarray] | None = None  # read once per step
         self._read = batch.Buffer()
         self._write = batch.Buffer()
         self._add_boundary(*size)
@@ -67,6 +69,7 @@ class Physics:
         self.space.add(body, shape)
         self._bodies.append(body)
         self._map_rows()
+        self._state = None
         return len(self._bodies) - 1
 
     def _map_rows(self) -> None:
@@ -85,13 +88,18 @@ class Physics:
         return len(self._bodies)
 
     def state(self) -> tuple[np.ndarray, np.ndarray]:
-        """(positions, velocities) of every agent body, each (n, 2), in agent order."""
-        if not self._bodies:
-            return np.zeros((0, 2)), np.zeros((0, 2))
-        self._read.clear()
-        batch.get_space_bodies(self.space, _READ, self._read)
-        rows = np.frombuffer(self._read.float_buf()).reshape(self._nrows, 4)[self._rows]
-        return rows[:, :2].copy(), rows[:, 2:].copy()
+        """(positions, velocities) of every agent body, each (n, 2), in agent order.
+
+        Read from pymunk once per change (step, new body, teleport); treat as read-only.
+        """
+        if self._state is None:
+            if not self._bodies:
+                return np.zeros((0, 2)), np.zeros((0, 2))
+            self._read.clear()
+            batch.get_space_bodies(self.space, _READ, self._read)
+            rows = np.frombuffer(self._read.float_buf()).reshape(self._nrows, 4)[self._rows]
+            self._state = (rows[:, :2].copy(), rows[:, 2:].copy())
+        return self._state
 
     def drive(self, velocity: np.ndarray, desired: np.ndarray) -> None:
         """Make each body reach `desired` velocity during the next step, contacts permitting.
@@ -112,17 +120,28 @@ class Physics:
         body.position = (float(xy[0]), float(xy[1]))
         body.velocity = (0.0, 0.0)
         self.space.reindex_shapes_for_body(body)
+        self._state = None
 
     def step(self) -> None:
         self.space.step(self.cfg.dt)
+        self._state = None
 
 
-def motor_velocities(velocity: np.ndarray, heading: np.ndarray, speed: np.ndarray,
-                     inertia: float) -> np.ndarray:
-    """Velocities after one tick of inertia: close `inertia` of the gap to the target.
+@njit(cache=True)
+def motor_update(heading, turn, speed, alive, velocity, inertia):
+    """Turn every live body and return the velocities it should have after this tick.
 
-    The target is `speed` along `heading`; the current velocity already includes what
-    collisions did to it, so a blocked agent does not build up speed it never had.
+    Heading += turn (wrapped to [-pi, pi)); the velocity closes `inertia` of the gap to
+    `speed` along the new heading. The current velocity already includes what contacts
+    did to it, so a blocked body does not build up speed it never had. Dead bodies stop.
+    One compiled pass instead of a dozen small array operations per tick.
     """
-    target = np.column_stack([np.cos(heading), np.sin(heading)]) * speed[:, None]
-    return velocity + inertia * (target - velocity)
+    desired = np.zeros_like(velocity)
+    for i in range(heading.shape[0]):
+        if not alive[i]:
+            continue
+        h = (heading[i] + turn[i] + np.pi) % (2.0 * np.pi) - np.pi
+        heading[i] = h
+        desired[i, 0] = velocity[i, 0] + inertia * (speed[i] * np.cos(h) - velocity[i, 0])
+        desired[i, 1] = velocity[i, 1] + inertia * (speed[i] * np.sin(h) - velocity[i, 1])
+    return desired

@@ -15,9 +15,9 @@ import numpy as np
 
 from protocol.messages import ACTIONS, CHANNELS, DISC_KINDS, Perturbation, PerturbResult, SensorFrame, Welcome, WorldStatus
 from world_server.discs import BRICK, FOOD, WATER, DiscStore
-from world_server.physics import Physics, motor_velocities
+from world_server.physics import Physics, motor_update
 from world_server.scenario import Scenario
-from world_server.sensors import add_noise, sense
+from world_server.sensors import sense
 
 GRAB, DROP, EAT, DRINK = (ACTIONS.index(a) for a in ("grab", "drop", "eat", "drink"))
 FLAGS = ("grabbed", "dropped", "ate", "drank")
@@ -157,12 +157,11 @@ class World:
         pos, vel = self.physics.state()
         for i in np.flatnonzero(self.action):
             self._act(self._order[i], pos[i])
-        self.heading = np.mod(self.heading + self.turn * self.alive + np.pi, 2 * np.pi) - np.pi
+        desired = motor_update(self.heading, self.turn, self.speed, self.alive, vel, self.cfg.inertia)
         # The turn and the action are one-shot; the speed is a set point that persists.
         self.turn[:] = 0.0
         self.action[:] = 0
-        desired = motor_velocities(vel, self.heading, self.speed * self.alive, self.cfg.inertia)
-        self.physics.drive(vel, desired * self.alive[:, None])
+        self.physics.drive(vel, desired)
         self.physics.step()
         new_pos, _ = self.physics.state()
         moved = new_pos - pos
@@ -179,8 +178,9 @@ class World:
         if pos is None:
             pos, _ = self.physics.state()
         _, disc_xy, disc_kind = self.discs.present_arrays()
-        self._ranges = sense(pos, self.alive, disc_xy, disc_kind, self.cfg.sensor_sectors, self.cfg.sensor_range, self.size)
-        add_noise(self._ranges, self.cfg.sensor_noise, self.cfg.sensor_range, self.rng)
+        seed = int(self.rng.integers(2**63)) if self.cfg.sensor_noise > 0 else 0
+        self._ranges = sense(pos, self.alive, disc_xy, disc_kind, self.cfg.sensor_sectors,
+                             self.cfg.sensor_range, self.size, noise=self.cfg.sensor_noise, seed=seed)
 
     def _act(self, rec: AgentRecord, xy: np.ndarray) -> None:
         action = self.action[rec.index]
