@@ -81,8 +81,11 @@ def cmd_world(args) -> int:
             print(f"world {args.world_id}: {scenario.name} ({scenario.cols}x{scenario.rows} cells, "
                   f"{len(world.sites_xy)} sites, {world.discs.bricks_total()} bricks), "
                   f"{args.mode_tick or scenario.tick_mode} mode", flush=True)
+            if (args.mode_tick or scenario.tick_mode) == "lockstep":
+                print(f"lockstep: ticks start once {args.wait_agents} agent(s) have attached", flush=True)
             server = WorldServer(world, session, mode=args.mode_tick, max_ticks=args.ticks,
-                                 stop_when_complete=args.stop_when_complete, on_status=on_status)
+                                 stop_when_complete=args.stop_when_complete, wait_agents=args.wait_agents,
+                                 on_status=on_status)
             final = server.run(stop)
         finally:
             session.close()
@@ -217,6 +220,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="override the scenario's tick mode")
     w.add_argument("--seed", type=int, help="override the scenario's seed")
     w.add_argument("--stop-when-complete", action="store_true", help="stop once every site holds a brick")
+    w.add_argument("--wait-agents", type=int, default=1, metavar="N",
+                   help="lockstep: do not tick before N agents have attached (default 1)")
     w.add_argument("--summary", metavar="PATH", help="write the final status as JSON")
     w.add_argument("--quiet", action="store_true", help="do not print periodic status lines")
     _bus_args(w)

@@ -50,10 +50,10 @@ def running_world():
 def test_world_runs_a_fixed_number_of_ticks_and_writes_a_summary(tmp_path):
     summary = tmp_path / "out.json"
     ep = f"tcp/127.0.0.1:{free_port()}"
-    r = conag("world", QUICK_WALL, "--ticks", 50, "--listen", ep, "--summary", summary)
+    r = conag("world", QUICK_WALL, "--ticks", 50, "--tick-mode", "realtime", "--listen", ep, "--summary", summary)
     assert r.returncode == 0, r.stderr
     lines = r.stdout.splitlines()
-    assert lines[0].startswith("world w0: quick_wall (12x8 cells, 3 sites, 4 bricks), lockstep mode")
+    assert lines[0].startswith("world w0: quick_wall (12x8 cells, 3 sites, 4 bricks), realtime mode")
     assert any(line.startswith("tick ") and "sites 0/3" in line for line in lines[1:-1])
     assert lines[-1].startswith("final: tick      50  sites 0/3  bricks 4")
     data = json.loads(summary.read_text(encoding="utf-8"))

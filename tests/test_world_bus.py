@@ -132,6 +132,7 @@ def test_agent_killed_holding_a_brick_leaves_it_and_gets_its_body_back(bus, star
         proc.send_signal(signal.SIGKILL)
         proc.wait(10)
         wait_for(lambda: not world.agents["a1"].alive, what="the killed agent to be noticed")
+        time.sleep(0.1)  # let the world thread finish the tick in which it noticed
         rec = world.agents["a1"]
         assert rec.holding == -1
         brick = int(np.flatnonzero(world.discs.kind == 2)[0])
@@ -207,3 +208,19 @@ def test_realtime_mode_ticks_at_its_rate_without_agents(bus, start_world):
     ticks = rw.world.tick
     rate = rw.world.cfg.tick_rate
     assert 0.6 * rate <= ticks <= 1.2 * rate
+
+
+def test_lockstep_is_driven_by_agents_not_by_the_clock(bus, start_world):
+    rw = start_world(SCRIPT_WORLD, wait_agents=2)
+    time.sleep(0.5)
+    assert rw.world.tick == 0  # nobody to drive it
+    first = ScriptedBody(WorldLink(bus.client_session(), "w0", "a1"))
+    first.link.send(first.frame.tick, 1.0, 0.0)
+    time.sleep(0.5)
+    assert rw.world.tick == 0  # waits for the second of the two agents it was told to expect
+    second = ScriptedBody(WorldLink(bus.client_session(), "w0", "a2"))
+    for _ in range(5):
+        second.link.send(second.frame.tick, 0.0, 0.0)
+        first.act(1.0, 0.0)
+        second.frame = second.link.next_frame(second.frame.tick)
+    assert rw.world.tick == 5

@@ -5,7 +5,9 @@ one queue by zenoh's callback threads and applied by the single loop thread, so 
 world itself is never touched concurrently. The loop:
 
 * lockstep: tick t is stepped once every live agent has sent its command for t, or
-  after `lockstep_timeout`; with no live agent it paces itself at `tick_rate`;
+  after `lockstep_timeout`. Ticks are driven by agents only, never by the wall clock:
+  the world does not tick before `wait_agents` agents have attached, nor while no agent
+  is live, so the same seed and the same agents give the same run;
 * realtime: a tick every 1/tick_rate seconds, the latest command of each agent wins.
 
 Agents come and go: an agent is waited for only while its liveliness token exists.
@@ -34,7 +36,7 @@ log = logging.getLogger("conag.world")
 
 class WorldServer:
     def __init__(self, world: World, session: zenoh.Session, *, mode: str | None = None,
-                 max_ticks: int | None = None, stop_when_complete: bool = False,
+                 max_ticks: int | None = None, stop_when_complete: bool = False, wait_agents: int = 1,
                  clock: Callable[[], float] = time.monotonic,
                  on_status: Callable[[WorldStatus], None] | None = None):
         self.world = world
@@ -42,6 +44,7 @@ class WorldServer:
         self.mode = mode or world.scenario.tick_mode
         self.max_ticks = max_ticks
         self.stop_when_complete = stop_when_complete
+        self.wait_agents = wait_agents
         self.clock = clock
         self.on_status = on_status
         self.cfg = world.cfg
@@ -51,6 +54,7 @@ class WorldServer:
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._status_bytes = encode(world.status())
         self._declared: list = []
+        self._last_status = float("-inf")
 
     # zenoh callbacks: decode if cheap, then hand over to the loop thread ------------------
     def _on_command(self, sample: zenoh.Sample) -> None:
@@ -95,52 +99,51 @@ class WorldServer:
         self._declare()
         try:
             self._publish_status()
-            last_tick = last_status = self.clock()
-            while not stop.is_set():
-                self._wait_for_tick(last_tick, stop)
-                if stop.is_set():
-                    break
+            last_tick = self.clock()
+            while self._wait_for_tick(last_tick, stop):
                 self.world.step()
                 last_tick = self.clock()
                 self._answered.clear()
                 self._publish_frames()
                 status = self.world.status()
-                done = (self.max_ticks is not None and self.world.tick >= self.max_ticks) or (
-                    self.stop_when_complete and status.completed)
-                if done:
+                if (self.max_ticks is not None and self.world.tick >= self.max_ticks) or (
+                        self.stop_when_complete and status.completed):
                     break
-                if last_tick - last_status >= self.cfg.status_period:
-                    self._publish_status(status)
-                    last_status = last_tick
+                self._publish_status_if_due(status)
             return self._publish_status()
         finally:
             self._undeclare()
 
-    def _deadline(self, last_tick: float) -> float:
-        if self.mode == "lockstep" and self._live():
-            return last_tick + self.cfg.lockstep_timeout
-        return last_tick + 1.0 / self.cfg.tick_rate
-
     def _live(self) -> list[str]:
         return [a for a in self.world.live_agents() if a in self._tokens]
 
-    def _wait_for_tick(self, last_tick: float, stop: threading.Event) -> None:
+    def _wait_for_tick(self, last_tick: float, stop: threading.Event) -> bool:
+        """Handle bus events until the next tick is due; False once `stop` is set."""
         while not stop.is_set():
+            self._publish_status_if_due()
             live = self._live()
-            if self.mode == "lockstep" and live and self._answered.issuperset(live):
-                return
+            # Realtime ticks by the clock; lockstep only once agents are there to drive it.
+            armed = self.mode == "realtime" or (bool(live) and len(self.world.agents) >= self.wait_agents)
+            if self.mode == "lockstep" and armed and self._answered.issuperset(live):
+                return True
             now = self.clock()
-            deadline = self._deadline(last_tick)
-            if now >= deadline:
-                if self.mode == "lockstep" and live:
-                    late = sorted(set(live) - self._answered)
-                    log.debug("tick %d: no command from %s in time", self.world.tick, ", ".join(late))
-                return
+            if not armed:
+                last_tick = now  # a lockstep timeout counts from when there is someone to wait for
+                timeout = 0.05
+            else:
+                period = 1.0 / self.cfg.tick_rate if self.mode == "realtime" else self.cfg.lockstep_timeout
+                if now >= last_tick + period:
+                    if self.mode == "lockstep":
+                        late = sorted(set(live) - self._answered)
+                        log.debug("tick %d: no command from %s in time", self.world.tick, ", ".join(late))
+                    return True
+                timeout = min(last_tick + period - now, 0.05)
             try:
-                event = self._events.get(timeout=min(deadline - now, 0.05))
+                event = self._events.get(timeout=timeout)
             except queue.Empty:
                 continue
             self._handle(event)
+        return False
 
     def _handle(self, event: tuple) -> None:
         kind = event[0]
@@ -223,8 +226,13 @@ class WorldServer:
             if frame.agent_id in self._tokens:
                 self._publish_frame(frame)
 
+    def _publish_status_if_due(self, status: WorldStatus | None = None) -> None:
+        if self.clock() - self._last_status >= self.cfg.status_period:
+            self._publish_status(status)
+
     def _publish_status(self, status: WorldStatus | None = None) -> WorldStatus:
         status = status or self.world.status()
+        self._last_status = self.clock()
         self._status_bytes = encode(status)
         self._status_pub.put(self._status_bytes)
         if self.on_status:

@@ -102,13 +102,13 @@ class World:
         rec = self.agents.get(agent_id)
         if rec is None or not rec.alive:
             return
-        rec.alive = False
-        self.alive[rec.index] = False
-        self.speed[rec.index] = self.turn[rec.index] = 0.0
-        self.action[rec.index] = 0
         if rec.holding >= 0:
             pos, _ = self.physics.state()
             self._drop(rec, pos[rec.index])
+        self.speed[rec.index] = self.turn[rec.index] = 0.0
+        self.action[rec.index] = 0
+        self.alive[rec.index] = False
+        rec.alive = False
 
     def live_agents(self) -> list[str]:
         return [r.agent_id for r in self._order if r.alive]
