@@ -1,15 +1,17 @@
 """The agent's end of the world link: liveliness, attach, sensor frames, commands.
 
 A `WorldLink` declares the agent's liveliness token, subscribes to its own sensor frames
-("latest wins": a ring of one, so a slow agent always acts on the newest frame), attaches
-by id (retrying until a world answers) and publishes commands. It holds no agent logic;
-the scripted test controller and the agent process both drive a body through it.
+("latest wins": a zenoh ring channel of one, so a slow agent always acts on the newest
+frame), attaches by id (retrying until a world answers) and publishes commands. It holds
+no agent logic; the scripted test controller and the agent process both drive a body
+through it. Frames are taken with a blocking `recv` in the caller's thread (no Python
+callback thread in between: that hand-off cost more than the rest of the round trip);
+zenoh's `recv` still lets SIGINT/SIGTERM handlers run.
 """
 
 from __future__ import annotations
 
 import os
-import threading
 import time
 
 import zenoh
@@ -27,22 +29,18 @@ class WorldLink:
     def __init__(self, session: zenoh.Session, world_id: str, agent_id: str):
         self.session, self.world_id, self.agent_id = session, world_id, agent_id
         self.bad_frames = 0
-        self._frames = threading.Condition()
-        self._latest: SensorFrame | None = None
         self._token = session.liveliness().declare_token(keys.agent_token(world_id, agent_id))
-        self._sub = session.declare_subscriber(keys.sensors(world_id, agent_id), self._on_frame)
+        self._sub = session.declare_subscriber(keys.sensors(world_id, agent_id), zenoh.handlers.RingChannel(1))
         self._pub = session.declare_publisher(keys.command(world_id, agent_id), express=True)
 
-    def _on_frame(self, sample: zenoh.Sample) -> None:
+    def _decode(self, sample: zenoh.Sample | None) -> SensorFrame | None:
+        if sample is None:
+            return None
         try:
-            frame = decode(sample.payload.to_bytes(), SensorFrame)
+            return decode(sample.payload.to_bytes(), SensorFrame)
         except ProtocolError:
             self.bad_frames += 1
-            return
-        with self._frames:
-            if self._latest is None or frame.tick >= self._latest.tick:
-                self._latest = frame
-            self._frames.notify_all()
+            return None
 
     def attach(self, timeout: float = 10.0, retry: float = 0.05) -> Welcome:
         """Ask the world for this agent's body; retry until it answers or `timeout` passes."""
@@ -62,16 +60,25 @@ class WorldLink:
             time.sleep(retry)
         raise AttachError(f"agent {self.agent_id} could not attach to world {self.world_id}: {last_error}")
 
-    def next_frame(self, after_tick: int = -1, timeout: float = 5.0) -> SensorFrame | None:
-        """The newest frame with tick > `after_tick`, waiting up to `timeout`; None if none came."""
-        deadline = time.monotonic() + timeout
-        with self._frames:
-            while self._latest is None or self._latest.tick <= after_tick:
-                remaining = deadline - time.monotonic()
-                if remaining <= 0:
-                    return None
-                self._frames.wait(remaining)
-            return self._latest
+    def next_frame(self, after_tick: int = -1, timeout: float | None = 5.0) -> SensorFrame | None:
+        """The newest frame with tick > `after_tick`; None if none came within `timeout`.
+
+        With `timeout=None` it blocks until a frame comes (the world keeps publishing:
+        lockstep steps on after its own timeout, realtime at its rate).
+        """
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            if deadline is None:
+                frame = self._decode(self._sub.recv())
+            else:
+                frame = self._decode(self._sub.try_recv())
+                if frame is None:
+                    if time.monotonic() >= deadline:
+                        return None
+                    time.sleep(0.0002)  # zenoh's recv has no timeout: poll, finely
+                    continue
+            if frame.tick > after_tick:
+                return frame
 
     def send(self, tick: int, speed: float = 0.0, turn: float = 0.0, action: str = "none") -> None:
         self._pub.put(encode(AgentCommand(self.agent_id, tick, speed, turn, action)))

@@ -8,16 +8,17 @@ agents at random free cells; every tick applies a fresh command to every agent (
 turn, and for about 1% of agents a grab or a drop), then steps physics, gripper, odometry and the
 noisy sensors. No bus. Round trip: a world-side process publishes an encoded sensor
 frame, an agent-side process decodes it and answers with an encoded command, and the
-world side times until that command is decoded. Median of many.
+world side times until that command is decoded (the agent side is the real WorldLink). Median.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import multiprocessing as mp
+import queue
 import statistics
 import sys
-import threading
 import time
 from pathlib import Path
 
@@ -79,65 +80,68 @@ def ticks_per_second(n_agents: int, seconds: float, repeats: int = 5) -> list[fl
 
 
 def _agent_side(endpoint: str, ready, done) -> None:
-    """Agent process: answer every frame with a command."""
+    """Agent process: the real agent link, answering every frame with a command."""
+    from agent_runtime.link import WorldLink
     from conag.bus import BusOptions, open_session
-    from protocol import keys
-    from protocol.codec import decode, encode
-    from protocol.messages import AgentCommand, SensorFrame
 
     session = open_session(BusOptions(connect=(endpoint,)))
     try:
-        pub = session.declare_publisher(keys.command("bench", "a1"), express=True)
-
-        def on_frame(sample):
-            frame = decode(sample.payload.to_bytes(), SensorFrame)
-            pub.put(encode(AgentCommand("a1", frame.tick, 1.0, 0.1, "none")))
-
-        sub = session.declare_subscriber(keys.sensors("bench", "a1"), on_frame)
+        link = WorldLink(session, "bench", "a1")
         ready.set()
-        done.wait(120)
-        sub.undeclare()
+        while not done.is_set():
+            frame = link.next_frame(timeout=None)
+            link.send(frame.tick, 1.0, 0.1)
+        link.close()
     finally:
         session.close()
 
 
 def round_trip_ms(samples: int, endpoint: str) -> tuple[float, float]:
-    """(median, 90th percentile) of frame -> command round trips between two processes."""
+    """(median, 90th percentile) of frame -> command round trips between two processes.
+
+    The world side hands samples from zenoh's callback thread to its loop through a
+    queue, as the world server does; the agent side is `agent_runtime.link.WorldLink`.
+    Both ends decode what they receive and encode what they send.
+    """
     from conag.bus import BusOptions, open_session
     from protocol import keys
     from protocol.codec import decode, encode
     from protocol.messages import AgentCommand
 
     world = make_world(1, n_discs=200, side=30)
-    frame_bytes = [encode(f) for f in [world.frame("a0")]]
+    frame = world.frame("a0")
     ctx = mp.get_context("spawn")
     ready, done = ctx.Event(), ctx.Event()
     session = open_session(BusOptions(listen=(endpoint,)), serve=True)
     proc = ctx.Process(target=_agent_side, args=(endpoint, ready, done), daemon=True)
     proc.start()
     try:
-        got = threading.Event()
-        sub = session.declare_subscriber(keys.command("bench", "a1"),
-                                         lambda s: (decode(s.payload.to_bytes(), AgentCommand), got.set()))
+        inbox: queue.SimpleQueue = queue.SimpleQueue()
+        sub = session.declare_subscriber(keys.command("bench", "a1"), lambda s: inbox.put(s.payload.to_bytes()))
         pub = session.declare_publisher(keys.sensors("bench", "a1"), express=True)
         if not ready.wait(30):
             raise RuntimeError("agent process did not start")
         times = []
-        template = frame_bytes[0]
         for i in range(samples + 200):
-            got.clear()
+            payload = encode(dataclasses.replace(frame, tick=i + 1))
             t0 = time.perf_counter()
-            pub.put(template)
-            if not got.wait(2.0):
+            pub.put(payload)
+            try:
+                decode(inbox.get(timeout=2.0), AgentCommand)
+            except queue.Empty:
                 continue  # the first frames may go out before the routes are up
             if i >= 200:  # warm-up
                 times.append((time.perf_counter() - t0) * 1e3)
+        done.set()
+        pub.put(encode(dataclasses.replace(frame, tick=samples + 1000)))  # unblock the agent
         sub.undeclare()
         times.sort()
         return statistics.median(times), times[int(0.9 * (len(times) - 1))]
     finally:
         done.set()
         proc.join(10)
+        if proc.is_alive():
+            proc.terminate()
         session.close()
 
 
