@@ -67,6 +67,7 @@ class WorldLink:
         lockstep steps on after its own timeout, realtime at its rate).
         """
         deadline = None if timeout is None else time.monotonic() + timeout
+        pause = 0.0001
         while True:
             if deadline is None:
                 frame = self._decode(self._sub.recv())
@@ -75,7 +76,10 @@ class WorldLink:
                 if frame is None:
                     if time.monotonic() >= deadline:
                         return None
-                    time.sleep(0.0002)  # zenoh's recv has no timeout: poll, finely
+                    # zenoh's recv has no timeout: poll, finely at first, then backing off
+                    # so a waiting agent does not take a core from the world.
+                    time.sleep(pause)
+                    pause = min(pause * 2, 0.002)
                     continue
             if frame.tick > after_tick:
                 return frame

@@ -23,6 +23,7 @@ from contextlib import contextmanager
 from dataclasses import asdict
 
 from conag.bus import MODES, BusOptions, open_session
+from conag.summary import write_summary
 
 EXIT_USAGE = 2
 
@@ -91,8 +92,7 @@ def cmd_world(args) -> int:
             session.close()
     print("final: " + _status_line(final), flush=True)
     if args.summary:
-        with open(args.summary, "w", encoding="utf-8") as fh:
-            json.dump(asdict(final), fh, indent=2)
+        write_summary(final, args.summary)
     return 0
 
 
@@ -208,6 +208,68 @@ def cmd_router(args) -> int:
     return 0
 
 
+class _Stopped(Exception):
+    """Raised by the agent's signal handler, so a blocking frame wait ends at once."""
+
+
+def cmd_agent(args) -> int:
+    from agent_runtime.config import AgentConfig
+    from agent_runtime.link import AttachError
+    from agent_runtime.process import run_agent
+
+    def raise_stop(signum, _frame):
+        raise _Stopped()
+
+    previous = {s: signal.signal(s, raise_stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        session = open_session(_bus(args))
+        try:
+            run_agent(session, args.world_id, args.id, AgentConfig(), args.seed, attach_timeout=args.attach_timeout)
+        except AttachError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 1
+        finally:
+            session.close()
+    except _Stopped:
+        pass
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
+    return 0
+
+
+def cmd_run(args) -> int:
+    from conag.bus import DEFAULT_ENDPOINT
+    from conag.run import RunOptions, run
+    from world_server.scenario import load_scenario
+
+    opts = RunOptions(scenario_path=args.scenario, scenario=load_scenario(args.scenario),
+                      endpoint=(args.listen or [DEFAULT_ENDPOINT])[0], world_id=args.world_id,
+                      agents=args.agents, seed=args.seed, max_ticks=args.max_ticks, summary=args.summary,
+                      headless=args.headless, quiet=args.quiet)
+    with _stop_on_signals() as stop:
+        summary = run(opts, stop)
+    state = "complete" if summary["completed"] else "NOT complete"
+    print(f"{summary['scenario']}: {state}: {summary['sites_filled']}/{summary['sites_total']} sites in "
+          f"{summary['ticks']} ticks, {len(summary['agents'])} agents, total distance "
+          f"{summary['total_distance']:.1f}")
+    if args.summary:
+        print(f"summary written to {args.summary}")
+    return 0 if summary["completed"] else 3
+
+
+def cmd_control(args) -> int:
+    from conag.run import control
+
+    session = open_session(_bus(args))
+    try:
+        result = control(session, args.world_id, args.command, args.id, args.timeout)
+    finally:
+        session.close()
+    print(result.message, file=sys.stdout if result.ok else sys.stderr)
+    return 0 if result.ok else 1
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="conag", description="ConAg: agents that build structures from a blueprint.")
     p.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
@@ -242,6 +304,34 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the world")
     _bus_args(q)
     q.set_defaults(func=cmd_perturb)
+
+    a = sub.add_parser("agent", help="run one agent process")
+    a.add_argument("--id", required=True, help="agent id; a restarted process with the same id gets its body back")
+    a.add_argument("--seed", type=int, default=0, help="seed of the agent's own randomness (exploring)")
+    a.add_argument("--attach-timeout", type=float, default=30.0, help="seconds to wait for the world")
+    _bus_args(a)
+    a.set_defaults(func=cmd_agent)
+
+    u = sub.add_parser("run", help="build a scenario: a world and its agents as processes, until done")
+    u.add_argument("scenario")
+    u.add_argument("--agents", type=int, help="number of agents (default: the scenario's)")
+    u.add_argument("--seed", type=int, help="override the scenario's seed")
+    u.add_argument("--max-ticks", type=int, help="stop after this many ticks (default: the scenario's)")
+    u.add_argument("--summary", metavar="PATH", help="write the run summary (JSON)")
+    u.add_argument("--headless", action="store_true", help="plain progress lines, no terminal tricks")
+    u.add_argument("--quiet", action="store_true", help="no progress lines")
+    u.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
+                   help="where the world listens (default tcp/127.0.0.1:7447)")
+    u.add_argument("--world-id", default="w0")
+    u.set_defaults(func=cmd_run)
+
+    for name, text in (("kill", "SIGKILL one agent process of a running `conag run`"),
+                       ("restart", "kill and start again one agent process of a running `conag run`")):
+        k = sub.add_parser(name, help=text)
+        k.add_argument("id", help="agent id, e.g. a2")
+        k.add_argument("--timeout", type=float, default=5.0)
+        _bus_args(k)
+        k.set_defaults(func=cmd_control)
 
     r = sub.add_parser("render", help="draw a scenario as a bird's-eye PNG")
     r.add_argument("scenario")

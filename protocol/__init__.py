@@ -18,6 +18,8 @@ from protocol.messages import (
     Perturbation,
     PerturbResult,
     Reinforcement,
+    RunControl,
+    RunControlResult,
     SensorFrame,
     Welcome,
     WorldStatus,
@@ -26,5 +28,5 @@ from protocol.messages import (
 __all__ = [
     "ACTIONS", "CHANNELS", "DISC_KINDS", "MAX_MESSAGE_BYTES", "MESSAGE_TYPES", "PERTURB_OPS",
     "SCHEMA_VERSION", "AgentCommand", "Decision", "Hello", "Perturbation", "PerturbResult",
-    "ProtocolError", "Reinforcement", "SensorFrame", "Welcome", "WorldStatus", "decode", "encode",
+    "ProtocolError", "Reinforcement", "RunControl", "RunControlResult", "SensorFrame", "Welcome", "WorldStatus", "decode", "encode",
 ]

@@ -38,6 +38,11 @@ def perturb(world: str) -> str:
     return f"{world_root(world)}/perturb"
 
 
+def run_control(world: str) -> str:
+    """Queryable of a running `conag run`: a RunControl in, a RunControlResult back."""
+    return f"{world_root(world)}/run/control"
+
+
 def attach(world: str, agent: str) -> str:
     """Queryable: a Hello in, a Welcome back."""
     return f"{world_root(world)}/agent/{check_id(agent, 'agent id')}/attach"

@@ -274,7 +274,33 @@ class Reinforcement:
         _require(self.tick >= 0 and self.seq >= 0, "Reinforcement counts must be >= 0")
 
 
+RUN_OPS = ("kill", "restart")
+
+
+@dataclass(frozen=True)
+class RunControl:
+    """Anyone -> a running `conag run` (as a query): kill or restart one agent process."""
+
+    op: str
+    agent_id: str
+
+    def __post_init__(self) -> None:
+        _require(self.op in RUN_OPS, f"RunControl.op must be one of {RUN_OPS}")
+        check_id(self.agent_id, "agent id")
+
+
+@dataclass(frozen=True)
+class RunControlResult:
+    """`conag run` -> the asker: whether it did it."""
+
+    ok: bool
+    message: str
+
+    def __post_init__(self) -> None:
+        _require(len(self.message) <= MAX_STRING, "RunControlResult.message too long")
+
+
 MESSAGE_TYPES: tuple[type, ...] = (
     Hello, Welcome, SensorFrame, AgentCommand, WorldStatus,
-    Perturbation, PerturbResult, Decision, Reinforcement,
+    Perturbation, PerturbResult, Decision, Reinforcement, RunControl, RunControlResult,
 )

@@ -57,7 +57,9 @@ def test_world_runs_a_fixed_number_of_ticks_and_writes_a_summary(tmp_path):
     assert any(line.startswith("tick ") and "sites 0/3" in line for line in lines[1:-1])
     assert lines[-1].startswith("final: tick      50  sites 0/3  bricks 4")
     data = json.loads(summary.read_text(encoding="utf-8"))
-    assert (data["tick"], data["sites_total"], data["bricks_total"]) == (50, 3, 4)
+    assert (data["ticks"], data["sites_total"], data["bricks_total"]) == (50, 3, 4)
+    assert set(data) == {"scenario", "seed", "completed", "ticks", "sites_total", "sites_filled", "bricks_total",
+                         "total_distance", "agents"}  # the run summary contract of MISSION.md
     assert data["scenario"] == "quick_wall" and data["completed"] is False
 
 

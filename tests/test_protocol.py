@@ -29,6 +29,8 @@ from protocol import (
     PerturbResult,
     ProtocolError,
     Reinforcement,
+    RunControl,
+    RunControlResult,
     SensorFrame,
     Welcome,
     WorldStatus,
@@ -75,6 +77,8 @@ EXAMPLES: dict[type, object] = {
         outputs=(0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7), arm="drop", motor="go-to-site",
     ),
     Reinforcement: Reinforcement(agent_id="a1", tick=121, seq=17, arm=1, motor=-1),
+    RunControl: RunControl(op="restart", agent_id="a2"),
+    RunControlResult: RunControlResult(ok=True, message="restarted a2 (pid 4242)"),
 }
 
 

@@ -1,0 +1,187 @@
+"""One agent's decision step (paper §4): sense, map, plan, select, act. No bus here.
+
+Per frame: shift the ESMs by the odometry and write what the sensors report; update the
+motivations; build the configuration and brick navigation maps from the ESMs (§4.2.3);
+read the six internal state nodes off them (§4.3, §5); then select by fixed priority
+(§4.4): eat/drink > avoid > approach food/water > the construction network of Fig. 8.
+The result is a motor command and the Decision the teacher watches.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from agent_runtime import steering
+from agent_runtime.config import AgentConfig
+from agent_runtime.esm import BRICK, CONFIG, FOOD, WATER, EgocentricMaps
+from agent_runtime.motivations import Motivations
+from agent_runtime.network import NONE, STATE_NODES, ActionNetwork, engineered
+from agent_runtime.spreading import distance_field, gradient_step
+from protocol.messages import CHANNELS, NO_READING, Decision, SensorFrame, Welcome
+
+_CH = {name: CHANNELS.index(name) for name in CHANNELS}
+
+
+@dataclass(frozen=True)
+class Step:
+    """What one decision step produced."""
+
+    speed: float
+    turn: float
+    action: str          # for the world: none, grab, drop, eat, drink
+    behaviour: str       # the motor behaviour that won
+    decision: Decision   # for the teacher
+
+
+@dataclass(frozen=True)
+class Plans:
+    """The navigation maps of one step, as distance fields (inf: unreachable)."""
+
+    config: np.ndarray
+    brick: np.ndarray
+    config_goals: np.ndarray
+    brick_goals: np.ndarray
+
+
+class Brain:
+    def __init__(self, welcome: Welcome, cfg: AgentConfig | None = None,
+                 rng: np.random.Generator | None = None, network: ActionNetwork | None = None):
+        self.cfg = cfg or AgentConfig()
+        self.agent_id = welcome.agent_id
+        self.cell = welcome.cell_size
+        self.sensor_range = welcome.sensor_range / welcome.cell_size
+        self.sectors = welcome.sectors
+        self.rng = rng if rng is not None else np.random.default_rng(0)
+        self.network = network or engineered()
+        self.maps = EgocentricMaps(self.cfg.map_size)
+        self.maps.seed_blueprint(welcome.x, welcome.y, welcome.site_xs, welcome.site_ys, welcome.cell_size)
+        self.motivations = Motivations()
+        self.centre = self.cfg.map_size // 2
+        self._attach_tick = welcome.tick
+        self.plans: Plans | None = None
+
+    # sensing and planning --------------------------------------------------------------
+    def perceive(self, frame: SensorFrame) -> np.ndarray:
+        """Update maps and motivations from a frame; returns its readings as (channels, sectors)."""
+        raw = np.asarray(frame.ranges, dtype=np.float64).reshape(len(CHANNELS), frame.sectors)
+        ranges = np.where(raw != NO_READING, raw / self.cell, NO_READING)  # in cells from here on
+        if frame.tick > self._attach_tick:  # the attach pose already includes the last move
+            self.maps.move(frame.odom_dx, frame.odom_dy, self.cell)
+        self.maps.sense(ranges, self.sensor_range)
+        self.motivations.update(self.cfg, frame.ate, frame.drank)
+        return ranges
+
+    def plan(self) -> Plans:
+        """Configuration and brick NMs from the ESMs (paper §4.2.3, Fig. 5)."""
+        m = self.maps.maps > 0.5
+        food, water, brick, config = m[FOOD], m[WATER], m[BRICK], m[CONFIG]
+        config_goals = config & ~brick          # sites still missing a brick
+        brick_goals = brick & ~config           # bricks not part of the structure
+        config_obstacles = self._free_centre(food | water | brick)
+        brick_obstacles = self._free_centre(food | water | (brick & config))
+        self.plans = Plans(distance_field(config_goals, config_obstacles),
+                           distance_field(brick_goals, brick_obstacles), config_goals, brick_goals)
+        return self.plans
+
+    def _free_centre(self, obstacles: np.ndarray) -> np.ndarray:
+        # The agent stands in the centre cell, sometimes on a brick it just dropped: its
+        # own cell is never an obstacle, or it could not plan a way out.
+        obstacles[self.centre, self.centre] = False
+        return obstacles
+
+    def state_nodes(self, frame: SensorFrame, plans: Plans) -> np.ndarray:
+        """The six internal state nodes, in STATE_NODES order (0 or 1)."""
+        c = self.centre
+        near_centre = float(np.hypot(*self.maps.frac)) <= self.cfg.drop_centering
+        at_site = bool(plans.config_goals[c, c]) and near_centre
+        values = {
+            "holding_brick": frame.holding,
+            "at_drop_site": at_site,
+            "at_brick": self._nearest_brick(plans, self.cfg.reach) is not None,
+            "near_brick": self._nearest_brick(plans, self.cfg.near_brick) is not None,
+            "brick_available": bool(np.isfinite(plans.brick[c, c])),
+            "drop_site_available": bool(np.isfinite(plans.config[c, c])),
+        }
+        return np.array([float(values[n]) for n in STATE_NODES])
+
+    def _nearest_brick(self, plans: Plans, within: float) -> tuple[float, float] | None:
+        """Offset (cells) to the nearest available brick within `within`, or None."""
+        rows, cols = np.nonzero(plans.brick_goals)
+        if rows.size == 0:
+            return None
+        dx, dy = self.maps.offset_of(rows, cols)
+        d = np.hypot(dx, dy)
+        i = int(np.argmin(d))
+        return (float(dx[i]), float(dy[i])) if d[i] <= within else None
+
+    # deciding ----------------------------------------------------------------------------
+    def step(self, frame: SensorFrame) -> Step:
+        ranges = self.perceive(frame)
+        plans = self.plan()
+        state = self.state_nodes(frame, plans)
+        choice = self.network.choose(state)
+        speed, turn, action, behaviour = self._select(frame, ranges, plans, choice.arm, choice.motor)
+        decision = Decision(self.agent_id, frame.tick, tuple(state.tolist()), choice.outputs,
+                            choice.arm, choice.motor)
+        return Step(speed, turn, action, behaviour, decision)
+
+    def _select(self, frame, ranges, plans, arm, motor):
+        """Fixed priority by lateral inhibition: eat/drink > avoid > approach food/water > build."""
+        mot, cruise = self.motivations, self.cfg.cruise_speed
+        for seeking, channel, act in ((mot.seeking_water, "water", "drink"), (mot.seeking_food, "food", "eat")):
+            if seeking and _nearest(ranges[_CH[channel]]) <= self.cfg.touch:
+                return 0.0, 0.0, act, act
+        agent_near = _nearest(ranges[_CH["agent"]])
+        if agent_near < self.cfg.avoid_distance:
+            dx, dy = self._reading_offset(ranges[_CH["agent"]])
+            return (*steering.away_from(dx, dy, frame.heading, cruise), NONE, "avoid")
+        for seeking, layer, name in ((mot.seeking_water, WATER, "approach_water"),
+                                     (mot.seeking_food, FOOD, "approach_food")):
+            if seeking:
+                return (*self._navigate(self._need_field(layer), frame.heading), NONE, name)
+        return (*self._construct(frame, ranges, plans, motor), arm if arm != NONE else NONE, motor)
+
+    def _need_field(self, layer: int) -> np.ndarray:
+        m = self.maps.maps > 0.5
+        others = (m[FOOD] | m[WATER] | m[BRICK]) & ~m[layer]
+        return distance_field(m[layer], self._free_centre(others))
+
+    def _construct(self, frame, ranges, plans, motor) -> tuple[float, float]:
+        cruise = self.cfg.cruise_speed
+        if motor == "config_nav":
+            return self._navigate(plans.config, frame.heading)
+        if motor == "brick_nav":
+            return self._navigate(plans.brick, frame.heading)
+        if motor == "approach_red":
+            target = self._nearest_brick(plans, self.cfg.near_brick)
+            return steering.steer_to(*target, frame.heading, cruise) if target else (0.0, 0.0)
+        if motor == "avoid_red":
+            if _nearest(ranges[_CH["brick"]]) < self.sensor_range:
+                return steering.away_from(*self._reading_offset(ranges[_CH["brick"]]), frame.heading, cruise)
+            return steering.explore(frame.heading, self.rng, self.cfg.explore_turn, cruise)
+        if motor == "explore":
+            return steering.explore(frame.heading, self.rng, self.cfg.explore_turn, cruise)
+        return 0.0, 0.0
+
+    def _navigate(self, field: np.ndarray, heading: float) -> tuple[float, float]:
+        """Follow the steepest gradient: steer for the centre of the best neighbouring cell."""
+        move = gradient_step(field)
+        if move is None:  # nothing reachable on this map: look around
+            return steering.explore(heading, self.rng, self.cfg.explore_turn, self.cfg.cruise_speed)
+        dr, dc = move
+        dx, dy = self.maps.offset_of(self.centre + dr, self.centre + dc)
+        return steering.steer_to(float(dx), float(dy), heading, self.cfg.cruise_speed)
+
+    def _reading_offset(self, readings: np.ndarray) -> tuple[float, float]:
+        """Offset (cells) of the nearest reading, at its sector's centre angle."""
+        k = int(np.argmin(np.where(readings >= 0, readings, np.inf)))
+        angle = (k + 0.5) * 2 * math.pi / len(readings)
+        return readings[k] * math.cos(angle), readings[k] * math.sin(angle)
+
+
+def _nearest(readings: np.ndarray) -> float:
+    hits = readings[readings != NO_READING]
+    return float(hits.min()) if hits.size else math.inf

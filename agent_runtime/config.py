@@ -1,0 +1,45 @@
+"""Agent configuration: a frozen dataclass, loadable from a TOML table.
+
+Map geometry follows the world: one map cell is one world cell (one disc diameter).
+Maps are indexed [row, col] with row 0 the northmost row and the agent in the centre
+cell (size // 2, size // 2).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class AgentConfig:
+    map_size: int = 41              # cells per side of every ESM and NM (odd)
+    hunger_rate: float = 0.002      # hunger and thirst grow by this much per tick ...
+    thirst_rate: float = 0.0025
+    need_threshold: float = 0.8     # ... and a need above this interrupts construction
+    sated_threshold: float = 0.05   # eat / drink until the need is back below this
+    cruise_speed: float = 2.0       # world units per second when following a plan
+    near_brick: float = 2.5         # Near-Brick: an available brick within this many cells
+    reach: float = 1.3              # a brick closer than this (cells) is within the gripper's reach
+    touch: float = 1.0              # food/water closer than this (centre to centre) is touching
+    drop_centering: float = 0.3     # drop only this close (cells) to the site cell's centre
+    avoid_distance: float = 0.9     # Avoid: another agent closer than this
+    explore_turn: float = 0.6       # largest random turn per tick while exploring
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.map_size, int) and self.map_size >= 5 and self.map_size % 2 == 1):
+            raise ValueError("agent.map_size must be an odd integer >= 5")
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, float) and not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"agent.{f.name} must be a finite number >= 0")
+
+    @classmethod
+    def from_mapping(cls, table: dict) -> "AgentConfig":
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(table) - known)
+        if unknown:
+            raise ValueError(f"unknown agent setting(s): {', '.join(unknown)}; known: {', '.join(sorted(known))}")
+        return cls(**{k: (float(v) if isinstance(getattr(cls, k), float) and isinstance(v, int) else v)
+                      for k, v in table.items()})

@@ -1,0 +1,235 @@
+"""Egocentric spatial maps (paper §4.2.1, Fig. 4; MISSION A2).
+
+One square grid per kind of thing the agent keeps track of, stacked in one float32
+array `maps[layer, row, col]`: FOOD, WATER, BRICK (written from the sector sensors),
+CONFIG (the blueprint, seeded once at attach) and AGENT (other agents, rewritten from
+scratch each step because they move). One map cell is one world cell (one disc
+diameter); row 0 is the northmost row, columns grow eastwards, and the agent is always
+in the centre cell (size // 2, size // 2).
+
+The agent is rarely at the exact centre of its cell: `frac` holds its offset from the
+centre cell's centre, in cells, (x east, y north), each in [-0.5, 0.5). Odometry is
+accumulated into `frac`; only when the agent crosses into another cell do all layers
+shift by whole cells, opposite to the motion, so sub-cell motion is never lost and the
+map stays aligned with the world grid the blueprint was given in. Whatever is shifted
+off the map is forgotten.
+
+Sensing (see `sense`) clears what a sector proves empty (nothing of its colour nearer
+than its reading, or nothing at all within range) and writes each reading at the cell
+holding the point at that distance along the sector's centre angle: a sector cannot
+tell the angle inside it, so a disc at distance d lands at most d * 2 sin(pi / 2S)
+from its true position (< 0.5 cell, i.e. in the exact cell, within 2.5 cells for 16
+sectors). Cells behind a reading keep what they had: a sector reports only the nearest
+object, so it says nothing about what lies beyond.
+
+Pure numpy, no bus. The per-sector geometry of the cells within sensor range is
+computed for a window of cell offsets fixed per sensor range, and cached per `frac`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from protocol.messages import CHANNELS
+
+FOOD, WATER, BRICK, CONFIG, AGENT = range(5)   # layer indices
+LAYERS = 5
+# Map layer fed by each sensor channel, in CHANNELS order (food, water, brick, agent).
+_CHANNEL_LAYER = np.array([{"food": FOOD, "water": WATER, "brick": BRICK, "agent": AGENT}[c] for c in CHANNELS])
+_LAYER_BASE = _CHANNEL_LAYER[:, None].astype(np.float64)  # (channels, 1), broadcast over sectors
+_DISC_CHANNELS = 3             # the first three channels are discs, cleared by their sectors
+CLEAR_MARGIN = 0.75            # clear only cells nearer than reading - this (a disc's cell centre
+                               # can be up to 0.71 cell nearer than the disc, plus a little noise)
+RANGE_MARGIN = 0.5             # with no reading, clear only cells well inside the sensor range
+
+
+class EgocentricMaps:
+    """The agent's ESMs: `maps` (5, size, size) float32 and the sub-cell offset `frac`."""
+
+    def __init__(self, size: int = 41):
+        if not (isinstance(size, int) and size >= 1 and size % 2 == 1):
+            raise ValueError("map size must be an odd positive integer")
+        self.size = size
+        self.centre = size // 2
+        self.maps = np.zeros((LAYERS, size, size), np.float32)
+        # A flat view, valid for the map's lifetime because `maps` is only ever changed in place.
+        self._all = self.maps.reshape(-1)
+        self.frac = np.zeros(2)
+        self._windows: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._sector_dirs: dict[int, np.ndarray] = {}
+        self._geometry_key: tuple | None = None
+        self._geometry: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+
+    # ------------------------------------------------------------------ coordinates
+
+    def cell_of(self, ox: float, oy: float) -> tuple[int, int]:
+        """(row, col) of the cell holding the point at offset (ox, oy) cells from the agent.
+
+        The result may lie outside the map (check with `contains`).
+        """
+        return (self.centre - math.floor(self.frac[1] + oy + 0.5),
+                self.centre + math.floor(self.frac[0] + ox + 0.5))
+
+    def offset_of(self, row: int, col: int) -> tuple[float, float]:
+        """World offset (x, y), in cells, from the agent to the centre of cell (row, col)."""
+        return (col - self.centre - float(self.frac[0]), self.centre - row - float(self.frac[1]))
+
+    def contains(self, row: int, col: int) -> bool:
+        return 0 <= row < self.size and 0 <= col < self.size
+
+    # ------------------------------------------------------------------ blueprint
+
+    def seed_blueprint(self, x: float, y: float, site_xs, site_ys, cell_size: float = 1.0) -> None:
+        """Start a fresh map at pose (x, y) (world units) holding the blueprint's sites.
+
+        Called once at attach. `frac` comes from the pose, so the map grid lines up with
+        the world grid (world cell (c, r) is centred on ((c + 0.5), (r + 0.5)) * cell_size,
+        r counted northwards). Every layer is cleared first: anything sensed before was
+        placed relative to a pose this one replaces. Sites whose cell falls outside the map
+        are ignored (the configuration map only knows the blueprint near where it starts).
+        """
+        self.maps.fill(0.0)
+        gx, gy = x / cell_size, y / cell_size
+        ax, ay = math.floor(gx), math.floor(gy)
+        self.frac[:] = (gx - ax - 0.5, gy - ay - 0.5)
+        sx = np.floor(np.asarray(site_xs, np.float64) / cell_size).astype(np.int64) - ax
+        sy = np.floor(np.asarray(site_ys, np.float64) / cell_size).astype(np.int64) - ay
+        self._set_cells(CONFIG, self.centre - sy, self.centre + sx)
+
+    # ------------------------------------------------------------------ odometry
+
+    def move(self, dx: float, dy: float, cell_size: float = 1.0) -> None:
+        """Dead reckoning: the agent moved (dx, dy) world units (x east, y north) this tick."""
+        if not (math.isfinite(dx) and math.isfinite(dy)):
+            raise ValueError(f"odometry must be finite, got ({dx!r}, {dy!r})")
+        fx, kx = _wrap(float(self.frac[0]) + dx / cell_size)
+        fy, ky = _wrap(float(self.frac[1]) + dy / cell_size)
+        self.frac[:] = (fx, fy)
+        if kx or ky:
+            self._shift(kx, ky)
+
+    def _shift(self, kx: int, ky: int) -> None:
+        """The agent entered the cell kx east, ky north: move all contents the other way."""
+        n = self.size
+        if abs(kx) >= n or abs(ky) >= n:
+            self.maps.fill(0.0)
+            return
+        # Content at (row, col) goes to (row + ky, col - kx): north motion pushes contents
+        # south (rows grow southwards), east motion pushes them west.
+        dst_r, src_r = _span(ky, n)
+        dst_c, src_c = _span(-kx, n)
+        # numpy copes with the overlap of source and destination (it buffers), and
+        # working in place keeps `maps` (and views of it) the same object.
+        self.maps[:, dst_r, dst_c] = self.maps[:, src_r, src_c]
+        # What came in from beyond the map is unknown: zeros.
+        if ky > 0:
+            self.maps[:, :ky, :] = 0.0
+        elif ky < 0:
+            self.maps[:, n + ky:, :] = 0.0
+        if kx > 0:
+            self.maps[:, :, n - kx:] = 0.0
+        elif kx < 0:
+            self.maps[:, :, :-kx] = 0.0
+
+    # ------------------------------------------------------------------ sensing
+
+    def sense(self, ranges, sensor_range: float, cell_size: float = 1.0) -> None:
+        """Integrate one sensor frame: `ranges` is (4, S) world-unit readings (or flat, channel-major).
+
+        Per sector of FOOD, WATER and BRICK: cells whose centre lies in the sector's wedge
+        and nearer than reading - 0.75 cell are cleared (the reading is the nearest object of
+        that colour), or, with no reading, every cell of the wedge within sensor_range - 0.5
+        cell. Then each reading is written at the cell holding the point at its distance
+        along the sector's centre angle, measured from the agent's true position (the cell
+        centre plus `frac`). Cells beyond a reading keep what they had. The AGENT layer is
+        rebuilt from this frame alone; CONFIG is never touched.
+        """
+        r = np.asarray(ranges, np.float64).reshape(len(CHANNELS), -1) / cell_size
+        sectors = r.shape[1]
+        reach = sensor_range / cell_size
+        cells, dist, sector = self._geometry_for(sectors, reach)
+        disc = r[:_DISC_CHANNELS]
+        limit = np.where(disc >= 0.0, disc - CLEAR_MARGIN, reach - RANGE_MARGIN)
+        # Per disc channel and window cell: is the cell nearer than what its sector saw?
+        empty = dist < limit[:, sector]
+        self._all[cells[empty]] = 0.0
+        self.maps[AGENT].fill(0.0)
+        self._write_readings(r, sectors)
+
+    def _write_readings(self, r: np.ndarray, sectors: int) -> None:
+        """Mark each reading's cell in its channel's layer (all channels and sectors at once)."""
+        dirs = self._dirs(sectors)
+        n = self.size
+        col = np.floor(self.frac[0] + r * dirs[0] + 0.5) + self.centre
+        row = self.centre - np.floor(self.frac[1] + r * dirs[1] + 0.5)
+        hit = (r >= 0.0) & (row >= 0) & (row < n) & (col >= 0) & (col < n)
+        self._all[(_LAYER_BASE * (n * n) + row * n + col)[hit].astype(np.int64)] = 1.0
+
+    def _set_cells(self, layer: int, row: np.ndarray, col: np.ndarray) -> None:
+        inside = (row >= 0) & (row < self.size) & (col >= 0) & (col < self.size)
+        self.maps[layer, row[inside], col[inside]] = 1.0
+
+    # ------------------------------------------------------------------ precomputed geometry
+
+    def _dirs(self, sectors: int) -> np.ndarray:
+        """(2, S): cos and sin of each sector's centre angle."""
+        dirs = self._sector_dirs.get(sectors)
+        if dirs is None:
+            angle = (np.arange(sectors) + 0.5) * (2.0 * np.pi / sectors)
+            dirs = self._sector_dirs[sectors] = np.vstack([np.cos(angle), np.sin(angle)])
+        return dirs
+
+    def _window(self, reach: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Flat indices (per disc layer) and (east, north) offsets of every cell whose centre can be in range.
+
+        Only these cells can be cleared, so only they need a sector and a distance each
+        call; which they are does not depend on `frac` (it moves a centre by <= 0.71 cell).
+        """
+        win = self._windows.get(reach)
+        if win is None:
+            c = self.centre
+            rows, cols = np.mgrid[0:self.size, 0:self.size]
+            east, north = (cols - c).ravel(), (c - rows).ravel()
+            keep = np.hypot(east, north) < reach + 0.75
+            # Indices into the flattened maps of these cells in each disc layer: (3, cells).
+            cells = np.arange(_DISC_CHANNELS)[:, None] * (self.size * self.size) + np.flatnonzero(keep)
+            win = self._windows[reach] = (cells, east[keep].astype(np.float64), north[keep].astype(np.float64))
+        return win
+
+    def _geometry_for(self, sectors: int, reach: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(flat indices, distance, sector) of the window's cells as seen from the agent now.
+
+        Cached per (frac, sectors, reach): an agent standing still reuses it.
+        """
+        key = (float(self.frac[0]), float(self.frac[1]), sectors, reach)
+        if key != self._geometry_key:
+            cells, east, north = self._window(reach)
+            vx = east - 0.0
+            vy = north - key[1]
+            angle = np.arctan2(vy, vx) % (2.0 * np.pi)
+            # min(): an angle a hair below 2*pi must not become sector S.
+            sector = np.minimum((angle * (sectors / (2.0 * np.pi))).astype(np.int64), sectors - 1)
+            self._geometry = (cells, np.hypot(vx, vy), sector)
+            self._geometry_key = key
+        return self._geometry
+
+
+def _wrap(f: float) -> tuple[float, int]:
+    """Split an offset in cells into (rest in [-0.5, 0.5), whole cells crossed)."""
+    k = math.floor(f + 0.5)
+    f -= k
+    # Rounding in f + 0.5 can leave f a hair outside the range; put it back.
+    if f >= 0.5:
+        f, k = f - 1.0, k + 1
+    elif f < -0.5:
+        f, k = f + 1.0, k - 1
+    return f, k
+
+
+def _span(shift: int, n: int) -> tuple[slice, slice]:
+    """(destination, source) slices along one axis for moving contents by `shift` cells."""
+    if shift >= 0:
+        return slice(shift, n), slice(0, n - shift)
+    return slice(0, n + shift), slice(-shift, n)

@@ -1,0 +1,175 @@
+"""`conag run SCENARIO`: a world and one process per agent, on loopback, until done.
+
+The world and every agent are separate processes (fresh interpreters: nothing crosses a
+fork). This process watches the world's status, shows progress, answers `conag kill` /
+`conag restart` (a RunControl query on the bus), and once the structure is complete or
+the tick limit passes, stops everything and writes the run summary.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import tempfile
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from conag.bus import BusOptions, open_session
+from protocol import keys
+from protocol.codec import ProtocolError, decode, encode
+from protocol.messages import RunControl, RunControlResult, WorldStatus
+from world_server.scenario import Scenario
+
+
+@dataclass
+class RunOptions:
+    scenario_path: str
+    scenario: Scenario
+    endpoint: str
+    world_id: str = "w0"
+    agents: int | None = None
+    seed: int | None = None
+    max_ticks: int | None = None
+    summary: str | None = None
+    headless: bool = False
+    quiet: bool = False
+    extra_agent_args: tuple[str, ...] = ()
+
+
+@dataclass
+class Fleet:
+    """The agent processes of a run, by id."""
+
+    opts: RunOptions
+    procs: dict[str, subprocess.Popen] = field(default_factory=dict)
+    lock: threading.Lock = field(default_factory=threading.Lock)
+
+    def start(self, agent_id: str) -> subprocess.Popen:
+        o = self.opts
+        cmd = [sys.executable, "-m", "conag", "agent", "--id", agent_id, "--world-id", o.world_id,
+               "--connect", o.endpoint, "--seed", str(o.seed if o.seed is not None else o.scenario.seed),
+               *o.extra_agent_args]
+        proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL)
+        with self.lock:
+            self.procs[agent_id] = proc
+        return proc
+
+    def kill(self, agent_id: str) -> str:
+        with self.lock:
+            proc = self.procs.get(agent_id)
+        if proc is None:
+            raise KeyError(agent_id)
+        if proc.poll() is None:
+            proc.kill()  # SIGKILL: the point is to show the world survives a crash
+            proc.wait(10)
+        return f"killed {agent_id} (pid {proc.pid})"
+
+    def restart(self, agent_id: str) -> str:
+        if agent_id in self.procs:
+            self.kill(agent_id)
+        proc = self.start(agent_id)
+        return f"started {agent_id} (pid {proc.pid})"
+
+    def stop_all(self, grace: float = 5.0) -> None:
+        with self.lock:
+            procs = list(self.procs.values())
+        for p in procs:
+            if p.poll() is None:
+                p.send_signal(signal.SIGTERM)
+        deadline = time.monotonic() + grace
+        for p in procs:
+            try:
+                p.wait(max(deadline - time.monotonic(), 0.1))
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait(5)
+
+
+def _progress(st: WorldStatus, started: float) -> str:
+    return (f"tick {st.tick:>7}  sites {st.sites_filled}/{st.sites_total}  "
+            f"agents alive {st.agents_alive}/{len(st.agent_ids)}  {time.monotonic() - started:6.1f} s"
+            + ("  COMPLETE" if st.completed else ""))
+
+
+def run(opts: RunOptions, stop: threading.Event) -> dict:
+    """Run the scenario; returns the run summary (also written to opts.summary)."""
+    sc = opts.scenario
+    n_agents = sc.agents if opts.agents is None else opts.agents
+    max_ticks = opts.max_ticks or sc.max_ticks
+    final_path = Path(tempfile.mkdtemp(prefix="conag-run-")) / "final.json"
+    world_cmd = [sys.executable, "-m", "conag", "world", opts.scenario_path, "--world-id", opts.world_id,
+                 "--listen", opts.endpoint, "--ticks", str(max_ticks), "--stop-when-complete",
+                 "--wait-agents", str(max(n_agents, 1)), "--quiet", "--summary", str(final_path)]
+    if opts.seed is not None:
+        world_cmd += ["--seed", str(opts.seed)]
+    world = subprocess.Popen(world_cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
+    fleet = Fleet(opts)
+    session = open_session(BusOptions(connect=(opts.endpoint,)))
+    started = time.monotonic()
+    tty = sys.stdout.isatty() and not opts.headless
+
+    def on_status(sample):
+        try:
+            st = decode(sample.payload.to_bytes(), WorldStatus)
+        except ProtocolError:
+            return
+        if not opts.quiet:
+            line = _progress(st, started)
+            print(("\r" + line) if tty else line, end="" if tty else "\n", flush=True)
+
+    def on_control(query):
+        try:
+            req = decode(query.payload.to_bytes() if query.payload is not None else b"", RunControl)
+            message = fleet.kill(req.agent_id) if req.op == "kill" else fleet.restart(req.agent_id)
+            result = RunControlResult(True, message)
+        except ProtocolError as exc:
+            result = RunControlResult(False, f"bad request: {exc}")
+        except KeyError as exc:
+            result = RunControlResult(False, f"no agent {exc.args[0]!r} in this run")
+        query.reply(query.key_expr, encode(result))
+        query.drop()
+
+    subs = [session.declare_subscriber(keys.status(opts.world_id), on_status),
+            session.declare_queryable(keys.run_control(opts.world_id), on_control)]
+    try:
+        for i in range(n_agents):
+            fleet.start(f"a{i + 1}")
+        while world.poll() is None and not stop.is_set():
+            time.sleep(0.1)
+    finally:
+        if world.poll() is None:
+            world.send_signal(signal.SIGTERM)
+        try:
+            world.wait(10)
+        except subprocess.TimeoutExpired:
+            world.kill()
+        fleet.stop_all()
+        for s in subs:
+            s.undeclare()
+        session.close()
+    if tty:
+        print()
+    if not final_path.exists():
+        raise RuntimeError(f"the world exited ({world.returncode}) without a final status")
+    summary = json.loads(final_path.read_text(encoding="utf-8"))
+    final_path.unlink()
+    final_path.parent.rmdir()
+    if opts.summary:
+        Path(opts.summary).write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    return summary
+
+
+def control(session, world_id: str, op: str, agent_id: str, timeout: float = 5.0) -> RunControlResult:
+    """Ask a running `conag run` to kill or restart one agent."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        for reply in session.get(keys.run_control(world_id), payload=encode(RunControl(op, agent_id)),
+                                 timeout=min(1.0, timeout)):
+            if reply.ok is not None:
+                return decode(reply.ok.payload.to_bytes(), RunControlResult)
+        time.sleep(0.1)
+    return RunControlResult(False, f"no `conag run` of world {world_id!r} answered within {timeout:g} s")
