@@ -16,11 +16,12 @@ off the map is forgotten.
 
 Sensing (see `sense`) clears what a sector proves empty (nothing of its colour nearer
 than its reading, or nothing at all within range) and writes each reading at the cell
-holding the point at that distance along the sector's centre angle: a sector cannot
-tell the angle inside it, so a disc at distance d lands at most d * 2 sin(pi / 2S)
-from its true position (< 0.5 cell, i.e. in the exact cell, within 2.5 cells for 16
-sectors). Cells behind a reading keep what they had: a sector reports only the nearest
-object, so it says nothing about what lies beyond.
+holding the point at that distance along the sector's centre angle. A sector cannot
+tell the angle inside it, so that point is up to d * 2 sin(pi / 2S) from the disc: a
+disc sitting on a cell centre lands in its very cell while that is under half a cell
+(d < 2.5 cells with 16 sectors) and at most one cell off while it is under 1.5 (all of
+a 6-cell range). Cells behind a reading keep what they had: a sector reports only the
+nearest object, so it says nothing about what lies beyond.
 
 Pure numpy, no bus. The per-sector geometry of the cells within sensor range is
 computed for a window of cell offsets fixed per sensor range, and cached per `frac`.
@@ -32,7 +33,7 @@ import math
 
 import numpy as np
 
-from protocol.messages import CHANNELS
+from protocol.messages import CHANNELS, NO_READING
 
 FOOD, WATER, BRICK, CONFIG, AGENT = range(5)   # layer indices
 LAYERS = 5
@@ -43,6 +44,7 @@ _DISC_CHANNELS = 3             # the first three channels are discs, cleared by 
 CLEAR_MARGIN = 0.75            # clear only cells nearer than reading - this (a disc's cell centre
                                # can be up to 0.71 cell nearer than the disc, plus a little noise)
 RANGE_MARGIN = 0.5             # with no reading, clear only cells well inside the sensor range
+BAND = 0.75                    # cells this close to a reading's distance may hold what it saw
 
 
 class EgocentricMaps:
@@ -149,14 +151,54 @@ class EgocentricMaps:
         r = np.asarray(ranges, np.float64).reshape(len(CHANNELS), -1) / cell_size
         sectors = r.shape[1]
         reach = sensor_range / cell_size
-        cells, dist, sector = self._geometry_for(sectors, reach)
+        cells, dist, (k, sector, starts), vx, vy = self._geometry_for(sectors, reach)
         disc = r[:_DISC_CHANNELS]
         limit = np.where(disc >= 0.0, disc - CLEAR_MARGIN, reach - RANGE_MARGIN)
-        # Per disc channel and window cell: is the cell nearer than what its sector saw?
-        empty = dist < limit[:, sector]
-        self._all[cells[empty]] = 0.0
+        # A cell is known empty when it is nearer than what every sector it overlaps saw.
+        cell_limit = np.minimum.reduceat(limit[:, sector], starts, axis=1)
+        self._all[cells[dist < cell_limit]] = 0.0
+        # Each reading may be explained by any cell its wedge overlaps: the (cell, sector) pairs.
+        d = disc[:, sector]
+        explained = self._associate(r, cells[:, k], dist[k], sector, vx[k], vy[k], d)
         self.maps[AGENT].fill(0.0)
-        self._write_readings(r, sectors)
+        self._write_readings(np.where(explained, NO_READING, r), sectors)
+
+    def _associate(self, r, cells, dist, sector, vx, vy, d) -> np.ndarray:
+        """Attribute each disc reading to one cell of its band; True where that was done.
+
+        A sector cannot tell the angle inside it, so the same disc seen from two places
+        lands in two cells and leaves a ghost beside the real one; a ghost brick is then a
+        goal the agent keeps driving to (and the gripper takes the real brick, from the
+        structure). So a reading is matched to the cells of its wedge at about its distance
+        (the band): a cell already holding that colour first, then, for bricks, a blueprint
+        cell (bricks are expected there), else the cell at the sector's centre angle
+        (the plain rule, left to `_write_readings`). Other brick marks in the band are
+        ghosts of the one brick the sector saw and are cleared, except on blueprint cells,
+        where neighbouring structure bricks really do stand at the same distance.
+        """
+        sectors = r.shape[1]
+        band = (d >= 0.0) & (np.abs(dist - d) <= BAND)
+        if not band.any():
+            return np.zeros_like(r, dtype=bool)
+        dirs = self._dirs(sectors)
+        err = np.hypot(vx - d * dirs[0][sector], vy - d * dirs[1][sector])
+        marked = self._all[cells] > 0.5
+        blueprint = np.zeros_like(band)
+        blueprint[BRICK] = self.maps[CONFIG].reshape(-1)[cells[0]] > 0.5  # cells[0]: positions in a layer
+        score = np.where(band, err - 2.0 * marked - 1.0 * blueprint, np.inf)
+        group = np.arange(_DISC_CHANNELS)[:, None] * sectors + sector
+        best = np.full(_DISC_CHANNELS * sectors, np.inf)
+        np.minimum.at(best, group[band], score[band])
+        winner = band & (score <= best[group]) & (marked | blueprint)
+        ghosts = np.zeros_like(band)
+        ghosts[BRICK] = band[BRICK] & marked[BRICK] & ~winner[BRICK] & ~blueprint[BRICK]
+        self._all[cells[ghosts]] = 0.0
+        self._all[cells[winner]] = 1.0
+        explained = np.zeros_like(r, dtype=bool)
+        hit = np.zeros(_DISC_CHANNELS * sectors, dtype=bool)
+        hit[group[winner]] = True
+        explained[:_DISC_CHANNELS] = hit.reshape(_DISC_CHANNELS, sectors)
+        return explained
 
     def _write_readings(self, r: np.ndarray, sectors: int) -> None:
         """Mark each reading's cell in its channel's layer (all channels and sectors at once)."""
@@ -192,26 +234,37 @@ class EgocentricMaps:
             c = self.centre
             rows, cols = np.mgrid[0:self.size, 0:self.size]
             east, north = (cols - c).ravel(), (c - rows).ravel()
-            keep = np.hypot(east, north) < reach + 0.75
+            # reach + BAND + the largest frac (0.71): every cell a reading can be attributed to.
+            keep = np.hypot(east, north) < reach + BAND + 0.75
             # Indices into the flattened maps of these cells in each disc layer: (3, cells).
             cells = np.arange(_DISC_CHANNELS)[:, None] * (self.size * self.size) + np.flatnonzero(keep)
             win = self._windows[reach] = (cells, east[keep].astype(np.float64), north[keep].astype(np.float64))
         return win
 
-    def _geometry_for(self, sectors: int, reach: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(flat indices, distance, sector) of the window's cells as seen from the agent now.
+    def _geometry_for(self, sectors: int, reach: float) -> tuple[np.ndarray, ...]:
+        """(flat indices, distance, sector, east, north offsets) of the window's cells, seen from the agent now.
 
         Cached per (frac, sectors, reach): an agent standing still reuses it.
         """
         key = (float(self.frac[0]), float(self.frac[1]), sectors, reach)
         if key != self._geometry_key:
             cells, east, north = self._window(reach)
-            vx = east - 0.0
+            vx = east - key[0]
             vy = north - key[1]
-            angle = np.arctan2(vy, vx) % (2.0 * np.pi)
-            # min(): an angle a hair below 2*pi must not become sector S.
-            sector = np.minimum((angle * (sectors / (2.0 * np.pi))).astype(np.int64), sectors - 1)
-            self._geometry = (cells, np.hypot(vx, vy), sector)
+            angle = np.arctan2(vy, vx)
+            dist = np.hypot(vx, vy)
+            # A cell has width: it overlaps every sector within half a cell of its centre's
+            # direction (a disc on a sector border may be reported by either neighbour).
+            half = np.arcsin(np.minimum(0.5 / np.maximum(dist, 1e-9), 1.0))
+            per = sectors / (2.0 * np.pi)
+            lo = np.floor((angle - half) * per).astype(np.int64)
+            span = np.minimum(np.floor((angle + half) * per).astype(np.int64) - lo + 1, sectors)
+            # Every (cell, sector) pair the cell overlaps, grouped by cell in window order.
+            cell_of_pair = np.repeat(np.arange(dist.size), span)
+            starts = np.cumsum(span) - span
+            step = np.arange(cell_of_pair.size) - np.repeat(starts, span)
+            sector = (np.repeat(lo, span) + step) % sectors
+            self._geometry = (cells, dist, (cell_of_pair, sector, starts), vx, vy)
             self._geometry_key = key
         return self._geometry
 

@@ -73,7 +73,8 @@ def scattered_cells(n: int, seed: int) -> list[tuple[int, int]]:
 def world(layout: str, **settings_) -> World:
     settings_.setdefault("sensor_noise", 0.0)
     lines = "\n".join(f"{k} = {v!r}" for k, v in settings_.items())
-    text = f'name = "esm"\nseed = 1\nagents = 1\nlayout = """\n{textwrap.dedent(layout).strip()}\n"""\n[world]\n{lines}\n'
+    rows = textwrap.dedent(layout).strip()
+    text = f'name = "esm"\nseed = 1\nagents = 1\nlayout = """\n{rows}\n"""\n[world]\n{lines}\n'
     return World(parse_scenario(text), np.random.default_rng(0))
 
 
@@ -437,27 +438,72 @@ def test_real_sensor_readings_put_discs_in_their_cells_from_any_sub_cell_positio
 
 
 def reference_sense(m: EgocentricMaps, ranges: np.ndarray, reach: float) -> np.ndarray:
-    """The rule of EgocentricMaps.sense, cell by cell (slow and plain), on a copy of the maps."""
+    """The rule of EgocentricMaps.sense, cell by cell (slow and plain), on a copy of the maps.
+
+    1. A cell is cleared when it is nearer than (reading - 0.75) of every sector it
+       overlaps (reach - 0.5 for a sector with no reading).
+    2. Each disc reading is attributed to the best cell of its band (cells overlapping its
+       wedge within 0.75 of its distance): score = distance to the measured point, minus 2
+       if the cell is marked in that layer, minus 1 for a brick on a blueprint cell; the best
+       must be marked or a blueprint brick cell. Other marked, non-blueprint brick cells of
+       the band are ghosts and cleared. Unattributed readings are written at the sector's
+       centre angle.
+    """
     out = m.maps.copy()
     n, sectors = m.size, ranges.shape[1]
+    # Which sectors each cell overlaps is taken from the map's own geometry: at exact sector
+    # borders numpy and math round a hair apart. The real-sensor tests check that geometry.
+    cells, _, (k, sector, _), _, _ = m._geometry_for(sectors, reach)
+    overlapped = {}
+    for i, s in zip(k.tolist(), sector.tolist()):
+        overlapped.setdefault(divmod(int(cells[0, i]), n), set()).add(s)
+    geometry = {}
+    for row in range(n):
+        for col in range(n):
+            ox, oy = m.offset_of(row, col)
+            geometry[(row, col)] = (ox, oy, math.hypot(ox, oy), overlapped.get((row, col), set()))
     for layer in (FOOD, WATER, BRICK):
-        for row in range(n):
-            for col in range(n):
-                ox, oy = m.offset_of(row, col)
-                angle = math.atan2(oy, ox) % (2 * math.pi)
-                s = min(int(angle * sectors / (2 * math.pi)), sectors - 1)
-                limit = ranges[layer, s] - 0.75 if ranges[layer, s] >= 0 else reach - 0.5
-                if math.hypot(ox, oy) < limit:
-                    out[layer, row, col] = 0.0
-    out[AGENT] = 0.0
-    for ch, layer in enumerate((FOOD, WATER, BRICK, AGENT)):
+        for cell, (ox, oy, d, overlapped) in geometry.items():
+            if d > reach + 0.75:
+                continue
+            limits = [ranges[layer, s] - 0.75 if ranges[layer, s] >= 0 else reach - 0.5 for s in overlapped]
+            if d < min(limits):
+                out[layer][cell] = 0.0
+    cleared = out.copy()
+    ghosts, winners, plain = [], [], []
+    for layer in (FOOD, WATER, BRICK):
         for s in range(sectors):
-            d = ranges[ch, s]
-            if d >= 0:
-                a = (s + 0.5) * 2 * math.pi / sectors
-                cell = m.cell_of(d * math.cos(a), d * math.sin(a))
-                if m.contains(*cell):
-                    out[layer][cell] = 1.0
+            d = ranges[layer, s]
+            if d < 0:
+                continue
+            a = (s + 0.5) * 2 * math.pi / sectors
+            px, py = d * math.cos(a), d * math.sin(a)
+            band = [(c, g) for c, g in geometry.items()
+                    if g[2] <= reach + 0.75 and s in g[3] and abs(g[2] - d) <= 0.75]
+            scored = []
+            for c, (ox, oy, _, _) in band:
+                marked = cleared[layer][c] > 0.5
+                blueprint = layer == BRICK and cleared[CONFIG][c] > 0.5
+                scored.append((math.hypot(ox - px, oy - py) - 2.0 * marked - 1.0 * blueprint, c, marked, blueprint))
+            best = min(scored)[0] if scored else None
+            won = [c for score, c, marked, bp in scored if score <= best and (marked or bp)]
+            if won:
+                winners += [(layer, c) for c in won]
+                if layer == BRICK:
+                    ghosts += [(layer, c) for score, c, marked, bp in scored if marked and not bp and c not in won]
+            else:
+                plain.append((layer, m.cell_of(px, py)))
+    for layer, c in ghosts:
+        out[layer][c] = 0.0
+    for layer, c in winners:
+        out[layer][c] = 1.0
+    out[AGENT] = 0.0
+    a_plain = [(AGENT, m.cell_of(ranges[3, s] * math.cos((s + 0.5) * 2 * math.pi / sectors),
+                                 ranges[3, s] * math.sin((s + 0.5) * 2 * math.pi / sectors)))
+               for s in range(sectors) if ranges[3, s] >= 0]
+    for layer, c in plain + a_plain:
+        if m.contains(*c):
+            out[layer][c] = 1.0
     return out
 
 
@@ -469,10 +515,13 @@ def test_sense_follows_its_rule_cell_by_cell(size, fx, fy, sectors, reach, seed)
     m = EgocentricMaps(size)
     m.frac[:] = (fx, fy)
     m.maps[:] = rng.random(m.maps.shape) < 0.5
-    ranges = np.where(rng.random((4, sectors)) < 0.6, rng.uniform(0, reach, (4, sectors)), NO_READING)
-    expected = reference_sense(m, ranges, reach)
-    m.sense(ranges, reach)
-    np.testing.assert_array_equal(m.maps, expected)
+    for tick in range(3):   # the same map over a few ticks, moving (and standing still) in between
+        ranges = np.where(rng.random((4, sectors)) < 0.6, rng.uniform(0, reach, (4, sectors)), NO_READING)
+        expected = reference_sense(m, ranges, reach)
+        m.sense(ranges, reach)
+        np.testing.assert_array_equal(m.maps, expected)
+        if tick:
+            m.move(*rng.uniform(-1.5, 1.5, 2))
 
 
 def test_world_units_are_converted_with_the_cell_size():
@@ -498,8 +547,10 @@ def test_an_empty_sector_clears_its_wedge_only_within_range():
     for layer in (FOOD, WATER, BRICK):
         assert m.maps[layer, C - 2, C + 3] == 0.0   # the empty sector proved it gone
         assert m.maps[layer, C, C - 8] == 1.0       # out of range: unknown, kept
-        assert m.maps[layer, C - 5, C + 2] == 1.0   # not nearer than the reading: kept
-        assert m.maps[layer, C - 5, C + 1] == 1.0   # the reading itself
+        assert m.maps[layer, C - 5, C + 2] == 1.0   # not nearer than the reading: kept ...
+        # ... and the reading is attributed to that known disc rather than written beside
+        # it at the sector's centre angle (a sector cannot tell the angle).
+        assert m.maps[layer, C - 5, C + 1] == 0.0
 
 
 def test_the_agent_layer_is_rebuilt_each_sense():
