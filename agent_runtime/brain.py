@@ -140,8 +140,12 @@ class Brain:
             return (*steering.away_from(dx, dy, frame.heading, cruise), NONE, "avoid")
         for seeking, layer, name in ((mot.seeking_water, WATER, "approach_water"),
                                      (mot.seeking_food, FOOD, "approach_food")):
+            # With no source on the maps there is nothing to approach: keep building (and
+            # so moving about) until one comes into view, rather than wander for ever.
             if seeking:
-                return (*self._navigate(self._need_field(layer), frame.heading), NONE, name)
+                field = self._need_field(layer)
+                if np.isfinite(field[self.centre, self.centre]):
+                    return (*self._navigate(field, frame.heading), NONE, name)
         return (*self._construct(frame, ranges, plans, motor), arm if arm != NONE else NONE, motor)
 
     def _need_field(self, layer: int) -> np.ndarray:

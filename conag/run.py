@@ -69,10 +69,9 @@ class Fleet:
         return f"killed {agent_id} (pid {proc.pid})"
 
     def restart(self, agent_id: str) -> str:
-        if agent_id in self.procs:
-            self.kill(agent_id)
+        killed = self.kill(agent_id) + ", " if agent_id in self.procs else ""
         proc = self.start(agent_id)
-        return f"started {agent_id} (pid {proc.pid})"
+        return f"{killed}started {agent_id} (pid {proc.pid})"
 
     def stop_all(self, grace: float = 5.0) -> None:
         with self.lock:

@@ -13,11 +13,11 @@ from protocol.messages import WorldStatus
 
 
 def run_summary(status: WorldStatus) -> dict:
-    agents = [
-        {"id": a, "distance": round(d, 6), "grabs": g, "drops": dr, "restarts": r}
-        for a, d, g, dr, r in zip(status.agent_ids, status.agent_distance, status.agent_grabs,
-                                  status.agent_drops, status.agent_restarts)
-    ]
+    agents = sorted(
+        ({"id": a, "distance": round(d, 6), "grabs": g, "drops": dr, "restarts": r}
+         for a, d, g, dr, r in zip(status.agent_ids, status.agent_distance, status.agent_grabs,
+                                   status.agent_drops, status.agent_restarts)),
+        key=lambda agent: agent["id"])  # by id, not by who happened to attach first
     return {
         "scenario": status.scenario,
         "seed": status.seed,

@@ -1,0 +1,143 @@
+"""Agent decision step benchmark: one `Brain.step(frame)` against scipy's Dijkstra.
+
+    python3 bench/bench_decision.py              # the table of BENCHMARKS.md
+    python3 bench/bench_decision.py --quick      # a smoke run, not a measurement
+
+For each map size, scenarios/fig6.toml runs in-process (`conag.sim.start`, one agent,
+`AgentConfig(map_size=...)`) for a warm-up of 300 ticks, so the ESMs hold a realistic
+picture (blueprint, the food-and-water wall, bricks). Then the sim keeps running, and on
+every tick until the structure is complete (about 540 ticks; then a new
+episode with the next seed starts and warms up again, so an idle agent is never timed)
+the agent's whole decision step, `brain.step(frame)` (ESM move + sense,
+motivations, the configuration and brick navigation maps, the state nodes, action
+selection), is timed on that tick's frame; the world step is not timed. Right after the
+step, the goal and obstacle masks of both navigation maps are rebuilt from `brain.maps`
+exactly as `Brain.plan` builds them, and `scipy.sparse.csgraph.dijkstra` computes the same
+two fields (8-connected, no corner cutting, multi-source `indices=goal cells`,
+`min_only=True`), timed with the sparse graphs built from the masks (the realistic cost,
+as the obstacles change every tick) and solve-only on prebuilt graphs. The scipy fields
+are checked equal to the brain's. Every figure is the median over the timed ticks.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from agent_runtime.config import AgentConfig  # noqa: E402
+from agent_runtime.esm import BRICK, CONFIG, FOOD, WATER  # noqa: E402
+from bench.bench_spreading import scipy_field, scipy_graph  # noqa: E402
+from conag import sim  # noqa: E402
+from world_server.scenario import load_scenario  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+SCENARIO = ROOT / "scenarios" / "fig6.toml"
+SIZES = (41, 101)
+TARGET_MS = {41: 0.5, 101: 4.0}
+TARGET_SPEEDUP = 5.0
+
+
+def nav_masks(brain) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(goals, obstacles) of the configuration and brick NMs, as `Brain.plan` builds them."""
+    m = brain.maps.maps > 0.5
+    food, water, brick, config = m[FOOD], m[WATER], m[BRICK], m[CONFIG]
+    c = brain.centre
+    config_obstacles = food | water | brick
+    brick_obstacles = food | water | (brick & config)
+    config_obstacles[c, c] = brick_obstacles[c, c] = False
+    return [(config & ~brick, config_obstacles), (brick & ~config, brick_obstacles)]
+
+
+def solve(goals: np.ndarray, obstacles: np.ndarray, graph=None) -> np.ndarray:
+    if not (goals & ~obstacles).any():  # no source: nothing reachable (dijkstra needs one)
+        if graph is None:
+            scipy_graph(obstacles)  # the build is still part of the cost
+        return np.full(goals.shape, np.inf)
+    return scipy_field(goals, obstacles, graph)
+
+
+def _same(ours: np.ndarray, ref: np.ndarray) -> bool:
+    fin = np.isfinite(ours)
+    return bool(np.array_equal(fin, np.isfinite(ref)) and np.allclose(ours[fin], ref[fin], rtol=0, atol=1e-9))
+
+
+def measure(n: int, warmup: int, ticks: int) -> dict:
+    scenario, cfg = load_scenario(SCENARIO), AgentConfig(map_size=n)
+    step_ms, built_ms, solve_ms, behaviours = [], [], [], {}
+    checked, episodes, run = 0, 0, None
+    while checked < ticks:
+        if run is None or run.world.status().completed:
+            # A finished structure leaves the agent idle: time building agents only, so
+            # start the next episode (another seed) and warm it up first.
+            run = sim.start(scenario, agents=1, seed=scenario.seed + episodes, cfg=cfg)
+            run.run(warmup, until_complete=False)
+            episodes += 1
+            continue
+        (frame,) = run.world.frames()
+        brain = run.brains[frame.agent_id]
+        t0 = time.perf_counter_ns()
+        s = brain.step(frame)
+        t1 = time.perf_counter_ns()
+        step_ms.append((t1 - t0) / 1e6)
+        behaviours[s.behaviour] = behaviours.get(s.behaviour, 0) + 1
+        run.world.set_command(frame.agent_id, s.speed, s.turn, s.action)
+
+        masks = nav_masks(brain)
+        t0 = time.perf_counter_ns()
+        fields = [solve(g, o) for g, o in masks]
+        built_ms.append((time.perf_counter_ns() - t0) / 1e6)
+        graphs = [scipy_graph(o) for _, o in masks]
+        t0 = time.perf_counter_ns()
+        for (g, o), graph in zip(masks, graphs):
+            solve(g, o, graph)
+        solve_ms.append((time.perf_counter_ns() - t0) / 1e6)
+        plans = brain.plans
+        for ours, ref in zip((plans.config, plans.brick), fields):
+            if not _same(ours, ref):
+                raise AssertionError(f"map {n}: scipy field differs from the brain's at tick {frame.tick}")
+        checked += 1
+
+        run.world.step()  # not timed
+    return {"step": statistics.median(step_ms), "step_p90": sorted(step_ms)[int(0.9 * (len(step_ms) - 1))],
+            "built": statistics.median(built_ms), "solve": statistics.median(solve_ms),
+            "behaviours": behaviours, "checked": checked, "episodes": episodes}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="a few ticks: a smoke run, not a measurement")
+    parser.add_argument("--warmup", type=int, default=300, help="sim ticks before timing starts")
+    parser.add_argument("--ticks", type=int, default=2000, help="timed decision steps per map size")
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.warmup, args.ticks = 30, 20
+    print("| map | decision step median ms (p90) | scipy 2 fields incl. build ms | scipy 2 fields solve only ms "
+          "| speed-up vs incl. build | speed-up vs solve only | step target ms | step met | 5x vs incl. build | 5x vs solve only |")
+    print("|---|---:|---:|---:|---:|---:|---:|:---:|:---:|:---:|")
+    notes = []
+    for n in SIZES:
+        r = measure(n, args.warmup, args.ticks)
+        up_built, up_solve = r["built"] / r["step"], r["solve"] / r["step"]
+        yes = {True: "yes", False: "NO"}
+        print(f"| {n} x {n} | {r['step']:.3f} ({r['step_p90']:.3f}) | {r['built']:.3f} | {r['solve']:.3f} "
+              f"| {up_built:.1f}x | {up_solve:.1f}x | {TARGET_MS[n]} | {yes[r['step'] <= TARGET_MS[n]]} "
+              f"| {yes[up_built >= TARGET_SPEEDUP]} | {yes[up_solve >= TARGET_SPEEDUP]} |", flush=True)
+        mix = ", ".join(f"{k} {v}" for k, v in sorted(r["behaviours"].items(), key=lambda kv: -kv[1]))
+        notes.append(f"{n} x {n}: {r['checked']} ticks timed in {r['episodes']} episode(s) (seeds from 6), each timed from tick {args.warmup} until the structure was complete (the last one until enough ticks); behaviours: {mix}")
+    print()
+    print("Targets: decision step <= " + ", ".join(f"{v:g} ms at {k} x {k}" for k, v in TARGET_MS.items())
+          + f"; >= {TARGET_SPEEDUP:g}x faster than scipy computing the same two fields.")
+    for line in notes:
+        print(f"- {line}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,91 @@
+"""`conag run`: a world and one process per agent build the structure; agents die and return."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from tests.conftest import ROOT, free_port
+
+pytestmark = pytest.mark.slow
+
+
+def conag(*args, timeout=60):
+    return subprocess.run([sys.executable, "-m", "conag", *map(str, args)], cwd=ROOT, capture_output=True,
+                          text=True, timeout=timeout)
+
+
+def test_run_builds_fig6_with_three_agent_processes_and_writes_the_summary(tmp_path):
+    out = tmp_path / "summary.json"
+    r = conag("run", "scenarios/fig6.toml", "--headless", "--summary", out,
+              "--listen", f"tcp/127.0.0.1:{free_port()}", timeout=240)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "fig6: complete" in r.stdout
+    assert any(line.startswith("tick ") and "sites" in line for line in r.stdout.splitlines())  # progress
+    s = json.loads(out.read_text())
+    assert set(s) == {"scenario", "seed", "completed", "ticks", "sites_total", "sites_filled", "bricks_total",
+                      "total_distance", "agents"}
+    assert s["completed"] and s["sites_filled"] == s["sites_total"] == 4 and s["bricks_total"] == 5
+    assert [a["id"] for a in s["agents"]] == ["a1", "a2", "a3"]
+    assert sum(a["drops"] for a in s["agents"]) >= 4
+    assert s["total_distance"] == pytest.approx(sum(a["distance"] for a in s["agents"]), abs=1e-3)
+
+
+# Long enough (twenty sites, bricks spread out) that a restarted process is back before the
+# two others could finish alone.
+LONG_WALL = '''
+name = "long_walls"
+seed = 11
+agents = 3
+max_ticks = 30000
+layout = """
+b.b.b.b.b.b.b.b.b.b.
+....................
+....................
+.....++++++++++.....
+....................
+..b....A.A.A....b...
+....................
+.....++++++++++.....
+....................
+....................
+b.b.b.b.b.b.b.b.b.b.
+"""
+'''
+
+
+def test_an_agent_killed_mid_build_and_restarted_rejoins_and_the_structure_completes(tmp_path):
+    out = tmp_path / "summary.json"
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    scenario = tmp_path / "long_wall.toml"
+    scenario.write_text(LONG_WALL)
+    run = subprocess.Popen([sys.executable, "-m", "conag", "run", str(scenario), "--headless",
+                            "--summary", str(out), "--listen", ep], cwd=ROOT, stdout=subprocess.PIPE,
+                           stderr=subprocess.STDOUT, text=True)
+    try:
+        for line in run.stdout:  # wait until the build is under way
+            if line.startswith("tick ") and int(line.split()[1]) > 0:
+                break
+        # `conag restart` SIGKILLs the process (mid-build, perhaps holding a brick) and starts
+        # a new one with the same id at once; a separate `conag kill` first would let the
+        # two others finish this small structure before the new process is up.
+        restarted = conag("restart", "a2", "--connect", ep)
+        assert restarted.returncode == 0 and "started a2" in restarted.stdout, restarted.stderr
+        rest, _ = run.communicate(timeout=240)
+        assert run.returncode == 0, rest
+    finally:
+        if run.poll() is None:
+            run.kill()
+            run.wait(10)
+    s = json.loads(out.read_text())
+    assert s["completed"] and s["bricks_total"] == 22
+    restarts = {a["id"]: a["restarts"] for a in s["agents"]}
+    assert restarts == {"a1": 0, "a2": 1, "a3": 0}
+
+
+def test_kill_with_no_run_going_is_a_clear_error():
+    r = conag("kill", "a1", "--connect", f"tcp/127.0.0.1:{free_port()}", "--timeout", "1")
+    assert r.returncode == 1 and "no `conag run`" in r.stderr
