@@ -44,6 +44,7 @@ class Plans:
     brick: np.ndarray
     config_goals: np.ndarray
     brick_goals: np.ndarray
+    nearest_brick: tuple[float, float, float] | None  # (dx, dy, distance) in cells, or None
 
 
 class Brain:
@@ -83,8 +84,19 @@ class Brain:
         config_obstacles = self._free_centre(food | water | brick)
         brick_obstacles = self._free_centre(food | water | (brick & config))
         self.plans = Plans(distance_field(config_goals, config_obstacles),
-                           distance_field(brick_goals, brick_obstacles), config_goals, brick_goals)
+                           distance_field(brick_goals, brick_obstacles), config_goals, brick_goals,
+                           self._nearest(brick_goals))
         return self.plans
+
+    def _nearest(self, cells: np.ndarray) -> tuple[float, float, float] | None:
+        """Offset and straight-line distance (cells) to the nearest marked cell, or None."""
+        rows, cols = np.nonzero(cells)
+        if rows.size == 0:
+            return None
+        dx, dy = self.maps.offset_of(rows, cols)
+        d = np.hypot(dx, dy)
+        i = int(np.argmin(d))
+        return float(dx[i]), float(dy[i]), float(d[i])
 
     def _free_centre(self, obstacles: np.ndarray) -> np.ndarray:
         # The agent stands in the centre cell, sometimes on a brick it just dropped: its
@@ -100,22 +112,18 @@ class Brain:
         values = {
             "holding_brick": frame.holding,
             "at_drop_site": at_site,
-            "at_brick": self._nearest_brick(plans, self.cfg.reach) is not None,
-            "near_brick": self._nearest_brick(plans, self.cfg.near_brick) is not None,
+            "at_brick": self._brick_within(plans, self.cfg.reach) is not None,
+            "near_brick": self._brick_within(plans, self.cfg.near_brick) is not None,
             "brick_available": bool(np.isfinite(plans.brick[c, c])),
             "drop_site_available": bool(np.isfinite(plans.config[c, c])),
         }
         return np.array([float(values[n]) for n in STATE_NODES])
 
-    def _nearest_brick(self, plans: Plans, within: float) -> tuple[float, float] | None:
-        """Offset (cells) to the nearest available brick within `within`, or None."""
-        rows, cols = np.nonzero(plans.brick_goals)
-        if rows.size == 0:
-            return None
-        dx, dy = self.maps.offset_of(rows, cols)
-        d = np.hypot(dx, dy)
-        i = int(np.argmin(d))
-        return (float(dx[i]), float(dy[i])) if d[i] <= within else None
+    @staticmethod
+    def _brick_within(plans: Plans, within: float) -> tuple[float, float] | None:
+        """Offset (cells) to the nearest available brick if it is within `within`."""
+        near = plans.nearest_brick
+        return (near[0], near[1]) if near is not None and near[2] <= within else None
 
     # deciding ----------------------------------------------------------------------------
     def step(self, frame: SensorFrame) -> Step:
@@ -160,7 +168,7 @@ class Brain:
         if motor == "brick_nav":
             return self._navigate(plans.brick, frame.heading)
         if motor == "approach_red":
-            target = self._nearest_brick(plans, self.cfg.near_brick)
+            target = self._brick_within(plans, self.cfg.near_brick)
             return steering.steer_to(*target, frame.heading, cruise) if target else (0.0, 0.0)
         if motor == "avoid_red":
             if _nearest(ranges[_CH["brick"]]) < self.sensor_range:

@@ -253,7 +253,9 @@ def cmd_run(args) -> int:
     print(f"{summary['scenario']}: {state}: {summary['sites_filled']}/{summary['sites_total']} sites in "
           f"{summary['ticks']} ticks, {len(summary['agents'])} agents, total distance "
           f"{summary['total_distance']:.1f}")
-    if args.summary:
+    if args.summary == "-":
+        print(json.dumps(summary, indent=2))
+    elif args.summary:
         print(f"summary written to {args.summary}")
     return 0 if summary["completed"] else 3
 
@@ -317,7 +319,7 @@ def build_parser() -> argparse.ArgumentParser:
     u.add_argument("--agents", type=int, help="number of agents (default: the scenario's)")
     u.add_argument("--seed", type=int, help="override the scenario's seed")
     u.add_argument("--max-ticks", type=int, help="stop after this many ticks (default: the scenario's)")
-    u.add_argument("--summary", metavar="PATH", help="write the run summary (JSON)")
+    u.add_argument("--summary", metavar="PATH", help="write the run summary (JSON); - prints it")
     u.add_argument("--headless", action="store_true", help="plain progress lines, no terminal tricks")
     u.add_argument("--quiet", action="store_true", help="no progress lines")
     u.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",

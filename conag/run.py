@@ -157,7 +157,7 @@ def run(opts: RunOptions, stop: threading.Event) -> dict:
     summary = json.loads(final_path.read_text(encoding="utf-8"))
     final_path.unlink()
     final_path.parent.rmdir()
-    if opts.summary:
+    if opts.summary and opts.summary != "-":
         Path(opts.summary).write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
     return summary
 

@@ -7,6 +7,7 @@ circles of radius `world.agent_radius` with a line showing their heading. The li
 grid is the layout's cells; axes are in world units (x east, y north, one cell = one
 disc diameter). By default everything comes from the layout; `agents` and `discs`
 override it with live poses and disc positions, e.g. from a running world.
+`draw_world` draws the same picture on an existing axes, for composite figures.
 
 Rendering uses matplotlib's Agg canvas directly (no pyplot, no global backend switch),
 so it works headless and from any thread.
@@ -48,23 +49,38 @@ def render_scenario(scenario: Scenario, out_path: str | Path, *,
     from east; default: every `A` cell facing east. discs: (x, y, kind) with kind
     "food", "water" or "brick"; default: the layout's F, W, b and B cells.
     """
-    agents = _layout_agents(scenario) if agents is None else [tuple(map(float, a)) for a in agents]
-    discs = _layout_discs(scenario) if discs is None else [_checked_disc(d) for d in discs]
-    fig, ax = _new_axes(scenario)
-    legend: dict[str, object] = {}
-    _draw_grid(ax, scenario)
-    _draw_obstacles(ax, scenario, legend)
-    _draw_discs(ax, scenario, discs, legend)
-    _draw_sites(ax, scenario, legend)
-    _draw_agents(ax, scenario, agents, legend)
+    fig = Figure(figsize=(2.5 + 0.3 * scenario.cols, 1.0 + 0.3 * scenario.rows))
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
+    draw_world(ax, scenario, agents=agents, discs=discs)
     ax.set_title(title if title is not None else scenario.name)
-    if legend:
-        ax.legend(list(legend.values()), list(legend), loc="upper left", bbox_to_anchor=(1.02, 1.0),
-                  handler_map={Circle: _CircleHandler()}, fontsize="small", frameon=False)
     out = Path(out_path)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=100, bbox_inches="tight")
     return out
+
+
+def draw_world(ax, scenario: Scenario, *,
+               agents: Iterable[tuple[float, float, float]] | None = None,
+               discs: Iterable[tuple[float, float, str]] | None = None,
+               legend: str | None = "right") -> None:
+    """Draw the bird's-eye world on an existing matplotlib axes (see `render_scenario`
+    for `agents` and `discs`); `legend` puts the key "right" of or "below" the axes, or
+    nowhere (None)."""
+    agents = _layout_agents(scenario) if agents is None else [tuple(map(float, a)) for a in agents]
+    discs = _layout_discs(scenario) if discs is None else [_checked_disc(d) for d in discs]
+    _setup_axes(ax, scenario)
+    handles: dict[str, object] = {}
+    _draw_grid(ax, scenario)
+    _draw_obstacles(ax, scenario, handles)
+    _draw_discs(ax, scenario, discs, handles)
+    _draw_sites(ax, scenario, handles)
+    _draw_agents(ax, scenario, agents, handles)
+    if legend and handles:
+        where = {"right": {"loc": "upper left", "bbox_to_anchor": (1.02, 1.0)},
+                 "below": {"loc": "upper center", "bbox_to_anchor": (0.5, -0.13), "ncol": len(handles)}}[legend]
+        ax.legend(list(handles.values()), list(handles), handler_map={Circle: _CircleHandler()},
+                  fontsize="small", frameon=False, **where)
 
 
 def _layout_agents(scenario: Scenario) -> list[tuple[float, float, float]]:
@@ -84,17 +100,13 @@ def _checked_disc(disc) -> tuple[float, float, str]:
     return float(x), float(y), kind
 
 
-def _new_axes(scenario: Scenario):
+def _setup_axes(ax, scenario: Scenario) -> None:
     width, height = scenario.size
-    fig = Figure(figsize=(2.5 + 0.3 * scenario.cols, 1.0 + 0.3 * scenario.rows))
-    FigureCanvasAgg(fig)
-    ax = fig.add_subplot()
     ax.set_xlim(0, width)
     ax.set_ylim(0, height)
     ax.set_aspect("equal")
     ax.set_xlabel("x (world units, east)")
     ax.set_ylabel("y (world units, north)")
-    return fig, ax
 
 
 def _draw_grid(ax, scenario: Scenario) -> None:

@@ -1,0 +1,134 @@
+"""What one agent believes: its ESMs and NMs beside the world (paper Fig. 4 and Fig. 5).
+
+`render_agent_maps` runs a scenario in-process (`conag.sim`, lockstep) for some ticks,
+asks one agent's Brain to plan, and draws one figure: on the left the bird's-eye world
+as it is now (the chosen agent ringed, its map's extent dashed), on the right the
+agent's egocentric spatial maps (food, water, brick, configuration) and its
+configuration and brick navigation maps as Eq. 1-2 activations (goals 1, falling with
+path distance, unreachable 0, obstacles -1 drawn black).
+
+Map panels are egocentric but not rotated: axes are cell offsets from the agent (x
+east, y north), north up, so they line up with the world panel; the agent's centre
+cell is marked with a cross. Obstacles for the NMs are rebuilt exactly as
+`Brain.plan` builds them (it keeps only the distance fields).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from matplotlib import colormaps
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.patches import Circle, Rectangle
+
+from agent_runtime.brain import Brain, Plans
+from agent_runtime.esm import BRICK, CONFIG, FOOD, WATER
+from agent_runtime.spreading import activation
+from conag import sim
+from protocol.messages import DISC_KINDS
+from world_server.discs import IN_WORLD
+from world_server.render import draw_world
+from world_server.scenario import Scenario
+
+ESM_PANELS = ((FOOD, "food ESM", "Greens"), (WATER, "water ESM", "Blues"),
+              (BRICK, "brick ESM", "Reds"), (CONFIG, "configuration ESM", "Purples"))
+
+
+def render_agent_maps(scenario: Scenario, out_path: str | Path, *, agent: str = "a1",
+                      ticks: int = 0, seed: int | None = None) -> Path:
+    """Run `scenario` for `ticks` lockstep ticks, then draw `agent`'s world, ESMs and NMs
+    to `out_path` (format from the suffix) and return the path. ValueError for an
+    unknown agent id or negative ticks."""
+    if ticks < 0:
+        raise ValueError(f"ticks must be >= 0, got {ticks}")
+    run = sim.start(scenario, seed=seed)
+    if agent not in run.brains:
+        raise ValueError(f"unknown agent {agent!r}: scenario {scenario.name} has agents "
+                         f"{', '.join(run.brains)}")
+    for _ in range(ticks):
+        run.step()
+    brain = run.brains[agent]
+    fig = _figure(scenario, run, agent, brain, brain.plan())
+    out = Path(out_path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=90, bbox_inches="tight")
+    return out
+
+
+def _figure(scenario: Scenario, run: sim.SimRun, agent: str, brain: Brain, plans: Plans) -> Figure:
+    fig = Figure(figsize=(20, 9))
+    FigureCanvasAgg(fig)
+    grid = fig.add_gridspec(2, 4, width_ratios=(1.7, 1, 1, 1), wspace=0.45, hspace=0.3)
+    _world_panel(fig.add_subplot(grid[:, 0]), scenario, run, agent, brain.maps.size)
+    cells = [grid[r, c] for r in range(2) for c in range(1, 4)]
+    for spec, (layer, name, cmap) in zip(cells, ESM_PANELS):
+        _esm_panel(fig, fig.add_subplot(spec), brain.maps.maps[layer], name, cmap)
+    config_obs, brick_obs = nm_obstacles(brain)
+    _nm_panel(fig, fig.add_subplot(cells[4]), plans.config, config_obs, plans.config_goals, "configuration NM")
+    _nm_panel(fig, fig.add_subplot(cells[5]), plans.brick, brick_obs, plans.brick_goals, "brick NM")
+    status = run.world.status()
+    behaviour = run.behaviours.get(agent, "-")
+    fig.suptitle(f"{scenario.name}: agent {agent} after {status.tick} ticks "
+                 f"(behaviour: {behaviour}; sites filled {status.sites_filled}/{status.sites_total})")
+    return fig
+
+
+def nm_obstacles(brain: Brain) -> tuple[np.ndarray, np.ndarray]:
+    """The configuration and brick NMs' obstacle grids, as `Brain.plan` builds them."""
+    m = brain.maps.maps > 0.5
+    food, water, brick, config = m[FOOD], m[WATER], m[BRICK], m[CONFIG]
+    config_obs, brick_obs = food | water | brick, food | water | (brick & config)
+    c = brain.maps.centre
+    config_obs[c, c] = brick_obs[c, c] = False
+    return config_obs, brick_obs
+
+
+def _world_panel(ax, scenario: Scenario, run: sim.SimRun, agent: str, map_size: int) -> None:
+    world = run.world
+    present = np.flatnonzero(world.discs.state == IN_WORLD)
+    discs = [(x, y, DISC_KINDS[k]) for (x, y), k in
+             zip(world.discs.xy[present].tolist(), world.discs.kind[present].tolist())]
+    poses = world.agent_poses()
+    draw_world(ax, scenario, agents=poses.tolist(), discs=discs, legend="below")
+    x, y, _ = poses[list(run.brains).index(agent)]
+    ring = 1.8 * scenario.world.agent_radius
+    ax.add_patch(Circle((x, y), ring, fill=False, edgecolor="magenta", linewidth=2.0, zorder=6))
+    ax.annotate(agent, (x, y + ring), color="magenta", ha="center", va="bottom", fontweight="bold")
+    half = map_size / 2 * scenario.world.cell_size
+    ax.add_patch(Rectangle((x - half, y - half), 2 * half, 2 * half, fill=False, edgecolor="magenta",
+                           linestyle=":", linewidth=1.0, zorder=6, clip_on=True))
+    ax.set_title("world now (ringed: the agent; dotted: its map edge where inside)")
+
+
+def _extent(grid: np.ndarray) -> tuple[float, float, float, float]:
+    c = grid.shape[0] // 2
+    return (-c - 0.5, c + 0.5, -c - 0.5, c + 0.5)
+
+
+def _map_axes(ax, title: str) -> None:
+    ax.plot(0, 0, marker="+", color="magenta", markersize=12, markeredgewidth=2)
+    ax.set_title(title)
+    ax.set_xlabel("cells east of agent")
+    ax.set_ylabel("cells north of agent")
+
+
+def _esm_panel(fig, ax, layer: np.ndarray, title: str, cmap: str) -> None:
+    image = ax.imshow(layer, cmap=cmap, vmin=0.0, vmax=1.0, origin="upper",
+                      extent=_extent(layer), interpolation="nearest")
+    fig.colorbar(image, ax=ax, fraction=0.046, pad=0.03)
+    _map_axes(ax, title)
+
+
+def _nm_panel(fig, ax, dist: np.ndarray, obstacles: np.ndarray, goals: np.ndarray, title: str) -> None:
+    act = activation(dist, obstacles=obstacles)
+    cmap = colormaps["viridis"].with_extremes(under="black")  # obstacles (-1) black
+    image = ax.imshow(act, cmap=cmap, vmin=0.0, vmax=1.0, origin="upper",
+                      extent=_extent(act), interpolation="nearest")
+    fig.colorbar(image, ax=ax, fraction=0.046, pad=0.03, extend="min")
+    rows, cols = np.nonzero(goals)
+    c = dist.shape[0] // 2
+    ax.scatter(cols - c, c - rows, s=14, facecolors="none", edgecolors="white", linewidths=0.8)
+    _map_axes(ax, f"{title} (black: obstacle, o: goal)")
+
