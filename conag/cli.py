@@ -188,7 +188,15 @@ def cmd_render(args) -> int:
     from world_server.render import render_scenario
     from world_server.scenario import load_scenario
 
-    out = render_scenario(load_scenario(args.scenario), args.out)
+    if args.agent_maps:
+        from conag.render_agent import render_agent_maps
+
+        out = render_agent_maps(load_scenario(args.scenario), args.out,
+                                agent=args.agent or "a1", ticks=args.ticks or 0)
+    elif args.agent is not None or args.ticks is not None:
+        raise ValueError("--agent and --ticks need --agent-maps")
+    else:
+        out = render_scenario(load_scenario(args.scenario), args.out)
     print(f"wrote {out}")
     return 0
 
@@ -338,6 +346,10 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("render", help="draw a scenario as a bird's-eye PNG")
     r.add_argument("scenario")
     r.add_argument("--out", default="world.png", help="output PNG path")
+    r.add_argument("--agent-maps", action="store_true",
+                   help="run the scenario in-process and draw one agent's ESMs and NMs beside the world")
+    r.add_argument("--agent", metavar="ID", help="agent for --agent-maps (default a1)")
+    r.add_argument("--ticks", type=int, metavar="N", help="lockstep ticks to run first (default 0)")
     r.set_defaults(func=cmd_render)
 
     z = sub.add_parser("router", help="run a zenoh router for several hosts")

@@ -99,7 +99,7 @@ def _world_panel(ax, scenario: Scenario, run: sim.SimRun, agent: str, map_size: 
     half = map_size / 2 * scenario.world.cell_size
     ax.add_patch(Rectangle((x - half, y - half), 2 * half, 2 * half, fill=False, edgecolor="magenta",
                            linestyle=":", linewidth=1.0, zorder=6, clip_on=True))
-    ax.set_title("world now (ringed: the agent; dotted: its map edge where inside)")
+    ax.set_title("world now (ringed: the agent; dotted: its map edge)")
 
 
 def _extent(grid: np.ndarray) -> tuple[float, float, float, float]:

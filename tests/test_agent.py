@@ -138,3 +138,25 @@ def test_agent_config_rejects_bad_values():
     with pytest.raises(ValueError):
         AgentConfig.from_mapping({"map_sise": 41})
     assert dataclasses.replace(AgentConfig(), map_size=101).map_size == 101
+
+
+def _carry_trip(open_gap: bool) -> float:
+    """Distance the agent travels from its first grab to its first drop in fig6."""
+    run = sim.start(load_scenario(SCENARIOS / "fig6.toml"), agents=1)
+    world = run.world
+    while world.agents["a1"].holding < 0:
+        run.step()
+    if open_gap:  # two discs of the wall, straight between the agent and the diamond
+        for x in (6.5, 7.5):
+            assert world.perturb(Perturbation("remove", x, 8.5)).ok
+    start = world.distance[0]
+    while world.agents["a1"].drops == 0:
+        assert world.tick < 3000, "the brick was never dropped"
+        run.step()
+    return float(world.distance[0] - start)
+
+
+def test_a_gap_opened_in_the_wall_is_used_as_a_shorter_path():
+    """Paper Fig. 6c: when a gap appears, the plan goes through it instead of around."""
+    around, through = _carry_trip(False), _carry_trip(True)
+    assert through < 0.6 * around, (through, around)
