@@ -32,6 +32,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 from protocol.messages import CHANNELS, NO_READING
 
@@ -158,12 +159,11 @@ class EgocentricMaps:
         cell_limit = np.minimum.reduceat(limit[:, sector], starts, axis=1)
         self._all[cells[dist < cell_limit]] = 0.0
         # Each reading may be explained by any cell its wedge overlaps: the (cell, sector) pairs.
-        d = disc[:, sector]
-        explained = self._associate(r, cells[:, k], dist[k], sector, vx[k], vy[k], d)
+        explained = self._associate(r, cells[:, k], dist[k], sector, vx[k], vy[k])
         self.maps[AGENT].fill(0.0)
         self._write_readings(np.where(explained, NO_READING, r), sectors)
 
-    def _associate(self, r, cells, dist, sector, vx, vy, d) -> np.ndarray:
+    def _associate(self, r, cells, dist, sector, vx, vy) -> np.ndarray:
         """Attribute each disc reading to one cell of its band; True where that was done.
 
         A sector cannot tell the angle inside it, so the same disc seen from two places
@@ -176,29 +176,9 @@ class EgocentricMaps:
         ghosts of the one brick the sector saw and are cleared, except on blueprint cells,
         where neighbouring structure bricks really do stand at the same distance.
         """
-        sectors = r.shape[1]
-        band = (d >= 0.0) & (np.abs(dist - d) <= BAND)
-        if not band.any():
-            return np.zeros_like(r, dtype=bool)
-        dirs = self._dirs(sectors)
-        err = np.hypot(vx - d * dirs[0][sector], vy - d * dirs[1][sector])
-        marked = self._all[cells] > 0.5
-        blueprint = np.zeros_like(band)
-        blueprint[BRICK] = self.maps[CONFIG].reshape(-1)[cells[0]] > 0.5  # cells[0]: positions in a layer
-        score = np.where(band, err - 2.0 * marked - 1.0 * blueprint, np.inf)
-        group = np.arange(_DISC_CHANNELS)[:, None] * sectors + sector
-        best = np.full(_DISC_CHANNELS * sectors, np.inf)
-        np.minimum.at(best, group[band], score[band])
-        winner = band & (score <= best[group]) & (marked | blueprint)
-        ghosts = np.zeros_like(band)
-        ghosts[BRICK] = band[BRICK] & marked[BRICK] & ~winner[BRICK] & ~blueprint[BRICK]
-        self._all[cells[ghosts]] = 0.0
-        self._all[cells[winner]] = 1.0
-        explained = np.zeros_like(r, dtype=bool)
-        hit = np.zeros(_DISC_CHANNELS * sectors, dtype=bool)
-        hit[group[winner]] = True
-        explained[:_DISC_CHANNELS] = hit.reshape(_DISC_CHANNELS, sectors)
-        return explained
+        dirs = self._dirs(r.shape[1])
+        return _associate_kernel(self._all, cells, dist, sector, vx, vy, np.ascontiguousarray(r[:_DISC_CHANNELS]),
+                                 dirs[0], dirs[1], self.size * self.size * CONFIG, BRICK, BAND, r.shape[0])
 
     def _write_readings(self, r: np.ndarray, sectors: int) -> None:
         """Mark each reading's cell in its channel's layer (all channels and sectors at once)."""
@@ -286,3 +266,54 @@ def _span(shift: int, n: int) -> tuple[slice, slice]:
     if shift >= 0:
         return slice(shift, n), slice(0, n - shift)
     return slice(0, n + shift), slice(-shift, n)
+
+
+@njit(cache=True)
+def _associate_kernel(flat, cells, dist, sector, vx, vy, disc, cos_s, sin_s, config_base, brick, band_width,
+                      channels):
+    """The rule of EgocentricMaps._associate over (cell, sector) pairs; returns `explained`.
+
+    One compiled pass finds each reading's best cell; a second collects winners and
+    ghosts from the same (pre-update) map, which are then applied: ghosts cleared first,
+    so a cell that wins any reading ends up marked.
+    """
+    n_ch, sectors = disc.shape
+    pairs = sector.shape[0]
+    best = np.full(n_ch * sectors, np.inf)
+    score = np.full((n_ch, pairs), np.inf)
+    for ch in range(n_ch):
+        for p in range(pairs):
+            s = sector[p]
+            d = disc[ch, s]
+            if d < 0.0 or abs(dist[p] - d) > band_width:
+                continue
+            err = math.hypot(vx[p] - d * cos_s[s], vy[p] - d * sin_s[s])
+            marked = flat[cells[ch, p]] > 0.5
+            blueprint = ch == brick and flat[config_base + cells[0, p]] > 0.5
+            score[ch, p] = err - 2.0 * marked - 1.0 * blueprint
+            if score[ch, p] < best[ch * sectors + s]:
+                best[ch * sectors + s] = score[ch, p]
+    explained = np.zeros((channels, sectors), np.bool_)
+    winners = np.empty(n_ch * pairs, np.int64)
+    ghosts = np.empty(n_ch * pairs, np.int64)
+    n_win = 0
+    n_ghost = 0
+    for ch in range(n_ch):
+        for p in range(pairs):
+            if score[ch, p] == np.inf:
+                continue
+            s = sector[p]
+            marked = flat[cells[ch, p]] > 0.5
+            blueprint = ch == brick and flat[config_base + cells[0, p]] > 0.5
+            if score[ch, p] <= best[ch * sectors + s] and (marked or blueprint):
+                winners[n_win] = cells[ch, p]
+                n_win += 1
+                explained[ch, s] = True
+            elif ch == brick and marked and not blueprint:
+                ghosts[n_ghost] = cells[ch, p]
+                n_ghost += 1
+    for i in range(n_ghost):
+        flat[ghosts[i]] = 0.0
+    for i in range(n_win):
+        flat[winners[i]] = 1.0
+    return explained
