@@ -26,6 +26,7 @@ from conag.bus import MODES, BusOptions, open_session
 from conag.summary import write_summary
 
 EXIT_USAGE = 2
+AGENT_MAP_SIZE = 41  # AgentConfig's default, without importing the agent for --help
 
 
 def _bus_args(p: argparse.ArgumentParser) -> None:
@@ -232,7 +233,8 @@ def cmd_agent(args) -> int:
     try:
         session = open_session(_bus(args))
         try:
-            run_agent(session, args.world_id, args.id, AgentConfig(), args.seed, attach_timeout=args.attach_timeout)
+            run_agent(session, args.world_id, args.id, AgentConfig(map_size=args.map_size), args.seed,
+                      attach_timeout=args.attach_timeout)
         except AttachError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 1
@@ -251,10 +253,14 @@ def cmd_run(args) -> int:
     from conag.run import RunOptions, run
     from world_server.scenario import load_scenario
 
+    from agent_runtime.config import AgentConfig
+
+    AgentConfig(map_size=args.map_size)  # a bad size is a usage error here, not in every agent
     opts = RunOptions(scenario_path=args.scenario, scenario=load_scenario(args.scenario),
                       endpoint=(args.listen or [DEFAULT_ENDPOINT])[0], world_id=args.world_id,
                       agents=args.agents, seed=args.seed, max_ticks=args.max_ticks, summary=args.summary,
-                      headless=args.headless, quiet=args.quiet)
+                      headless=args.headless, quiet=args.quiet,
+                      extra_agent_args=("--map-size", str(args.map_size)))
     with _stop_on_signals() as stop:
         summary = run(opts, stop)
     state = "complete" if summary["completed"] else "NOT complete"
@@ -319,6 +325,8 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--id", required=True, help="agent id; a restarted process with the same id gets its body back")
     a.add_argument("--seed", type=int, default=0, help="seed of the agent's own randomness (exploring)")
     a.add_argument("--attach-timeout", type=float, default=30.0, help="seconds to wait for the world")
+    a.add_argument("--map-size", type=int, default=AGENT_MAP_SIZE, metavar="N",
+                   help=f"cells per side of the agent's maps, odd (default {AGENT_MAP_SIZE})")
     _bus_args(a)
     a.set_defaults(func=cmd_agent)
 
@@ -333,6 +341,8 @@ def build_parser() -> argparse.ArgumentParser:
     u.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
                    help="where the world listens (default tcp/127.0.0.1:7447)")
     u.add_argument("--world-id", default="w0")
+    u.add_argument("--map-size", type=int, default=AGENT_MAP_SIZE, metavar="N",
+                   help=f"cells per side of every agent's maps, odd (default {AGENT_MAP_SIZE})")
     u.set_defaults(func=cmd_run)
 
     for name, text in (("kill", "SIGKILL one agent process of a running `conag run`"),

@@ -34,16 +34,18 @@ def test_run_builds_fig6_with_three_agent_processes_and_writes_the_summary(tmp_p
     assert s["total_distance"] == pytest.approx(sum(a["distance"] for a in s["agents"]), abs=1e-3)
 
 
-# Long enough (twenty sites, bricks spread out) that a restarted process is back before the
+# Long enough (thirty sites, bricks spread out) that a restarted process is back before the
 # two others could finish alone.
 LONG_WALL = '''
 name = "long_walls"
 seed = 11
 agents = 3
-max_ticks = 30000
+max_ticks = 40000
 layout = """
 b.b.b.b.b.b.b.b.b.b.
+.b.b.b.b.b.b.b.b.b.b
 ....................
+.....++++++++++.....
 ....................
 .....++++++++++.....
 ....................
@@ -81,7 +83,7 @@ def test_an_agent_killed_mid_build_and_restarted_rejoins_and_the_structure_compl
             run.kill()
             run.wait(10)
     s = json.loads(out.read_text())
-    assert s["completed"] and s["bricks_total"] == 22
+    assert s["completed"] and s["bricks_total"] == 32
     restarts = {a["id"]: a["restarts"] for a in s["agents"]}
     assert restarts == {"a1": 0, "a2": 1, "a3": 0}
 
@@ -89,3 +91,8 @@ def test_an_agent_killed_mid_build_and_restarted_rejoins_and_the_structure_compl
 def test_kill_with_no_run_going_is_a_clear_error():
     r = conag("kill", "a1", "--connect", f"tcp/127.0.0.1:{free_port()}", "--timeout", "1")
     assert r.returncode == 1 and "no `conag run`" in r.stderr
+
+
+def test_a_bad_map_size_is_a_usage_error_before_anything_starts():
+    r = conag("run", "scenarios/quick_wall.toml", "--map-size", 40, "--listen", f"tcp/127.0.0.1:{free_port()}")
+    assert r.returncode == 2 and "map_size must be an odd integer" in r.stderr

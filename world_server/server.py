@@ -158,7 +158,7 @@ class WorldServer:
             _, agent, alive = event
             if alive:
                 self._tokens.add(agent)
-            else:
+            elif not self._token_exists(agent):
                 self._tokens.discard(agent)
                 if agent in self.world.agents and self.world.agents[agent].alive:
                     log.info("agent %s is gone at tick %d; its body stops", agent, self.world.tick)
@@ -169,6 +169,16 @@ class WorldServer:
             self._perturb(event[1])
         elif kind == "bad":
             self._bad(event[1])
+
+    def _token_exists(self, agent: str) -> bool:
+        """Whether some process still holds `agent`'s liveliness token.
+
+        A killed process and its restarted successor hold tokens with the same key, and
+        the old one's removal can arrive after the new one's declaration; without this
+        check the world would stop the body of a perfectly live agent.
+        """
+        key = keys.agent_token(self.world.world_id, agent)
+        return any(r.ok is not None for r in self.session.liveliness().get(key, timeout=0.5))
 
     def _bad(self, detail: str) -> None:
         self.world.bad_messages += 1
