@@ -10,7 +10,6 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-import time
 
 from agent_runtime.link import WorldLink
 from conag.bus import BusOptions, open_session

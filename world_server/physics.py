@@ -90,7 +90,7 @@ class Physics:
     def state(self) -> tuple[np.ndarray, np.ndarray]:
         """(positions, velocities) of every agent body, each (n, 2), in agent order.
 
-        Read from pymunk once per change (step, new body, teleport); treat as read-only.
+        Read from pymunk once per change (a step, a new body); treat as read-only.
         """
         if self._state is None:
             if not self._bodies:
@@ -114,13 +114,6 @@ class Physics:
         self._force_rows[self._rows] = force
         self._write.set_float_buf(np.ascontiguousarray(self._force_rows.ravel()))
         batch.set_space_bodies(self.space, batch.BodyFields.FORCE, self._write)
-
-    def teleport(self, index: int, xy: tuple[float, float]) -> None:
-        body = self._bodies[index]
-        body.position = (float(xy[0]), float(xy[1]))
-        body.velocity = (0.0, 0.0)
-        self.space.reindex_shapes_for_body(body)
-        self._state = None
 
     def step(self) -> None:
         self.space.step(self.cfg.dt)
