@@ -1,0 +1,111 @@
+"""Failure cases of the reactive baseline (R4, Fig. 12 and Fig. 14).
+
+Fig. 12: one brick placed by an agent is moved to a neighbouring cell while
+the square is being built; the rules, which only see local patterns, keep
+growing walls from the displaced brick and a different structure results.
+
+Fig. 14: a square enclosing a smaller square, both grown from corner seeds
+with the same rule set.  Agents enter from outside, so once the outer ring
+closes no new agent can reach the inner one, which stays unfinished.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .lattice import BRICK, EMPTY, World, make_world, simulate, step
+from .rules import corner_rules, corner_seeds, square_target
+
+STEPS = {"out": 1, "in": -1}
+
+
+def outward(pos, target_origin, n) -> tuple[int, int]:
+    """The unit step from a ring cell away from the ring's centre (one axis)."""
+    r0, c0 = target_origin
+    r, c = pos
+    if r == r0:
+        return (-1, 0)
+    if r == r0 + n - 1:
+        return (1, 0)
+    return (0, -1) if c == c0 else (0, 1)
+
+
+def placed_bricks(world: World, seeds: dict) -> list[tuple[int, int]]:
+    """Bricks laid by agents (not seeds), in a deterministic order."""
+    rows, cols = np.nonzero(world.grid == BRICK)
+    return sorted(p for p in zip(rows.tolist(), cols.tolist()) if p not in seeds)
+
+
+def move_brick(world: World, src, dst) -> bool:
+    """Move one brick (with its state) to a free cell; False if not possible."""
+    if world.grid[dst] != EMPTY or dst in world.agents:
+        return False
+    world.grid[dst], world.brick_state[dst] = BRICK, world.brick_state[src]
+    world.grid[src], world.brick_state[src] = EMPTY, 0
+    return True
+
+
+def brick_mover(at_step: int, seeds: dict, origin, n: int, direction: str = "out"):
+    """An `on_step` hook: from `at_step` on, move the first placed brick once.
+
+    The brick moves one cell away from ("out") or towards ("in") the centre.
+    `moved` records (src, dst) once done.
+    """
+    sign = STEPS[direction]
+
+    def hook(world: World, t: int) -> None:
+        if hook.moved or t < at_step:
+            return
+        for src in placed_bricks(world, seeds):
+            dr, dc = outward(src, origin, n)
+            dst = (src[0] + sign * dr, src[1] + sign * dc)
+            if move_brick(world, src, dst):
+                hook.moved = (src, dst)
+                return
+
+    hook.moved = None
+    return hook
+
+
+def run_perturbed(rule_set, seeds, shape, n, origin, at_step, direction, n_agents,
+                  max_steps, rng):
+    """Simulate with one brick moved at `at_step`; returns (result, move)."""
+    hook = brick_mover(at_step, seeds, origin, n, direction)
+    result = simulate(rule_set, seeds, shape, n_agents, max_steps, rng, on_step=hook)
+    return result, hook.moved
+
+
+def ring_done(world: World, ring: np.ndarray) -> bool:
+    return bool(np.all(world.grid[ring == BRICK] == BRICK))
+
+
+def inside(pos, origin, n) -> bool:
+    return all(o < p < o + n - 1 for p, o in zip(pos, origin))
+
+
+def nested_squares(outer_n: int, inner_n: int, n_agents: int, max_steps: int,
+                   rng: np.random.Generator, margin: int = 3) -> dict:
+    """Build a ring inside a ring with the corner rules (Fig. 14).
+
+    Returns when each ring was finished (None if never), how many agents
+    were enclosed when the outer ring closed, and the final world.
+    """
+    shape = (outer_n + 2 * margin,) * 2
+    outer_o = (margin, margin)
+    inner_o = (margin + (outer_n - inner_n) // 2,) * 2
+    outer = square_target(outer_n, outer_o, shape)
+    inner = square_target(inner_n, inner_o, shape)
+    world = make_world(shape, {**corner_seeds(outer_n, outer_o),
+                               **corner_seeds(inner_n, inner_o)})
+    rules = corner_rules(outer | inner)
+    done = {"outer": None, "inner": None, "enclosed": None}
+    for t in range(1, max_steps + 1):
+        step(world, rules, n_agents, rng)
+        if done["inner"] is None and ring_done(world, inner):
+            done["inner"] = t
+        if done["outer"] is None and ring_done(world, outer):
+            done["outer"] = t
+            done["enclosed"] = sum(inside(p, outer_o, outer_n) for p in world.agents)
+        if done["inner"] and done["outer"]:
+            break
+    done["world"] = world
+    return done
