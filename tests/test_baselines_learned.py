@@ -116,7 +116,7 @@ def test_same_seed_same_learning_curve():
         return learn(rule_set, seeds, shape, np.random.default_rng(seed), epochs=4,
                      episodes=1, return_net=True)
 
-    (ea, na, _, da), (eb, nb, _, db), (ec, nc, _, dc) = run(7), run(7), run(8)
+    (ea, na, _, da), (eb, nb, _, db), (_, nc, _, dc) = run(7), run(7), run(8)
     assert np.array_equal(ea, eb) and da == db
     assert np.array_equal(na.w1, nb.w1) and np.array_equal(na.w2, nb.w2)
     assert da != dc or not np.array_equal(na.w1, nc.w1)
