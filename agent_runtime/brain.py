@@ -154,15 +154,20 @@ class Brain:
                 field = self._need_field(layer)
                 if np.isfinite(field[self.centre, self.centre]):
                     return (*self._navigate(field, frame.heading), NONE, name)
-        return (*self._construct(frame, ranges, plans, motor), arm if arm != NONE else NONE, motor)
+        return (*self._construct(frame, ranges, plans, motor, arm), arm, motor)
 
     def _need_field(self, layer: int) -> np.ndarray:
         m = self.maps.maps > 0.5
         others = (m[FOOD] | m[WATER] | m[BRICK]) & ~m[layer]
         return distance_field(m[layer], self._free_centre(others))
 
-    def _construct(self, frame, ranges, plans, motor) -> tuple[float, float]:
+    def _construct(self, frame, ranges, plans, motor, arm=NONE) -> tuple[float, float]:
         cruise = self.cfg.cruise_speed
+        if arm == "grab":
+            # The gripper is in front: face the free brick and close in on it slowly (the
+            # world stops the body at contact, well within the gripper's reach).
+            target = self._brick_within(plans, self.cfg.reach)
+            return steering.steer_to(*target, frame.heading, 0.5) if target else (0.0, 0.0)
         if motor == "config_nav":
             return self._navigate(plans.config, frame.heading)
         if motor == "brick_nav":

@@ -55,6 +55,32 @@ def tick(w: World, commands: dict | None = None, n: int = 1) -> None:
         w.step()
 
 
+
+def face_nearest_brick(w, agent: str = "a") -> None:
+    """Turn the body to the nearest brick: the gripper takes bricks in front of it."""
+    i = w.agents[agent].index
+    x, y, _ = w.agent_poses()[i]
+    lying = (w.discs.kind == 2) & (w.discs.state == 0)
+    if lying.any():
+        bricks = w.discs.xy[lying]
+        bx, by = bricks[np.argmin(np.hypot(bricks[:, 0] - x, bricks[:, 1] - y))]
+        w.heading[i] = math.atan2(by - y, bx - x)
+
+
+def test_the_gripper_takes_the_brick_in_front_not_a_nearer_one_behind():
+    w = make("\n".join(["......", ".bAb..", "......"]), grab_reach=1.5)
+    w.attach("a")
+    x, y, _ = w.agent_poses()[0]
+    w.heading[0] = 0.0                       # facing east, a brick 1.0 away on each side
+    tick(w, {"a": (0.0, 0.0, "grab")})
+    held = w.agents["a"].holding
+    assert held >= 0 and w.discs.xy[held][0] > x   # the east one, in front
+    w2 = make("\n".join(["......", ".bA...", "......"]))
+    w2.attach("a")
+    w2.heading[0] = 0.0                      # the only brick is behind
+    tick(w2, {"a": (0.0, 0.0, "grab")})
+    assert w2.agents["a"].holding == -1 and not w2.frames()[0].grabbed
+
 def face(w: World, agent_id: str, angle: float) -> None:
     """Turn in place until the heading is `angle`."""
     for _ in range(10):
@@ -184,6 +210,7 @@ def test_a_carried_brick_is_invisible_to_everyone_until_dropped():
     tick(w)
     assert np.count_nonzero(ranges(w, "a")[BRICK] >= 0) == 1
     assert ranges(w, "b")[BRICK].max() == pytest.approx(3.0)
+    face_nearest_brick(w)
     tick(w, {"a": (0.0, 0.0, "grab")})
     assert w.frame("a").grabbed
     assert np.all(ranges(w, "a")[BRICK] == NO_READING)
@@ -440,18 +467,21 @@ def test_grab_only_within_reach():
     # bricks 1 (east) and sqrt(2) (north-west) cells away; grab_reach is 1.2
     w = make(".b...\n..Ab.\n.....", sensor_noise=0.0)
     w.attach("a")
+    face_nearest_brick(w)
     tick(w, {"a": (0.0, 0.0, "grab")})
     f = w.frame("a")
     assert f.grabbed and f.holding
     assert np.flatnonzero(ranges(w, "a")[BRICK] >= 0).tolist() == [6]  # the east one is gone
     w2 = make("b....\n.....\nA.b..")
     w2.attach("a")
+    face_nearest_brick(w2)
     tick(w2, {"a": (0.0, 0.0, "grab")})
     f = w2.frame("a")
     assert not f.grabbed and not f.holding
     assert w2.status().agent_grabs == (0,)
     w3 = make(".b...\n.....\n..A..", grab_reach=2.5)
     w3.attach("a")
+    face_nearest_brick(w3)
     tick(w3, {"a": (0.0, 0.0, "grab")})
     assert w3.frame("a").grabbed
 
@@ -459,8 +489,10 @@ def test_grab_only_within_reach():
 def test_an_agent_carries_at_most_one_brick():
     w = make(".....\n.bAb.\n.....")
     w.attach("a")
+    face_nearest_brick(w)
     tick(w, {"a": (0.0, 0.0, "grab")})
     assert w.frame("a").grabbed
+    face_nearest_brick(w)
     tick(w, {"a": (0.0, 0.0, "grab")})
     f = w.frame("a")
     assert not f.grabbed and f.holding
@@ -473,6 +505,7 @@ def test_drop_puts_the_brick_where_the_agent_stands():
     w = make("........\n.bA.....\n........\n......A.", agents=2, sensor_noise=0.0)
     w.attach("a")
     w.attach("obs")
+    face_nearest_brick(w)
     tick(w, {"a": (0.0, 0.0, "grab")})
     drive_to(w, "a", (4.5, 1.7))
     where = pose(w, "a")[:2]
@@ -484,6 +517,7 @@ def test_drop_puts_the_brick_where_the_agent_stands():
     d = where - obs
     assert ranges(w, "obs")[BRICK, sector_of(*d, 16)] == pytest.approx(np.hypot(*d), abs=1e-6)
     # the brick can be picked up again from there
+    face_nearest_brick(w)
     tick(w, {"a": (0.0, 0.0, "grab")})
     assert w.frame("a").grabbed
 
@@ -504,6 +538,7 @@ def test_a_brick_dropped_on_a_drop_site_fills_it():
     w.attach("a")
     s = w.status()
     assert (s.sites_total, s.sites_filled, s.completed) == (1, 0, False)
+    face_nearest_brick(w)
     tick(w, {"a": (0.0, 0.0, "grab")})
     assert w.frame("a").grabbed
     drive_to(w, "a", (2.5, 1.5))
@@ -512,6 +547,7 @@ def test_a_brick_dropped_on_a_drop_site_fills_it():
     s = w.status()
     assert (s.sites_total, s.sites_filled, s.completed) == (1, 1, True)
     # and picking it up again empties the site
+    face_nearest_brick(w)
     tick(w, {"a": (0.0, 0.0, "grab")})
     assert w.frame("a").grabbed and w.status().sites_filled == 0
 
@@ -519,7 +555,9 @@ def test_a_brick_dropped_on_a_drop_site_fills_it():
 def test_a_dropped_brick_does_not_kick_the_agent_and_is_solid_once_left():
     w = make(".b........\n.A........\n..........")
     w.attach("a")
+    face_nearest_brick(w)
     tick(w, {"a": (0.0, 0.0, "grab")})
+    w.heading[w.agents["a"].index] = 0.0  # face east again: the drive below goes east
     tick(w, n=5)
     start = pose(w, "a")[:2].copy()
     tick(w, {"a": (0.0, 0.0, "drop")})
@@ -612,6 +650,7 @@ def test_detach_drops_the_brick_stops_the_body_and_refuses_commands():
     w = make(".......\n.bA...A\n.......", agents=2, sensor_noise=0.0)
     w.attach("a")
     w.attach("b")
+    face_nearest_brick(w)
     tick(w, {"a": (0.0, 0.0, "grab")})
     assert w.frame("a").holding
     tick(w, {"a": (3.0, 0.0, "none")}, 4)  # moving east

@@ -26,6 +26,7 @@ class WorldConfig:
     sensor_noise: float = 0.02      # noise std per unit of distance (uniform, zero mean): far readings are worse
     odometry_noise: float = 0.0     # noise std per unit of distance moved
     grab_reach: float = 1.2         # agent centre to brick centre
+    grab_cone: float = math.pi / 3  # the gripper takes bricks within this angle of the heading
     touch_margin: float = 0.25      # eat/drink: surfaces closer than this count as touching (an
                                     # agent on the centre of the next cell touches the disc)
     lockstep_timeout: float = 1.0   # wall seconds the world waits for a live agent's command
@@ -34,7 +35,7 @@ class WorldConfig:
 
     def __post_init__(self) -> None:
         positive = ("cell_size", "disc_radius", "agent_radius", "agent_mass", "dt", "max_speed",
-                    "max_turn", "sensor_range", "grab_reach", "lockstep_timeout", "tick_rate",
+                    "max_turn", "sensor_range", "grab_reach", "grab_cone", "lockstep_timeout", "tick_rate",
                     "status_period")
         for name in positive:
             value = getattr(self, name)

@@ -76,6 +76,18 @@ class DiscStore:
         best = int(np.argmin(d2))
         return int(idx[best]) if d2[best] <= max_dist * max_dist else -1
 
+    def nearest_in_front(self, xy, heading: float, max_dist: float, cone: float, kind: int) -> int:
+        """Nearest present disc of `kind` within `max_dist` and within `cone` of `heading`, or -1."""
+        idx, pxy = self._present_of_kind(kind)
+        if idx.size == 0:
+            return -1
+        dx, dy = pxy[:, 0] - xy[0], pxy[:, 1] - xy[1]
+        d2 = np.square(dx) + np.square(dy)
+        off = np.abs((np.arctan2(dy, dx) - heading + np.pi) % (2 * np.pi) - np.pi)
+        d2 = np.where((off <= cone) | (d2 < 1e-12), d2, np.inf)
+        best = int(np.argmin(d2))
+        return int(idx[best]) if d2[best] <= max_dist * max_dist else -1
+
     def bricks_total(self) -> int:
         """Bricks that exist: in the world or carried. Only a perturbation changes this."""
         return int(np.count_nonzero((self.kind == BRICK) & (self.state != GONE)))

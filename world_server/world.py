@@ -186,7 +186,10 @@ class World:
         action = self.action[rec.index]
         touch = self.cfg.agent_radius + self.cfg.disc_radius + self.cfg.touch_margin
         if action == GRAB and rec.holding < 0:
-            brick = self.discs.nearest(xy, self.cfg.grab_reach, BRICK)
+            # The gripper is in front: it takes the nearest brick within reach there, so an
+            # agent facing a free brick does not pick up the structure brick beside it.
+            brick = self.discs.nearest_in_front(xy, self.heading[rec.index], self.cfg.grab_reach,
+                                                self.cfg.grab_cone, BRICK)
             if brick >= 0:
                 self.discs.carry(brick)
                 self.physics.remove_disc(brick)
