@@ -1,0 +1,54 @@
+"""R4: the reactive lattice system against ConAg (experiments/reactive_vs_conag.py)."""
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from baselines.lattice import BRICK
+from baselines.perturb import run_perturbed
+from baselines.rules import square_rules
+
+_PATH = Path(__file__).resolve().parent.parent / "experiments" / "reactive_vs_conag.py"
+_spec = importlib.util.spec_from_file_location("reactive_vs_conag", _PATH)
+rvc = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(rvc)
+
+
+@pytest.mark.parametrize("seeding", ["corners", "sides"])
+def test_reactive_moved_brick_gives_wrong_structure(seeding):
+    rule_set, seeds, shape = square_rules(6, seeding)
+    result, moved = run_perturbed(rule_set, seeds, shape, 6, (3, 3), 10, "out", 8, 2000,
+                                  np.random.default_rng(0))
+    assert moved is not None
+    assert not result.built
+    assert not np.array_equal(result.grid, rule_set.target)
+    assert result.grid[moved[1]] == BRICK and rule_set.target[moved[1]] != BRICK
+
+
+def test_ring_scenario_matches_the_lattice_task():
+    sc = rvc.ring_scenario("corners", 2)
+    assert len(sc.cells("+B")) == 20 and len(sc.cells("B")) == 4
+    assert len(sc.cells("b")) >= 16
+
+
+def test_conag_completes_ring_from_corner_seeds():
+    r = rvc.conag_ring("corners", 2, seed=0, max_ticks=3000)
+    assert r["completed"] and r["filled"] == r["total"] == 20
+
+
+def test_conag_moved_brick_leaves_its_site_and_the_structure():
+    """The disturbance itself: the site is unfilled again, the brick lies off every site."""
+    r = rvc.conag_moved("corners", 2, seed=0, max_ticks=300)
+    move = r["move"]
+    assert move is not None
+    assert move["site_unfilled_after"]
+    assert not move["dst_on_site"]
+
+
+def test_conag_completes_ring_after_moved_brick():
+    r = rvc.conag_moved("corners", 2, seed=0, max_ticks=3000)
+    assert not r["move"]["dst_on_site"]
+    assert r["completed"] and r["filled"] == r["total"]
