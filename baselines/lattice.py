@@ -132,10 +132,20 @@ def decide(rule_set: RuleSet, state: int, pattern, rng: np.random.Generator):
     return "move", free[int(rng.integers(len(free)))]
 
 
-def act(world: World, rule_set: RuleSet, pos, rng: np.random.Generator) -> None:
+# A policy maps (own state, 8-neighbour pattern, rng) to a decision, as `decide` does
+# for a rule set; a learned network (baselines/learned.py) is another policy.
+Policy = Callable[[int, tuple, np.random.Generator], tuple[str, int]]
+
+
+def rule_policy(rule_set: RuleSet) -> Policy:
+    """The rule set as a policy."""
+    return lambda state, pattern, rng: decide(rule_set, state, pattern, rng)
+
+
+def act(world: World, policy: Policy, pos, rng: np.random.Generator) -> None:
     """Let the agent at `pos` sense, decide and act."""
     state = world.agents[pos]
-    action, arg = decide(rule_set, state, sense(world, pos), rng)
+    action, arg = policy(state, sense(world, pos), rng)
     if action == "brick":
         del world.agents[pos]
         world.grid[pos], world.brick_state[pos] = BRICK, arg
@@ -162,13 +172,13 @@ def spawn(world: World, n_agents: int, rng: np.random.Generator) -> None:
         world.agents[free[int(i)]] = BLANK
 
 
-def step(world: World, rule_set: RuleSet, n_agents: int, rng: np.random.Generator) -> None:
+def step(world: World, policy: Policy, n_agents: int, rng: np.random.Generator) -> None:
     """One synchronous round: spawn, then every agent acts in a seeded order."""
     spawn(world, n_agents, rng)
     order = sorted(world.agents)
     for i in rng.permutation(len(order)):
         if order[int(i)] in world.agents:
-            act(world, rule_set, order[int(i)], rng)
+            act(world, policy, order[int(i)], rng)
 
 
 def is_built(world: World, target: np.ndarray | None) -> bool:
@@ -178,15 +188,23 @@ def is_built(world: World, target: np.ndarray | None) -> bool:
 def simulate(rule_set: RuleSet, seeds, shape, n_agents: int, max_steps: int,
              rng: np.random.Generator,
              on_step: Callable[[World, int], None] | None = None) -> Result:
-    """Run until the rule set's target is built or `max_steps` elapse.
+    """Run the rule set until its target is built or `max_steps` elapse.
 
     `on_step(world, step)` is called after each step (used for perturbations).
     """
+    return simulate_policy(rule_policy(rule_set), seeds, shape, n_agents, max_steps, rng,
+                           rule_set.target, on_step)
+
+
+def simulate_policy(policy: Policy, seeds, shape, n_agents: int, max_steps: int,
+                    rng: np.random.Generator, target: np.ndarray | None,
+                    on_step: Callable[[World, int], None] | None = None) -> Result:
+    """Run any policy until `target` is built or `max_steps` elapse."""
     world = make_world(shape, seeds)
     for t in range(1, max_steps + 1):
-        step(world, rule_set, n_agents, rng)
+        step(world, policy, n_agents, rng)
         if on_step is not None:
             on_step(world, t)
-        if is_built(world, rule_set.target):
+        if is_built(world, target):
             return Result(world.grid, world.brick_state, t, True)
     return Result(world.grid, world.brick_state, max_steps, False)

@@ -11,35 +11,26 @@ cross-entropy; an error is a decision where the network's argmax differs
 from the teacher's class, counted online (the prediction is made before the
 minibatch's update), per epoch — the quantity plotted in Fig. 11.
 
-The trained network then drives the lattice world in place of the rule set:
-`lattice.simulate` only takes a `RuleSet`, so `simulate_policy` here repeats
-its loop (spawn, seeded agent order, sense, decide, act) with any policy
-`decide(state, pattern, rng)` — `lattice.py` is not modified.  With the
-teacher as the policy it reproduces `lattice.simulate` exactly, random
-stream included.
+The trained network then drives the lattice world in place of the rule set,
+through `lattice.simulate_policy` (any policy `(state, pattern, rng) -> decision`;
+`lattice.simulate` is the same loop with the rule set as the policy). With the
+teacher as the policy it reproduces `lattice.simulate` exactly, random stream
+included.
 
 All randomness comes from the `np.random.Generator` passed in.
 """
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
 from .lattice import (
-    BRICK,
     FREE,
     MOVES,
-    Result,
     RuleSet,
-    World,
-    is_built,
-    make_world,
     matches,
-    neighbour,
-    sense,
-    spawn,
+    simulate_policy,
 )
 
 N_KINDS = 4  # FREE, WALL, AGENT, EDGE
@@ -156,7 +147,6 @@ class ImitationNet:
 
 # --------------------------------------------------------------------------- policies
 
-Policy = Callable[[int, tuple, np.random.Generator], tuple[str, int]]
 
 
 @dataclass
@@ -189,37 +179,6 @@ class RecordingTeacher:
         self.targets.append(cls)
         decision = from_class(cls, self.n_states)
         return explore(state, pattern, rng) if decision is None else decision
-
-
-def act_policy(world: World, policy: Policy, pos, rng: np.random.Generator) -> None:
-    """`lattice.act` with the decision taken by `policy`."""
-    state = world.agents[pos]
-    action, arg = policy(state, sense(world, pos), rng)
-    if action == "brick":
-        del world.agents[pos]
-        world.grid[pos], world.brick_state[pos] = BRICK, arg
-    elif action == "move":
-        world.agents[neighbour(pos, arg)] = world.agents.pop(pos)
-    else:
-        world.agents[pos] = arg
-
-
-def simulate_policy(policy: Policy, seeds, shape, n_agents: int, max_steps: int,
-                    rng: np.random.Generator, target: np.ndarray | None,
-                    on_step: Callable[[World, int], None] | None = None) -> Result:
-    """`lattice.simulate` with any policy in place of the rule set."""
-    world = make_world(shape, seeds)
-    for t in range(1, max_steps + 1):
-        spawn(world, n_agents, rng)
-        order = sorted(world.agents)
-        for i in rng.permutation(len(order)):
-            if order[int(i)] in world.agents:
-                act_policy(world, policy, order[int(i)], rng)
-        if on_step is not None:
-            on_step(world, t)
-        if is_built(world, target):
-            return Result(world.grid, world.brick_state, t, True)
-    return Result(world.grid, world.brick_state, max_steps, False)
 
 
 # --------------------------------------------------------------------------- learning

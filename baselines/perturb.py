@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .lattice import BRICK, EMPTY, World, make_world, simulate, step
+from .lattice import BRICK, EMPTY, World, make_world, rule_policy, simulate, step
 from .rules import corner_rules, corner_seeds, square_target
 
 STEPS = {"out": 1, "in": -1}
@@ -99,7 +99,7 @@ def nested_squares(outer_n: int, inner_n: int, n_agents: int, max_steps: int,
     rules = corner_rules(outer | inner)
     done = {"outer": None, "inner": None, "enclosed": None}
     for t in range(1, max_steps + 1):
-        step(world, rules, n_agents, rng)
+        step(world, rule_policy(rules), n_agents, rng)
         if done["inner"] is None and ring_done(world, inner):
             done["inner"] = t
         if done["outer"] is None and ring_done(world, outer):

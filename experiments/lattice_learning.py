@@ -112,6 +112,7 @@ def main(argv=None):
     args = parser.parse_args(argv)
     if args.out is None:
         args.out = Path(tempfile.gettempdir()) if args.quick else Path(__file__).resolve().parent
+    args.out.mkdir(parents=True, exist_ok=True)
     if args.quick:
         seeds, epochs, episodes, eval_runs, eval_steps = range(2), 5, 1, 1, 2000
     else:
