@@ -75,14 +75,23 @@ class Brain:
         self.motivations.update(self.cfg, frame.ate, frame.drank)
         return ranges
 
-    def plan(self) -> Plans:
-        """Configuration and brick NMs from the ESMs (paper §4.2.3, Fig. 5)."""
+    def nav_masks(self) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
+        """(goals, obstacles) of the configuration NM and of the brick NM (paper §4.2.3, Fig. 5).
+
+        The configuration NM is excited by the configuration ESM and inhibited by the food,
+        water and brick ESMs; the brick NM is excited by the brick ESM and inhibited by food,
+        water and the bricks that are part of the structure.
+        """
         m = self.maps.maps > 0.5
         food, water, brick, config = m[FOOD], m[WATER], m[BRICK], m[CONFIG]
         config_goals = config & ~brick          # sites still missing a brick
         brick_goals = brick & ~config           # bricks not part of the structure
-        config_obstacles = self._free_centre(food | water | brick)
-        brick_obstacles = self._free_centre(food | water | (brick & config))
+        return ((config_goals, self._free_centre(food | water | brick)),
+                (brick_goals, self._free_centre(food | water | (brick & config))))
+
+    def plan(self) -> Plans:
+        """Configuration and brick NMs from the ESMs, as distance fields."""
+        (config_goals, config_obstacles), (brick_goals, brick_obstacles) = self.nav_masks()
         self.plans = Plans(distance_field(config_goals, config_obstacles),
                            distance_field(brick_goals, brick_obstacles), config_goals, brick_goals,
                            self._nearest(brick_goals))

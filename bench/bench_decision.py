@@ -12,7 +12,7 @@ the agent's whole decision step, `brain.step(frame)` (ESM move + sense,
 motivations, the configuration and brick navigation maps, the state nodes, action
 selection), is timed on that tick's frame, and so is `brain.plan()` alone (the two
 navigation maps); the world step is not timed. The goal and obstacle masks of both maps
-(rebuilt from `brain.maps` exactly as `Brain.plan` builds them) and the brain's fields
+(rebuilt from `brain.maps` by `Brain.nav_masks`, which `Brain.plan` uses) and the brain's fields
 are recorded each tick. Afterwards, in the same run, `scipy.sparse.csgraph.dijkstra`
 computes the same two fields from every recorded tick's masks (8-connected, no corner
 cutting, multi-source `indices=goal cells`, `min_only=True`), timed with the sparse
@@ -35,7 +35,6 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from agent_runtime.config import AgentConfig  # noqa: E402
-from agent_runtime.esm import BRICK, CONFIG, FOOD, WATER  # noqa: E402
 from bench.bench_spreading import scipy_field, scipy_graph  # noqa: E402
 from conag import sim  # noqa: E402
 from world_server.scenario import load_scenario  # noqa: E402
@@ -48,14 +47,8 @@ TARGET_SPEEDUP = 5.0
 
 
 def nav_masks(brain) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(goals, obstacles) of the configuration and brick NMs, as `Brain.plan` builds them."""
-    m = brain.maps.maps > 0.5
-    food, water, brick, config = m[FOOD], m[WATER], m[BRICK], m[CONFIG]
-    c = brain.centre
-    config_obstacles = food | water | brick
-    brick_obstacles = food | water | (brick & config)
-    config_obstacles[c, c] = brick_obstacles[c, c] = False
-    return [(config & ~brick, config_obstacles), (brick & ~config, brick_obstacles)]
+    """(goals, obstacles) of the configuration and brick NMs, from `Brain.nav_masks`."""
+    return list(brain.nav_masks())
 
 
 def solve(goals: np.ndarray, obstacles: np.ndarray, graph=None) -> np.ndarray:

@@ -28,7 +28,6 @@ from agent_runtime.esm import BRICK, CONFIG, FOOD, WATER
 from agent_runtime.spreading import activation
 from conag import sim
 from protocol.messages import DISC_KINDS
-from world_server.discs import IN_WORLD
 from world_server.render import draw_world
 from world_server.scenario import Scenario
 
@@ -76,20 +75,15 @@ def _figure(scenario: Scenario, run: sim.SimRun, agent: str, brain: Brain, plans
 
 
 def nm_obstacles(brain: Brain) -> tuple[np.ndarray, np.ndarray]:
-    """The configuration and brick NMs' obstacle grids, as `Brain.plan` builds them."""
-    m = brain.maps.maps > 0.5
-    food, water, brick, config = m[FOOD], m[WATER], m[BRICK], m[CONFIG]
-    config_obs, brick_obs = food | water | brick, food | water | (brick & config)
-    c = brain.maps.centre
-    config_obs[c, c] = brick_obs[c, c] = False
+    """The configuration and brick NMs' obstacle grids, from `Brain.nav_masks`."""
+    (_, config_obs), (_, brick_obs) = brain.nav_masks()
     return config_obs, brick_obs
 
 
 def _world_panel(ax, scenario: Scenario, run: sim.SimRun, agent: str, map_size: int) -> None:
     world = run.world
-    present = np.flatnonzero(world.discs.state == IN_WORLD)
-    discs = [(x, y, DISC_KINDS[k]) for (x, y), k in
-             zip(world.discs.xy[present].tolist(), world.discs.kind[present].tolist())]
+    _, xy, kinds = world.discs.present_arrays()
+    discs = [(x, y, DISC_KINDS[k]) for (x, y), k in zip(xy.tolist(), kinds.tolist())]
     poses = world.agent_poses()
     draw_world(ax, scenario, agents=poses.tolist(), discs=discs, legend="below")
     x, y, _ = poses[list(run.brains).index(agent)]

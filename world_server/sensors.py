@@ -83,8 +83,15 @@ def _unit_random(seed, counter):
 
 
 @njit(cache=True)
-def _index(agent_xy, disc_xy, disc_channel, cell, nx, ny):
-    """Discs then agents, bucketed: (starts, xs, ys, channels, object ids) in bucket order."""
+def _index(agent_xy, disc_xy, disc_channel, radius, width, height):
+    """Discs then agents, bucketed: (cell, nx, ny, starts, xs, ys, channels, object ids).
+
+    Buckets are half the sensing radius wide: an agent scans at most 5 x 5 of them,
+    about 30% less area than 3 x 3 buckets of the full radius.
+    """
+    cell = radius / 2.0
+    nx = max(int(width / cell) + 1, 1)
+    ny = max(int(height / cell) + 1, 1)
     n_discs = disc_xy.shape[0]
     m = n_discs + agent_xy.shape[0]
     obj_xy = np.empty((m, 2))
@@ -100,12 +107,13 @@ def _index(agent_xy, disc_xy, disc_channel, cell, nx, ny):
         sx[k] = obj_xy[j, 0]
         sy[k] = obj_xy[j, 1]
         sch[k] = disc_channel[j] if j < n_discs else AGENT_CHANNEL
-    return starts, sx, sy, sch, order
+    return cell, nx, ny, starts, sx, sy, sch, order
 
 
 @njit(cache=True)
-def _scan(a, agent_xy, n_discs, starts, sx, sy, sch, sid, cell, nx, ny, radius, sectors, noise, seed, out):
+def _scan(a, agent_xy, n_discs, grid, radius, sectors, noise, seed, out):
     """One agent's readings into out[a]: nearest per (channel, sector), then the noise."""
+    cell, nx, ny, starts, sx, sy, sch, sid = grid
     ax, ay = agent_xy[a, 0], agent_xy[a, 1]
     x0 = min(max(int((ax - radius) / cell), 0), nx - 1)
     x1 = min(max(int((ax + radius) / cell), 0), nx - 1)
@@ -142,28 +150,19 @@ def _scan(a, agent_xy, n_discs, starts, sx, sy, sch, sid, cell, nx, ny, radius, 
 
 @njit(cache=True)
 def _sweep(agent_xy, disc_xy, disc_channel, sensing, sectors, radius, width, height, noise, seed, out):
-    # Buckets of half the sensing radius: an agent scans at most 5 x 5 of them, about
-    # 30% less area than 3 x 3 buckets of the full radius.
-    cell = radius / 2.0
-    nx = max(int(width / cell) + 1, 1)
-    ny = max(int(height / cell) + 1, 1)
-    starts, sx, sy, sch, sid = _index(agent_xy, disc_xy, disc_channel, cell, nx, ny)
+    grid = _index(agent_xy, disc_xy, disc_channel, radius, width, height)
     for a in range(agent_xy.shape[0]):
         if sensing[a]:
-            _scan(a, agent_xy, disc_xy.shape[0], starts, sx, sy, sch, sid, cell, nx, ny, radius, sectors,
-                  noise, seed, out)
+            _scan(a, agent_xy, disc_xy.shape[0], grid, radius, sectors, noise, seed, out)
 
 
 @njit(cache=True, parallel=True)
 def _sweep_parallel(agent_xy, disc_xy, disc_channel, sensing, sectors, radius, width, height, noise, seed, out):
-    cell = radius / 2.0
-    nx = max(int(width / cell) + 1, 1)
-    ny = max(int(height / cell) + 1, 1)
-    starts, sx, sy, sch, sid = _index(agent_xy, disc_xy, disc_channel, cell, nx, ny)
+    """`_sweep` with the agents shared among the cores (rows of different agents never overlap)."""
+    grid = _index(agent_xy, disc_xy, disc_channel, radius, width, height)
     for a in prange(agent_xy.shape[0]):
         if sensing[a]:
-            _scan(a, agent_xy, disc_xy.shape[0], starts, sx, sy, sch, sid, cell, nx, ny, radius, sectors,
-                  noise, seed, out)
+            _scan(a, agent_xy, disc_xy.shape[0], grid, radius, sectors, noise, seed, out)
 
 
 # Below this many agents, starting threads costs more than it saves.
