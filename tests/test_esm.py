@@ -487,12 +487,11 @@ def reference_sense(m: EgocentricMaps, ranges: np.ndarray, reach: float) -> np.n
                 scored.append((math.hypot(ox - px, oy - py) - 2.0 * marked - 1.0 * blueprint, c, marked, blueprint))
             best = min(scored)[0] if scored else None
             won = [c for score, c, marked, bp in scored if score <= best and (marked or bp)]
-            if won:
-                winners += [(layer, c) for c in won]
-                if layer == BRICK:
-                    ghosts += [(layer, c) for score, c, marked, bp in scored if marked and not bp and c not in won]
-            else:
+            winners += [(layer, c) for c in won]
+            if not won:
                 plain.append((layer, m.cell_of(px, py)))
+            if layer == BRICK:  # ghosts of the one brick this sector saw, attributed or written plainly
+                ghosts += [(layer, c) for score, c, marked, bp in scored if marked and not bp and c not in won]
     for layer, c in ghosts:
         out[layer][c] = 0.0
     for layer, c in winners:
