@@ -17,6 +17,7 @@ import numpy as np
 from agent_runtime import steering
 from agent_runtime.config import AgentConfig
 from agent_runtime.esm import BRICK, CONFIG, FOOD, WATER, EgocentricMaps
+from agent_runtime.matching import Matching, calculate_matching, select_goals
 from agent_runtime.motivations import Motivations
 from agent_runtime.network import NONE, STATE_NODES, ActionNetwork, engineered
 from agent_runtime.spreading import distance_field, gradient_step
@@ -45,6 +46,7 @@ class Plans:
     config_goals: np.ndarray
     brick_goals: np.ndarray
     nearest_brick: tuple[float, float, float] | None  # (dx, dy, distance) in cells, or None
+    matching: Matching | None = None  # the Matching grid (goal sequencing), None when it is off
 
 
 class Brain:
@@ -63,6 +65,7 @@ class Brain:
         self.centre = self.cfg.map_size // 2
         self._attach_tick = welcome.tick
         self.plans: Plans | None = None
+        self._matching: tuple[bytes, Matching] | None = None  # (inputs, result) of the last matching
 
     # sensing and planning --------------------------------------------------------------
     def perceive(self, frame: SensorFrame) -> np.ndarray:
@@ -75,26 +78,51 @@ class Brain:
         self.motivations.update(self.cfg, frame.ate, frame.drank)
         return ranges
 
-    def nav_masks(self) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
+    def nav_masks(self, sequenced: bool = True) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
         """(goals, obstacles) of the configuration NM and of the brick NM (paper §4.2.3, Fig. 5).
 
         The configuration NM is excited by the configuration ESM and inhibited by the food,
         water and brick ESMs; the brick NM is excited by the brick ESM and inhibited by food,
-        water and the bricks that are part of the structure.
+        water and the bricks that are part of the structure. With goal sequencing on (and
+        `sequenced`), the Matching grid also inhibits the sites that would block another
+        pair's path and leaves only the matched bricks as brick goals (§6.2).
         """
         m = self.maps.maps > 0.5
         food, water, brick, config = m[FOOD], m[WATER], m[BRICK], m[CONFIG]
         config_goals = config & ~brick          # sites still missing a brick
         brick_goals = brick & ~config           # bricks not part of the structure
+        if sequenced and self.cfg.goal_sequencing:
+            matching = self.matching(brick_goals, config_goals, food | water | (brick & config))
+            config_goals, brick_goals = select_goals(matching, brick_goals, config_goals)
         return ((config_goals, self._free_centre(food | water | brick)),
                 (brick_goals, self._free_centre(food | water | (brick & config))))
 
+    def matching(self, bricks: np.ndarray, sites: np.ndarray, obstacles: np.ndarray) -> Matching:
+        """calculateMatching on the current maps, recomputed only when its inputs change
+        (a brick moved, a site filled, the maps shifted by a cell)."""
+        key = np.packbits(np.stack([bricks, sites, obstacles])).tobytes()
+        if self._matching is None or self._matching[0] != key:
+            self._matching = (key, calculate_matching(bricks, sites, obstacles))
+        return self._matching[1]
+
     def plan(self) -> Plans:
-        """Configuration and brick NMs from the ESMs, as distance fields."""
-        (config_goals, config_obstacles), (brick_goals, brick_obstacles) = self.nav_masks()
-        self.plans = Plans(distance_field(config_goals, config_obstacles),
-                           distance_field(brick_goals, brick_obstacles), config_goals, brick_goals,
-                           self._nearest(brick_goals))
+        """Configuration and brick NMs from the ESMs, as distance fields.
+
+        If goal sequencing leaves no reachable goal on a map (every open site would block
+        another pair, or the matched bricks are out of reach) the plain goals of §4 are
+        used for that map: a blocked plan must not stall the agent.
+        """
+        c = self.centre
+        fields = []
+        for k, (goals, obstacles) in enumerate(self.nav_masks()):
+            field = distance_field(goals, obstacles)
+            if self.cfg.goal_sequencing and not np.isfinite(field[c, c]):
+                goals, obstacles = self.nav_masks(sequenced=False)[k]
+                field = distance_field(goals, obstacles)
+            fields.append((field, goals))
+        (config, config_goals), (brick, brick_goals) = fields
+        matching = self._matching[1] if self.cfg.goal_sequencing and self._matching else None
+        self.plans = Plans(config, brick, config_goals, brick_goals, self._nearest(brick_goals), matching)
         return self.plans
 
     def _nearest(self, cells: np.ndarray) -> tuple[float, float, float] | None:

@@ -26,6 +26,8 @@ class AgentConfig:
     drop_centering: float = 0.3     # drop only this close (cells) to the site cell's centre
     avoid_distance: float = 0.9     # Avoid: another agent closer than this
     explore_turn: float = 0.6       # largest random turn per tick while exploring
+    goal_sequencing: bool = True    # ConAg-TS (§6): calculateMatching and drop-site selection;
+                                    # False gives the plain nearest-first agent of §4
 
     def __post_init__(self) -> None:
         if not (isinstance(self.map_size, int) and self.map_size >= 5 and self.map_size % 2 == 1):
@@ -34,6 +36,8 @@ class AgentConfig:
             v = getattr(self, f.name)
             if isinstance(v, float) and not (math.isfinite(v) and v >= 0):
                 raise ValueError(f"agent.{f.name} must be a finite number >= 0")
+        if not isinstance(self.goal_sequencing, bool):
+            raise ValueError("agent.goal_sequencing must be true or false")
 
     @classmethod
     def from_mapping(cls, table: dict) -> "AgentConfig":

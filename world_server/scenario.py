@@ -72,6 +72,10 @@ class Scenario:
         found = [(c, r) for r, line in enumerate(self.layout) for c, ch in enumerate(line) if ch in chars]
         return np.array(found, dtype=np.int64).reshape(-1, 2)
 
+    def grid(self, chars: str) -> np.ndarray:
+        """bool [row, col]: where the layout holds one of `chars` (row 0 is the north)."""
+        return np.isin(np.array([list(line) for line in self.layout]), list(chars))
+
     def to_world(self, cells: np.ndarray) -> np.ndarray:
         """Cell (col, row) -> world (x, y) of the cell centre; y grows northwards."""
         cells = np.asarray(cells, dtype=np.float64).reshape(-1, 2)

@@ -1,0 +1,251 @@
+"""Goal sequencing (paper §6, Fig. 15-18; MISSION G1-G2): calculateMatching and drop-site selection.
+
+The Matching grid lies cell for cell on the agent's ESMs. calculateMatching (Fig. 16)
+spreads activation a from the free bricks (S) and b from the unfilled drop sites (T),
+every other disc being an obstacle (X). The cells of maximal a + b lie on the shortest
+path of the closest brick/site pair; from each such site's neighbour the path is traced
+down the gradient of a (succ, Eq. 3) to a brick, every cell on it gets match = 1, the
+site leaves T, and the loop repeats until T is empty or no site can reach a brick.
+
+Drop-site selection (§6.2) reads the grid: a site with match = 1 lies on the path of
+another pair, so it is inhibited on the configuration NM (it would block that pair); a
+brick with match = 1 was matched, so it alone excites the brick NM.
+
+Two implementations of the same algorithm:
+- `calculate_matching`: compiled (numba). a and b are exact distance fields from the
+  spreading module's kernel (the fixed point of Eq. 2, which M rounds aim at), the
+  maximum of a + b is a minimum of distance sums, and paths are pointer walks.
+- `calculate_matching_grid`: Fig. 16 step by step as whole-grid numpy operations (shifts
+  and minima over the grid, iterated until they settle), the reference the tests hold
+  the compiled one to.
+
+Choices where Fig. 16 is silent (both implementations make them alike):
+- S is never updated, as in the figure: a brick can be matched to several sites. That is
+  also our answer to more sites than bricks: every site reachable from a brick is
+  matched to its nearest one, so no site's path is left unprotected because the bricks
+  in view ran out (an agent rarely sees the whole supply).
+- Sites that no brick can reach (walled in, or no bricks in view) are left unmatched
+  with match 0: they block nobody's path, and the loop ends when only they remain.
+- Step 3 compares a site's a + b with the best anywhere (the text: "the maximum
+  activation value is distributed to all nodes"), not only with its neighbours as the
+  listing's `a[m] + b[m]` reads. Sites that tie for the maximum are matched in the same
+  round, as step 4 matches every T[n] with hasMaxValue. Because S is fixed, the final
+  grid does not depend on the order of rounds; only `Matching.pairs`' order does.
+- succ(n) is Eq. 3 literally: the passable neighbour of largest a (smallest distance to
+  a brick), ties broken by the spreading module's move order (N, E, S, W, NE, SE, SW, NW)
+  and diagonals only between two free cells. Every succ is strictly nearer a brick, so a
+  trace ends, at the first brick it reaches.
+- A tie at the site itself starts a trace from every tied neighbour: a site equally near
+  bricks in several directions (Fig. 20's middle wall, between two sources) keeps all
+  those ways open, so sites on any of them wait. The paper's Fig. 20 has "some" middle
+  sites matched up and some down; a fixed tie-break would send all one way and leave the
+  other outer wall free to close first. `pairs` records the first trace's brick.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from agent_runtime.spreading import _DC, _DR, _STEP, _TIE, _field_kernel, _move_masks, _shift
+
+
+@dataclass(frozen=True)
+class Matching:
+    """The Matching grid after calculateMatching."""
+
+    match: np.ndarray                                   # bool [row, col]: match = 1
+    pairs: tuple[tuple[tuple[int, int], tuple[int, int]], ...]  # (site, brick) in matching order
+    unmatched: tuple[tuple[int, int], ...]              # sites no brick can reach
+
+    @property
+    def matched_sites(self) -> frozenset[tuple[int, int]]:
+        return frozenset(site for site, _ in self.pairs)
+
+
+def _grids(bricks, sites, obstacles) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    grids = [np.ascontiguousarray(g, dtype=np.bool_) for g in (bricks, sites, obstacles)]
+    if grids[0].ndim != 2 or not grids[0].shape == grids[1].shape == grids[2].shape:
+        raise ValueError(f"bricks, sites and obstacles must be equal 2-D shapes, got "
+                         f"{[g.shape for g in grids]}")
+    bricks, sites, obstacles = grids
+    # A disc that is an obstacle is neither a free brick nor an open site; a site that
+    # already holds a brick is filled (the caller passes unfilled sites, this makes sure).
+    return bricks & ~obstacles, sites & ~obstacles & ~bricks, obstacles
+
+
+def _result(match, rounds, site_r, site_c, brick_r, brick_c, sites) -> Matching:
+    n = int(rounds)
+    pairs = tuple(((int(site_r[i]), int(site_c[i])), (int(brick_r[i]), int(brick_c[i]))) for i in range(n))
+    matched = {p[0] for p in pairs}
+    unmatched = tuple((int(r), int(c)) for r, c in zip(*np.nonzero(sites)) if (int(r), int(c)) not in matched)
+    return Matching(match, pairs, unmatched)
+
+
+# --- compiled ---------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def _nearest_neighbours(da, obstacles, r, c):
+    """The passable neighbours of (r, c) nearest a brick, as a mask over the 8 moves, and
+    the first of them (Eq. 3's succ, first in move order on a tie)."""
+    n, m = da.shape
+    dist = np.full(8, np.inf)
+    for j in range(8):
+        rr, cc = r + _DR[j], c + _DC[j]
+        if rr < 0 or rr >= n or cc < 0 or cc >= m or obstacles[rr, cc]:
+            continue
+        if j >= 4 and (obstacles[r + _DR[j], c] or obstacles[r, c + _DC[j]]):
+            continue
+        dist[j] = da[rr, cc]
+    tied = dist <= dist.min() + _TIE
+    return tied, np.argmax(tied)
+
+
+@njit(cache=True)
+def _trace(da, obstacles, match, r, c):
+    """Mark the path from (r, c) down the gradient of a to a brick; returns the brick."""
+    match[r, c] = True
+    while da[r, c] > 0.0:
+        _, j = _nearest_neighbours(da, obstacles, r, c)
+        r, c = r + _DR[j], c + _DC[j]
+        match[r, c] = True
+    return r, c
+
+
+@njit(cache=True)
+def _matching_kernel(bricks, sites, obstacles):
+    n, m = bricks.shape
+    da = _field_kernel(bricks, obstacles)                       # step 1 (distances: a = 1 - k da)
+    todo = sites.copy()
+    match = np.zeros((n, m), np.bool_)
+    total = int(todo.sum())
+    site_r = np.empty(total, np.int64)
+    site_c = np.empty(total, np.int64)
+    brick_r = np.empty(total, np.int64)
+    brick_c = np.empty(total, np.int64)
+    done = 0
+    while True:
+        db = _field_kernel(todo, obstacles)                     # step 2
+        best = np.inf                                           # step 3: the largest a + b
+        for r in range(n):
+            for c in range(m):
+                s = da[r, c] + db[r, c]
+                if s < best:
+                    best = s
+        if not np.isfinite(best):
+            break                                               # no remaining site reaches a brick
+        for r in range(n):                                      # steps 4-5, each maximal site
+            for c in range(m):
+                if not todo[r, c] or da[r, c] > best + _TIE:
+                    continue
+                todo[r, c] = False
+                tied, first = _nearest_neighbours(da, obstacles, r, c)
+                for j in range(8):                              # every tied way out (see above)
+                    if tied[j]:
+                        br, bc = _trace(da, obstacles, match, r + _DR[j], c + _DC[j])
+                        if j == first:
+                            brick_r[done], brick_c[done] = br, bc
+                site_r[done], site_c[done] = r, c
+                done += 1
+    return match, done, site_r, site_c, brick_r, brick_c
+
+
+def calculate_matching(bricks: np.ndarray, sites: np.ndarray, obstacles: np.ndarray) -> Matching:
+    """Fig. 16, compiled: `bricks` free bricks (S), `sites` unfilled drop sites (T),
+    `obstacles` every other disc (X); bool grids of one shape, indexed [row, col]."""
+    bricks, sites, obstacles = _grids(bricks, sites, obstacles)
+    match, done, *cells = _matching_kernel(bricks, sites, obstacles)
+    return _result(match, done, *cells, sites)
+
+
+# --- Fig. 16 as whole-grid steps (the reference) ----------------------------------------
+
+
+def _spread(sources: np.ndarray, masks: list[np.ndarray]) -> np.ndarray:
+    """Eq. 2 in distance form (a = 1 - k d): every cell takes the best of its passable
+    neighbours plus the step, over the whole grid at once, until nothing changes."""
+    d = np.where(sources, 0.0, np.inf)
+    while True:
+        new = d.copy()
+        for (dr, dc), step, ok in zip(zip(_DR.tolist(), _DC.tolist()), _STEP.tolist(), masks):
+            np.minimum(new, np.where(ok, _shift(d, dr, dc, np.inf) + step, np.inf), out=new)
+        if np.array_equal(new, d):
+            return d
+        d = new
+
+
+def _succ_grid(da: np.ndarray, masks: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """succ(n) of Eq. 3 for every cell at once, as (row, col) index grids, and per move
+    whether that neighbour ties for nearest (a (8, N, M) mask)."""
+    n, m = da.shape
+    cand = np.stack([np.where(ok, _shift(da, dr, dc, np.inf), np.inf)
+                     for dr, dc, ok in zip(_DR.tolist(), _DC.tolist(), masks)])
+    tied = cand <= cand.min(axis=0) + _TIE
+    first = np.argmax(tied, axis=0)  # first move within the tie
+    rows, cols = np.indices((n, m))
+    return np.clip(rows + _DR[first], 0, n - 1), np.clip(cols + _DC[first], 0, m - 1), tied
+
+
+def _distribute_max(c: np.ndarray, region: np.ndarray, masks: list[np.ndarray]) -> np.ndarray:
+    """Step 3: each cell of the region takes the best a + b of its neighbours, repeatedly,
+    so every cell ends with the best of its connected region."""
+    c = np.where(region, c, np.inf)
+    while True:
+        new = c.copy()
+        for (dr, dc), ok in zip(zip(_DR.tolist(), _DC.tolist()), masks):
+            np.minimum(new, np.where(ok & region, _shift(c, dr, dc, np.inf), np.inf), out=new)
+        if np.array_equal(new, c):
+            return c
+        c = new
+
+
+def calculate_matching_grid(bricks: np.ndarray, sites: np.ndarray, obstacles: np.ndarray) -> Matching:
+    """Fig. 16 step by step as whole-grid operations (slow; the tests' reference)."""
+    bricks, sites, obstacles = _grids(bricks, sites, obstacles)
+    masks = _move_masks(~obstacles)
+    da = _spread(bricks, masks)                                          # step 1
+    succ_r, succ_c, tied = _succ_grid(da, masks)
+    region = np.isfinite(da)                                             # a > 0
+    todo, match = sites.copy(), np.zeros(sites.shape, bool)
+    pairs: list[tuple[int, int, int, int]] = []
+    while (todo & region).any():
+        c = da + _spread(todo, masks)                                    # steps 2-3
+        best = _distribute_max(c, region, masks)
+        chosen = todo & region & (c <= best + _TIE)                      # T[n] and hasMaxValue[n]
+        on_path = np.zeros_like(match)                                   # step 4: every tied way out
+        for (dr, dc), way in zip(zip(_DR.tolist(), _DC.tolist()), tied):
+            on_path |= _shift(chosen & way, -dr, -dc, False)
+        while True:
+            grow = on_path.copy()
+            walking = on_path & (da > 0)
+            grow[succ_r[walking], succ_c[walking]] = True
+            if np.array_equal(grow, on_path):
+                break
+            on_path = grow
+        match |= on_path                                                 # step 5
+        todo &= ~chosen
+        for r, c_ in zip(*np.nonzero(chosen)):  # the pairs, for the report only
+            pairs.append((r, c_, *_trace_end(int(succ_r[r, c_]), int(succ_c[r, c_]), da, succ_r, succ_c)))
+    rows = np.array(pairs, np.int64).reshape(-1, 4).T
+    return _result(match, len(pairs), *rows, sites)
+
+
+def _trace_end(r: int, c: int, da: np.ndarray, succ_r: np.ndarray, succ_c: np.ndarray) -> tuple[int, int]:
+    while da[r, c] > 0:
+        r, c = int(succ_r[r, c]), int(succ_c[r, c])
+    return r, c
+
+
+# --- drop-site selection (§6.2) ---------------------------------------------------------
+
+
+def select_goals(matching: Matching, bricks: np.ndarray, sites: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(site goals, brick goals) for the configuration and brick NMs.
+
+    The Matching grid inhibits the configuration NM (a site with match = 1 would block
+    another pair's path) and excites the brick NM (only matched bricks are goals).
+    """
+    return sites & ~matching.match, bricks & matching.match
