@@ -189,6 +189,19 @@ def _grabbable(grid, reach):
             and any(n in reach for n in ((c + 1, r), (c - 1, r), (c, r + 1), (c, r - 1)))]
 
 
+def _obtainable(grid, reach):
+    """Free bricks that can be grabbed now or once the bricks in front of them are gone
+    (a pile is taken from its face): those joined to a grabbable one through free bricks."""
+    found, todo = set(_grabbable(grid, reach)), deque(_grabbable(grid, reach))
+    while todo:
+        c, r = todo.popleft()
+        for n in ((c + 1, r), (c - 1, r), (c, r + 1), (c, r - 1)):
+            if n not in found and 0 <= n[1] < len(grid) and 0 <= n[0] < len(grid[0]) and grid[n[1]][n[0]] == "b":
+                found.add(n)
+                todo.append(n)
+    return found
+
+
 def _safe_fill_order(s):
     """Fill sites one by one, each time one that keeps every other empty site reachable and
     enough bricks grabbable; return the order, or None if stuck. Greedy, so a sufficient test."""
@@ -204,7 +217,7 @@ def _safe_fill_order(s):
             grid[brick[1]][brick[0]], grid[site[1]][site[0]] = ".", "B"
             after = _component(grid, start)
             rest = [x for x in sites if x != site]
-            if all(x in after for x in rest) and len(_grabbable(grid, after)) >= len(rest):
+            if all(x in after for x in rest) and len(_obtainable(grid, after)) >= len(rest):
                 order.append(site)
                 break
             grid[brick[1]][brick[0]], grid[site[1]][site[0]] = "b", "+"
