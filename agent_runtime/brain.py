@@ -1,8 +1,10 @@
 """One agent's decision step (paper §4): sense, map, plan, select, act. No bus here.
 
 Per frame: shift the ESMs by the odometry and write what the sensors report; update the
-motivations; build the configuration and brick navigation maps from the ESMs (§4.2.3);
-read the six internal state nodes off them (§4.3, §5); then select by fixed priority
+motivations; build the configuration and brick navigation maps from the ESMs (§4.2.3),
+with goal sequencing (§6, ConAg-TS, unless `AgentConfig.goal_sequencing` is off) choosing
+which sites and bricks excite them; read the six internal state nodes off them (§4.3, §5);
+then select by fixed priority
 (§4.4): eat/drink > avoid > approach food/water > the construction network of Fig. 8.
 The result is a motor command and the Decision the teacher watches.
 """
@@ -66,6 +68,7 @@ class Brain:
         self._attach_tick = welcome.tick
         self.plans: Plans | None = None
         self._matching: tuple[bytes, Matching] | None = None  # (inputs, result) of the last matching
+        self._taken_from: np.ndarray | None = None  # (dx, dy) cells to where the held brick was taken
 
     # sensing and planning --------------------------------------------------------------
     def perceive(self, frame: SensorFrame) -> np.ndarray:
@@ -74,9 +77,36 @@ class Brain:
         ranges = np.where(raw != NO_READING, raw / self.cell, NO_READING)  # in cells from here on
         if frame.tick > self._attach_tick:  # the attach pose already includes the last move
             self.maps.move(frame.odom_dx, frame.odom_dy, self.cell)
+        self._track_source(frame)
         self.maps.sense(ranges, self.sensor_range)
         self.motivations.update(self.cfg, frame.ate, frame.drank)
         return ranges
+
+    def _track_source(self, frame: SensorFrame) -> None:
+        """Remember where the held brick came from, by odometry, while it is held."""
+        if not frame.holding:
+            self._taken_from = None
+        elif self._taken_from is None:
+            near = self.plans.nearest_brick if self.plans is not None else None
+            self._taken_from = np.array(near[:2] if near is not None else (0.0, 0.0))
+        else:
+            self._taken_from -= (frame.odom_dx / self.cell, frame.odom_dy / self.cell)
+
+    def _source_cell(self) -> np.ndarray:
+        """The cell the held brick was taken from, as a mask (empty when not holding).
+
+        While an agent carries a brick it may know no free brick at all (the last one in
+        view is in its hand, or another agent took it). The Matching grid then has no
+        source, protects no path, and the nearest site would be filled even if it walls
+        off another (Fig. 18 with several agents). So where the brick came from stands for
+        the supply: more bricks are likely there, and future bricks will come that way.
+        """
+        mask = np.zeros((self.cfg.map_size,) * 2, bool)
+        if self._taken_from is not None:
+            r, c = self.maps.cell_of(*self._taken_from)
+            if self.maps.contains(r, c):
+                mask[r, c] = True
+        return mask
 
     def nav_masks(self, sequenced: bool = True) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
         """(goals, obstacles) of the configuration NM and of the brick NM (paper §4.2.3, Fig. 5).
@@ -92,17 +122,22 @@ class Brain:
         config_goals = config & ~brick          # sites still missing a brick
         brick_goals = brick & ~config           # bricks not part of the structure
         if sequenced and self.cfg.goal_sequencing:
-            matching = self.matching(brick_goals, config_goals, food | water | (brick & config))
+            obstacles = food | water | (brick & config)
+            closed = config_goals & (self.maps.clear_age > self.cfg.site_memory)
+            matching = self.matching(brick_goals | (self._source_cell() & ~obstacles), config_goals, obstacles,
+                                     closed)
             config_goals, brick_goals = select_goals(matching, brick_goals, config_goals)
         return ((config_goals, self._free_centre(food | water | brick)),
                 (brick_goals, self._free_centre(food | water | (brick & config))))
 
-    def matching(self, bricks: np.ndarray, sites: np.ndarray, obstacles: np.ndarray) -> Matching:
+    def matching(self, bricks: np.ndarray, sites: np.ndarray, obstacles: np.ndarray,
+                 closed: np.ndarray | None = None) -> Matching:
         """calculateMatching on the current maps, recomputed only when its inputs change
-        (a brick moved, a site filled, the maps shifted by a cell)."""
-        key = np.packbits(np.stack([bricks, sites, obstacles])).tobytes()
+        (a brick moved, a site filled or went out of sight, the maps shifted by a cell)."""
+        closed = np.zeros_like(sites) if closed is None else closed
+        key = np.packbits(np.stack([bricks, sites, obstacles, closed])).tobytes()
         if self._matching is None or self._matching[0] != key:
-            self._matching = (key, calculate_matching(bricks, sites, obstacles))
+            self._matching = (key, calculate_matching(bricks, sites, obstacles, closed))
         return self._matching[1]
 
     def plan(self) -> Plans:

@@ -28,6 +28,8 @@ class AgentConfig:
     explore_turn: float = 0.6       # largest random turn per tick while exploring
     goal_sequencing: bool = True    # ConAg-TS (§6): calculateMatching and drop-site selection;
                                     # False gives the plain nearest-first agent of §4
+    site_memory: float = 300.0      # an open site not seen for this many ticks may have been
+                                    # filled by another agent: no planned path may cross it
 
     def __post_init__(self) -> None:
         if not (isinstance(self.map_size, int) and self.map_size >= 5 and self.map_size % 2 == 1):

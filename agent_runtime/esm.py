@@ -42,6 +42,7 @@ LAYERS = 5
 _CHANNEL_LAYER = np.array([{"food": FOOD, "water": WATER, "brick": BRICK, "agent": AGENT}[c] for c in CHANNELS])
 _LAYER_BASE = _CHANNEL_LAYER[:, None].astype(np.float64)  # (channels, 1), broadcast over sectors
 _DISC_CHANNELS = 3             # the first three channels are discs, cleared by their sectors
+_BRICK_CH = CHANNELS.index("brick")
 CLEAR_MARGIN = 0.75            # clear only cells nearer than reading - this (a disc's cell centre
                                # can be up to 0.71 cell nearer than the disc, plus a little noise)
 RANGE_MARGIN = 0.5             # with no reading, clear only cells well inside the sensor range
@@ -60,6 +61,10 @@ class EgocentricMaps:
         # A flat view, valid for the map's lifetime because `maps` is only ever changed in place.
         self._all = self.maps.reshape(-1)
         self.frac = np.zeros(2)
+        # Sense calls since each cell was last seen empty of bricks (inf: not since it came
+        # onto the map). Other agents fill sites out of sight, so an open site is only
+        # known to be open as of when it was seen (goal sequencing uses this).
+        self.clear_age = np.full((size, size), np.inf, np.float32)
         self._windows: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._sector_dirs: dict[int, np.ndarray] = {}
         self._geometry_key: tuple | None = None
@@ -94,6 +99,7 @@ class EgocentricMaps:
         are ignored (the configuration map only knows the blueprint near where it starts).
         """
         self.maps.fill(0.0)
+        self.clear_age.fill(np.inf)
         gx, gy = x / cell_size, y / cell_size
         ax, ay = math.floor(gx), math.floor(gy)
         self.frac[:] = (gx - ax - 0.5, gy - ay - 0.5)
@@ -118,6 +124,7 @@ class EgocentricMaps:
         n = self.size
         if abs(kx) >= n or abs(ky) >= n:
             self.maps.fill(0.0)
+            self.clear_age.fill(np.inf)
             return
         # Content at (row, col) goes to (row + ky, col - kx): north motion pushes contents
         # south (rows grow southwards), east motion pushes them west.
@@ -126,6 +133,7 @@ class EgocentricMaps:
         # numpy copes with the overlap of source and destination (it buffers), and
         # working in place keeps `maps` (and views of it) the same object.
         self.maps[:, dst_r, dst_c] = self.maps[:, src_r, src_c]
+        self.clear_age[dst_r, dst_c] = self.clear_age[src_r, src_c]
         # What came in from beyond the map is unknown: zeros.
         if ky > 0:
             self.maps[:, :ky, :] = 0.0
@@ -135,6 +143,9 @@ class EgocentricMaps:
             self.maps[:, :, n - kx:] = 0.0
         elif kx < 0:
             self.maps[:, :, :-kx] = 0.0
+        stale = np.ones((n, n), bool)
+        stale[dst_r, dst_c] = False
+        self.clear_age[stale] = np.inf
 
     # ------------------------------------------------------------------ sensing
 
@@ -147,7 +158,8 @@ class EgocentricMaps:
         cell. Then each reading is written at the cell holding the point at its distance
         along the sector's centre angle, measured from the agent's true position (the cell
         centre plus `frac`). Cells beyond a reading keep what they had. The AGENT layer is
-        rebuilt from this frame alone; CONFIG is never touched.
+        rebuilt from this frame alone; CONFIG is never touched. `clear_age` counts the
+        calls since each cell was last cleared of bricks.
         """
         r = np.asarray(ranges, np.float64).reshape(len(CHANNELS), -1) / cell_size
         sectors = r.shape[1]
@@ -157,7 +169,10 @@ class EgocentricMaps:
         limit = np.where(disc >= 0.0, disc - CLEAR_MARGIN, reach - RANGE_MARGIN)
         # A cell is known empty when it is nearer than what every sector it overlaps saw.
         cell_limit = np.minimum.reduceat(limit[:, sector], starts, axis=1)
-        self._all[cells[dist < cell_limit]] = 0.0
+        clear = dist < cell_limit
+        self._all[cells[clear]] = 0.0
+        self.clear_age += 1.0
+        self.clear_age.reshape(-1)[cells[_BRICK_CH][clear[_BRICK_CH]] - BRICK * self.size ** 2] = 0.0
         # Each reading may be explained by any cell its wedge overlaps: the (cell, sector) pairs.
         explained = self._associate(r, cells[:, k], dist[k], sector, vx[k], vy[k])
         self.maps[AGENT].fill(0.0)

@@ -31,6 +31,10 @@ Choices where Fig. 16 is silent (both implementations make them alike):
   listing's `a[m] + b[m]` reads. Sites that tie for the maximum are matched in the same
   round, as step 4 matches every T[n] with hasMaxValue. Because S is fixed, the final
   grid does not depend on the order of rounds; only `Matching.pairs`' order does.
+- Closed sites (an extension for several agents, see `calculate_matching`): a site the
+  agent has not seen open lately may have been filled by another agent, so no path may
+  rely on crossing it; it is still matched (its path starts beside it), so a site behind
+  it stays protected either way.
 - succ(n) is Eq. 3 literally: the passable neighbour of largest a (smallest distance to
   a brick), ties broken by the spreading module's move order (N, E, S, W, NE, SE, SW, NW)
   and diagonals only between two free cells. Every succ is strictly nearer a brick, so a
@@ -65,15 +69,19 @@ class Matching:
         return frozenset(site for site, _ in self.pairs)
 
 
-def _grids(bricks, sites, obstacles) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    grids = [np.ascontiguousarray(g, dtype=np.bool_) for g in (bricks, sites, obstacles)]
-    if grids[0].ndim != 2 or not grids[0].shape == grids[1].shape == grids[2].shape:
-        raise ValueError(f"bricks, sites and obstacles must be equal 2-D shapes, got "
+def _grids(bricks, sites, obstacles, closed=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(S, T, walls): free bricks, open sites, and every cell no path may cross."""
+    if closed is None:
+        closed = np.zeros(np.shape(obstacles), bool)
+    grids = [np.ascontiguousarray(g, dtype=np.bool_) for g in (bricks, sites, obstacles, closed)]
+    if grids[0].ndim != 2 or len({g.shape for g in grids}) != 1:
+        raise ValueError(f"bricks, sites, obstacles and closed must be equal 2-D shapes, got "
                          f"{[g.shape for g in grids]}")
-    bricks, sites, obstacles = grids
+    bricks, sites, obstacles, closed = grids
     # A disc that is an obstacle is neither a free brick nor an open site; a site that
     # already holds a brick is filled (the caller passes unfilled sites, this makes sure).
-    return bricks & ~obstacles, sites & ~obstacles & ~bricks, obstacles
+    sites = sites & ~obstacles & ~bricks
+    return bricks & ~obstacles, sites, obstacles | (closed & sites)
 
 
 def _result(match, rounds, site_r, site_c, brick_r, brick_c, sites) -> Matching:
@@ -116,9 +124,30 @@ def _trace(da, obstacles, match, r, c):
 
 
 @njit(cache=True)
+def _site_value(da, obstacles, r, c):
+    """A site's distance to its nearest brick through its best neighbour: da itself for an
+    open site, and what it would be for a closed one (a wall to every other path)."""
+    n, m = da.shape
+    best = np.inf
+    for j in range(8):
+        rr, cc = r + _DR[j], c + _DC[j]
+        if rr < 0 or rr >= n or cc < 0 or cc >= m or obstacles[rr, cc]:
+            continue
+        if j >= 4 and (obstacles[r + _DR[j], c] or obstacles[r, c + _DC[j]]):
+            continue
+        best = min(best, da[rr, cc] + _STEP[j])
+    return 0.0 if da[r, c] == 0.0 else best
+
+
+@njit(cache=True)
 def _matching_kernel(bricks, sites, obstacles):
     n, m = bricks.shape
     da = _field_kernel(bricks, obstacles)                       # step 1 (distances: a = 1 - k da)
+    value = np.full((n, m), np.inf)
+    for r in range(n):
+        for c in range(m):
+            if sites[r, c]:
+                value[r, c] = _site_value(da, obstacles, r, c)
     todo = sites.copy()
     match = np.zeros((n, m), np.bool_)
     total = int(todo.sum())
@@ -133,13 +162,15 @@ def _matching_kernel(bricks, sites, obstacles):
         for r in range(n):
             for c in range(m):
                 s = da[r, c] + db[r, c]
+                if todo[r, c]:
+                    s = value[r, c]                             # (= da + 0 on an open site)
                 if s < best:
                     best = s
         if not np.isfinite(best):
             break                                               # no remaining site reaches a brick
         for r in range(n):                                      # steps 4-5, each maximal site
             for c in range(m):
-                if not todo[r, c] or da[r, c] > best + _TIE:
+                if not todo[r, c] or value[r, c] > best + _TIE:
                     continue
                 todo[r, c] = False
                 tied, first = _nearest_neighbours(da, obstacles, r, c)
@@ -153,11 +184,16 @@ def _matching_kernel(bricks, sites, obstacles):
     return match, done, site_r, site_c, brick_r, brick_c
 
 
-def calculate_matching(bricks: np.ndarray, sites: np.ndarray, obstacles: np.ndarray) -> Matching:
+def calculate_matching(bricks: np.ndarray, sites: np.ndarray, obstacles: np.ndarray,
+                       closed: np.ndarray | None = None) -> Matching:
     """Fig. 16, compiled: `bricks` free bricks (S), `sites` unfilled drop sites (T),
-    `obstacles` every other disc (X); bool grids of one shape, indexed [row, col]."""
-    bricks, sites, obstacles = _grids(bricks, sites, obstacles)
-    match, done, *cells = _matching_kernel(bricks, sites, obstacles)
+    `obstacles` every other disc (X); bool grids of one shape, indexed [row, col].
+
+    `closed` marks sites that are matched but that no other path may cross (the agent has
+    not seen them open lately: another agent may have filled them).
+    """
+    bricks, sites, walls = _grids(bricks, sites, obstacles, closed)
+    match, done, *cells = _matching_kernel(bricks, sites, walls)
     return _result(match, done, *cells, sites)
 
 
@@ -177,44 +213,47 @@ def _spread(sources: np.ndarray, masks: list[np.ndarray]) -> np.ndarray:
         d = new
 
 
-def _succ_grid(da: np.ndarray, masks: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _exits(walls: np.ndarray) -> list[np.ndarray]:
+    """Per move, where a cell may step to that neighbour: the neighbour is free and, for a
+    diagonal, so are both flanking cells. The cell itself may be a wall (a closed site's
+    path starts beside it)."""
+    free = ~walls
+    exits = []
+    for dr, dc in zip(_DR.tolist(), _DC.tolist()):
+        ok = _shift(free, dr, dc, False)
+        if dr and dc:
+            ok &= _shift(free, dr, 0, False) & _shift(free, 0, dc, False)
+        exits.append(ok)
+    return exits
+
+
+def _succ_grid(da: np.ndarray, exits: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """succ(n) of Eq. 3 for every cell at once, as (row, col) index grids, and per move
     whether that neighbour ties for nearest (a (8, N, M) mask)."""
     n, m = da.shape
     cand = np.stack([np.where(ok, _shift(da, dr, dc, np.inf), np.inf)
-                     for dr, dc, ok in zip(_DR.tolist(), _DC.tolist(), masks)])
+                     for dr, dc, ok in zip(_DR.tolist(), _DC.tolist(), exits)])
     tied = cand <= cand.min(axis=0) + _TIE
     first = np.argmax(tied, axis=0)  # first move within the tie
     rows, cols = np.indices((n, m))
     return np.clip(rows + _DR[first], 0, n - 1), np.clip(cols + _DC[first], 0, m - 1), tied
 
 
-def _distribute_max(c: np.ndarray, region: np.ndarray, masks: list[np.ndarray]) -> np.ndarray:
-    """Step 3: each cell of the region takes the best a + b of its neighbours, repeatedly,
-    so every cell ends with the best of its connected region."""
-    c = np.where(region, c, np.inf)
-    while True:
-        new = c.copy()
-        for (dr, dc), ok in zip(zip(_DR.tolist(), _DC.tolist()), masks):
-            np.minimum(new, np.where(ok & region, _shift(c, dr, dc, np.inf), np.inf), out=new)
-        if np.array_equal(new, c):
-            return c
-        c = new
-
-
-def calculate_matching_grid(bricks: np.ndarray, sites: np.ndarray, obstacles: np.ndarray) -> Matching:
+def calculate_matching_grid(bricks: np.ndarray, sites: np.ndarray, obstacles: np.ndarray,
+                            closed: np.ndarray | None = None) -> Matching:
     """Fig. 16 step by step as whole-grid operations (slow; the tests' reference)."""
-    bricks, sites, obstacles = _grids(bricks, sites, obstacles)
-    masks = _move_masks(~obstacles)
+    bricks, sites, walls = _grids(bricks, sites, obstacles, closed)
+    masks, exits = _move_masks(~walls), _exits(walls)
     da = _spread(bricks, masks)                                          # step 1
-    succ_r, succ_c, tied = _succ_grid(da, masks)
-    region = np.isfinite(da)                                             # a > 0
+    succ_r, succ_c, tied = _succ_grid(da, exits)
+    value = np.where(da == 0, 0.0, np.min([np.where(ok, _shift(da, dr, dc, np.inf) + step, np.inf)
+                                            for dr, dc, step, ok in zip(_DR.tolist(), _DC.tolist(),
+                                                                        _STEP.tolist(), exits)], axis=0))
     todo, match = sites.copy(), np.zeros(sites.shape, bool)
     pairs: list[tuple[int, int, int, int]] = []
-    while (todo & region).any():
-        c = da + _spread(todo, masks)                                    # steps 2-3
-        best = _distribute_max(c, region, masks)
-        chosen = todo & region & (c <= best + _TIE)                      # T[n] and hasMaxValue[n]
+    while np.isfinite(value[todo]).any():
+        c = np.where(todo, value, da + _spread(todo & ~walls, masks))   # steps 2-3
+        chosen = todo & (c <= c.min() + _TIE)                            # T[n] and hasMaxValue[n]
         on_path = np.zeros_like(match)                                   # step 4: every tied way out
         for (dr, dc), way in zip(zip(_DR.tolist(), _DC.tolist()), tied):
             on_path |= _shift(chosen & way, -dr, -dc, False)

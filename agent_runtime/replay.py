@@ -8,8 +8,9 @@ true layout, one brick at a time, and reports the order and whether every site c
 filled. The tests use it for the orders the paper describes (Fig. 18-20, nested
 squares); the Fig. 13 experiment reports it beside the live runs.
 
-`lower_bound` is the optimal assignment of bricks to sites by shortest-path distance
-(scipy's linear_sum_assignment) plus what the trips between them must cost at least.
+`assignment_bound` is the optimal assignment of bricks to sites by shortest-path distance
+(scipy's linear_sum_assignment), the carrying alone; `lower_bound` adds the walks between
+trips, by an assignment over the chain of trips each agent must make.
 
 Grids are bool [row, col] arrays in cells; distances are in cells.
 """
@@ -90,33 +91,65 @@ def replay(bricks: np.ndarray, sites: np.ndarray, obstacles: np.ndarray, start: 
     return Replay(tuple(order), walked, not sites.any())
 
 
+def _site_fields(cells: np.ndarray, obstacles: np.ndarray) -> list[np.ndarray]:
+    return [distance_field(_one_cell(obstacles.shape, tuple(c)), obstacles) for c in cells]
+
+
+def assignment_bound(bricks: np.ndarray, sites: np.ndarray, obstacles: np.ndarray) -> float:
+    """The optimal assignment of distinct bricks to sites by shortest-path distance on the
+    initial map (cells): the least total carrying distance, walks between trips aside.
+    0 if some site cannot be reached from any brick or there are too few bricks."""
+    from scipy.optimize import linear_sum_assignment
+
+    bricks, sites, obstacles = (np.array(g, dtype=bool) for g in (bricks, sites, obstacles))
+    site_cells = np.argwhere(sites)
+    if not len(site_cells) or bricks.sum() < len(site_cells):
+        return 0.0
+    cost = np.array([f[bricks] for f in _site_fields(site_cells, obstacles)])
+    if not np.isfinite(cost.min(axis=1)).all():
+        return 0.0
+    rows, cols = linear_sum_assignment(np.where(np.isfinite(cost), cost, 1e9))
+    return float(cost[rows, cols].sum())
+
+
 def lower_bound(bricks: np.ndarray, sites: np.ndarray, obstacles: np.ndarray,
-                starts: list[tuple[int, int]], reach: float = 1.0) -> float:
+                starts: list[tuple[int, int]], reach: float = 1.0, centering: float = 0.0) -> float:
     """Least total distance (cells) that agents starting at `starts` can build in.
 
-    Every site gets a distinct brick carried to it: at least the optimal assignment of
-    bricks to sites by shortest-path distance on the initial map (later drops only add
-    obstacles). Every agent first walks to some brick, and after every drop but the last
-    of each agent someone walks from that site to a brick: at least the site's distance
-    to its nearest brick, and the agents' last drops save at most the largest of those.
-    Each leg can be `reach` shorter (bricks are taken from beside them) and straighter
-    than a grid path (OCTILE_SLACK). 0 if no brick can reach a site. Needs scipy.
+    Each agent's walk is a chain of trips: from where it stands (its start, or the site it
+    filled last) to a brick and with the brick to the next site. A trip from p to site s
+    costs at least t(p, s) = min over bricks b of d(p, b) + d(b, s), shortest paths on
+    the initial map (later drops only add obstacles). Every site is entered by one trip
+    and left by at most one, every start begins at most one chain: an assignment of
+    predecessors to sites (scipy's linear_sum_assignment), which relaxes the chains (it
+    may close loops, and bricks may repeat) and so bounds them from below. Where distinct
+    bricks matter more (a supply used up from near to far), `assignment_bound`'s carrying
+    distance is the larger bound; the larger of the two is returned.
+
+    Per trip the agent may stop `reach` short of the brick and start carrying from there,
+    and end `centering` off the site's centre; legs may be straighter than grid paths
+    (OCTILE_SLACK). 0 if no chain can fill every site.
     """
     from scipy.optimize import linear_sum_assignment
 
     bricks, sites, obstacles = (np.array(g, dtype=bool) for g in (bricks, sites, obstacles))
-    brick_cells, site_cells = np.argwhere(bricks), np.argwhere(sites)
-    if len(brick_cells) < len(site_cells) or not len(site_cells):
+    site_cells = np.argwhere(sites)
+    k, m = len(site_cells), len(starts)
+    if not k or not m or bricks.sum() < k:
         return 0.0
-    # Paths may run over free bricks and open sites; other discs are in the way.
-    cost = np.array([distance_field(_one_cell(sites.shape, tuple(s)), obstacles)[bricks] for s in site_cells])
-    if not np.isfinite(cost.min(axis=1)).all():
+    to_sites = np.array([f[bricks] for f in _site_fields(site_cells, obstacles)])           # (k, B)
+    from_starts = np.array([f[bricks] for f in _site_fields(np.array(starts), obstacles)])   # (m, B)
+    legs = np.vstack([from_starts, to_sites])                                                # (m + k, B)
+    trip = (legs[:, None, :] + to_sites[None, :, :]).min(axis=2)                             # (m + k, k)
+    trip = np.maximum(trip / OCTILE_SLACK - 2 * reach - centering, 0.0)
+    trip[m + np.arange(k), np.arange(k)] = np.inf                                            # no trip to itself
+    ends = np.zeros((m + k, m))                                                              # a chain may end anywhere
+    cost = np.hstack([trip, ends])
+    big = 1e9
+    rows, cols = linear_sum_assignment(np.where(np.isfinite(cost), cost, big))
+    total = cost[rows, cols]
+    if not np.isfinite(total).all():
         return 0.0
-    finite = np.where(np.isfinite(cost), cost, 1e9)
-    rows, cols = linear_sum_assignment(finite)
-    leg = lambda d: np.maximum(np.asarray(d, dtype=float) - reach, 0.0)  # noqa: E731
-    carry = leg(finite[rows, cols]).sum()
-    returns = np.sort(leg(cost.min(axis=1)))[::-1]
-    to_bricks = distance_field(bricks, obstacles)
-    approach = sum(float(leg(to_bricks[s])) for s in starts if np.isfinite(to_bricks[s]))
-    return float(carry + returns[len(starts):].sum() + approach) / OCTILE_SLACK
+    # The chains may reuse a brick; distinct bricks bound the carrying alone (same slack).
+    carry = assignment_bound(bricks, sites, obstacles) / OCTILE_SLACK - k * (reach + centering)
+    return float(max(total.sum(), carry))

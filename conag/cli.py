@@ -233,7 +233,8 @@ def cmd_agent(args) -> int:
     try:
         session = open_session(_bus(args))
         try:
-            run_agent(session, args.world_id, args.id, AgentConfig(map_size=args.map_size), args.seed,
+            cfg = AgentConfig(map_size=args.map_size, goal_sequencing=not args.nearest_first)
+            run_agent(session, args.world_id, args.id, cfg, args.seed,
                       attach_timeout=args.attach_timeout)
         except AttachError as exc:
             print(f"error: {exc}", file=sys.stderr)
@@ -260,7 +261,8 @@ def cmd_run(args) -> int:
                       endpoint=(args.listen or [DEFAULT_ENDPOINT])[0], world_id=args.world_id,
                       agents=args.agents, seed=args.seed, max_ticks=args.max_ticks, summary=args.summary,
                       headless=args.headless, quiet=args.quiet,
-                      extra_agent_args=("--map-size", str(args.map_size)))
+                      extra_agent_args=("--map-size", str(args.map_size),
+                                        *(("--nearest-first",) if args.nearest_first else ())))
     with _stop_on_signals() as stop:
         summary = run(opts, stop)
     state = "complete" if summary["completed"] else "NOT complete"
@@ -327,6 +329,8 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--attach-timeout", type=float, default=30.0, help="seconds to wait for the world")
     a.add_argument("--map-size", type=int, default=AGENT_MAP_SIZE, metavar="N",
                    help=f"cells per side of the agent's maps, odd (default {AGENT_MAP_SIZE})")
+    a.add_argument("--nearest-first", action="store_true",
+                   help="no goal sequencing: always the nearest brick and site (the plain agent of paper §4)")
     _bus_args(a)
     a.set_defaults(func=cmd_agent)
 
@@ -343,6 +347,8 @@ def build_parser() -> argparse.ArgumentParser:
     u.add_argument("--world-id", default="w0")
     u.add_argument("--map-size", type=int, default=AGENT_MAP_SIZE, metavar="N",
                    help=f"cells per side of every agent's maps, odd (default {AGENT_MAP_SIZE})")
+    u.add_argument("--nearest-first", action="store_true",
+                   help="agents without goal sequencing (paper §4), for comparison with ConAg-TS (§6)")
     u.set_defaults(func=cmd_run)
 
     for name, text in (("kill", "SIGKILL one agent process of a running `conag run`"),

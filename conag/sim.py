@@ -21,6 +21,7 @@ class SimRun:
     world: World
     brains: dict[str, Brain] = field(default_factory=dict)
     behaviours: dict[str, str] = field(default_factory=dict)
+    filled_at: np.ndarray | None = None  # per site (world order), the tick it was last filled; -1: empty
 
     def step(self) -> None:
         """One lockstep tick: every brain answers its frame, then the world steps."""
@@ -29,6 +30,14 @@ class SimRun:
             self.behaviours[frame.agent_id] = s.behaviour
             self.world.set_command(frame.agent_id, s.speed, s.turn, s.action)
         self.world.step()
+        self._record_fills()
+
+    def _record_fills(self) -> None:
+        filled = self.world.sites_filled()
+        if self.filled_at is None:
+            self.filled_at = np.full(filled.shape, -1, np.int64)
+        self.filled_at[filled & (self.filled_at < 0)] = self.world.tick
+        self.filled_at[~filled] = -1  # emptied again (a perturbation): not filled any more
 
     def run(self, max_ticks: int, until_complete: bool = True) -> bool:
         """Step until the structure is complete (True) or `max_ticks` pass (False)."""
@@ -44,6 +53,7 @@ def start(scenario: Scenario, agents: int | None = None, seed: int | None = None
     seed = scenario.seed if seed is None else seed
     world = World(scenario, np.random.default_rng(seed))
     run = SimRun(world)
+    run.filled_at = np.where(world.sites_filled(), 0, -1)
     for i in range(scenario.agents if agents is None else agents):
         agent_id = f"a{i + 1}"
         welcome = world.attach(agent_id)

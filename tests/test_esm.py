@@ -588,3 +588,24 @@ def test_sensing_and_moving_cost_tens_of_microseconds():
     # Measured about 40 us; the bound leaves room for a loaded machine but not for a
     # per-cell Python loop (milliseconds).
     assert best < 300e-6, best
+
+
+# ---------------------------------------------------------------- how long ago a cell was seen open
+
+
+def test_clear_age_counts_senses_since_a_cell_was_seen_empty_of_bricks_and_moves_with_the_map():
+    m = EgocentricMaps(SIZE)
+    assert np.isinf(m.clear_age).all()                       # nothing seen yet
+    nothing = np.full((len(CHANNELS), 16), NO_READING)
+    brick_2_east = nothing.copy()
+    brick_2_east[CHANNELS.index("brick"), 0] = 2.0            # sector 0 points east (just north of it)
+    m.sense(nothing, 6.0)
+    assert m.clear_age[C, C + 3] == 0 and m.clear_age[C - 4, C] == 0
+    assert np.isinf(m.clear_age[C, C + 10])                   # beyond the sensor range
+    m.sense(brick_2_east, 6.0)
+    assert m.clear_age[C, C + 1] == 0                         # nearer than the brick: seen open again
+    assert m.clear_age[C, C + 4] == 1                         # behind it: not seen this time
+    m.move(1.0, 0.0)                                          # one cell east: contents shift west
+    assert m.clear_age[C, C + 3] == 1 and np.isinf(m.clear_age[:, -1]).all()
+    m.seed_blueprint(0.5, 0.5, [], [])
+    assert np.isinf(m.clear_age).all()                        # a fresh map has seen nothing

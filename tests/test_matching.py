@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agent_runtime.matching import calculate_matching, calculate_matching_grid, select_goals
-from agent_runtime.replay import OCTILE_SLACK, lower_bound, replay
+from agent_runtime.replay import OCTILE_SLACK, assignment_bound, lower_bound, replay
 from tests.conftest import ROOT
 from world_server.scenario import load_scenario
 
@@ -210,9 +210,21 @@ def test_lower_bound_of_one_trip_in_a_corridor():
     g = grid_of("""
 A.b....+
 """)
-    # walk 2 to the brick, carry it 5: each leg can be one cell shorter (reach), and straight.
+    # walk 2 to the brick, carry it 5; the trip may be straighter and stop `reach` short twice.
     bound = lower_bound(g["b"], g["+"], g["#"], [(0, 0)], reach=1.0)
-    assert bound == pytest.approx((1 + 4) / OCTILE_SLACK)
+    assert bound == pytest.approx(7 / OCTILE_SLACK - 2)
+    assert assignment_bound(g["b"], g["+"], g["#"]) == 5
+
+
+def test_lower_bound_chains_the_trips_of_one_agent():
+    # Two pairs far apart: one agent must walk from the first pair to the second.
+    g = grid_of("""
+A+b..........b+
+""")
+    chain = lower_bound(g["b"], g["+"], g["#"], [(0, 0)], reach=0.0)
+    assert chain == pytest.approx((2 + 1 + 12 + 1) / OCTILE_SLACK)   # start-b-site, site-far b-site
+    two_agents = lower_bound(g["b"], g["+"], g["#"], [(0, 0), (0, 14)], reach=0.0)
+    assert two_agents == pytest.approx((2 + 1 + 1 + 1) / OCTILE_SLACK)
 
 
 @pytest.mark.parametrize("name", ["fig6", "fig17", "fig18", "fig19", "fig20", "nested_squares"])
