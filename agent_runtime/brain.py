@@ -127,8 +127,10 @@ class Brain:
             matching = self.matching(brick_goals | (self._source_cell() & ~obstacles), config_goals, obstacles,
                                      closed)
             config_goals, brick_goals = select_goals(matching, brick_goals, config_goals)
+        # Bricks that are not goals (the structure's, and with sequencing the unmatched free
+        # ones) are in the way: a path must not lead through one to a matched brick beyond.
         return ((config_goals, self._free_centre(food | water | brick)),
-                (brick_goals, self._free_centre(food | water | (brick & config))))
+                (brick_goals, self._free_centre(food | water | (brick & ~brick_goals))))
 
     def matching(self, bricks: np.ndarray, sites: np.ndarray, obstacles: np.ndarray,
                  closed: np.ndarray | None = None) -> Matching:

@@ -58,8 +58,9 @@ def _goals(bricks, sites, obstacles, sequencing: bool) -> tuple[np.ndarray, np.n
 def _walk_to(here, goals, fallback, obstacles) -> tuple[tuple[int, int] | None, float]:
     """The nearest of `goals` reachable from `here` (else of `fallback`, as the agent's
     plan falls back when sequencing leaves nothing reachable) and the path length."""
-    field = distance_field(_one_cell(obstacles.shape, here), obstacles & ~_one_cell(obstacles.shape, here))
+    start = _one_cell(obstacles.shape, here)
     for candidates in (goals, fallback):
+        field = distance_field(start, obstacles & ~start & ~candidates)
         target = _nearest_goal(field, candidates)
         if target is not None:
             return target, float(field[target])
@@ -76,7 +77,8 @@ def replay(bricks: np.ndarray, sites: np.ndarray, obstacles: np.ndarray, start: 
     here, walked, order = tuple(start), 0.0, []
     while sites.any():
         _, brick_goals = _goals(bricks, sites, obstacles, sequencing)
-        brick, d_fetch = _walk_to(here, brick_goals, bricks, obstacles)
+        # Unselected bricks are in the way, as on the agent's brick NM.
+        brick, d_fetch = _walk_to(here, brick_goals, bricks, obstacles | (bricks & ~brick_goals))
         if brick is None:
             break
         bricks[brick] = False

@@ -33,12 +33,15 @@ sys.path.insert(0, str(ROOT))
 from baselines.lattice import BRICK, simulate
 from baselines.perturb import nested_squares, run_perturbed
 from baselines.rules import square_rules
+from agent_runtime.config import AgentConfig
 from conag import sim
+from experiments.report import write_section
 from protocol.messages import Perturbation
 from world_server.scenario import parse_scenario
 
 N = 6
 CONAG_RULES = "no rules: the blueprint + the Fig. 8 network"
+NESTED_MODES = (("nearest-first", False), ("goal sequencing", True))
 
 
 # ---------------------------------------------------------------- reactive system
@@ -169,9 +172,10 @@ def conag_moved(seeding, agents, seed=0, after_placed=3, max_ticks=8000):
             "total": st.sites_total, "move": move, "grabs": sum(st.agent_grabs)}
 
 
-def conag_nested(agents, seed=0, max_ticks=20000):
+def conag_nested(agents, seed=0, max_ticks=20000, sequencing=True):
+    """Build the nested rings, with goal sequencing (ConAg-TS, §6) or nearest-first (§4)."""
     sc = nested_scenario(agents)
-    run = sim.start(sc, seed=seed)
+    run = sim.start(sc, seed=seed, cfg=AgentConfig(goal_sequencing=sequencing))
     done = run.run(max_ticks)
     st = run.world.status()
     # inner ring: sites within 2 cells (Chebyshev) of the centre
@@ -306,10 +310,10 @@ def table(rseeds, square, moved, nested, conag):
                 f"/{len(nested['runs'])} (outer {outer_done}, inner {inner_done}) | "
                 f"{nested['max_steps']} steps budget | 8 rules / 4 states (corner rules) | "
                 f"{nested['n_agents']} |")
-    for agents, runs in conag["nested"].items():
+    for (mode, agents), runs in conag["nested"].items():
         ok = [r for r in runs if r["completed"]]
         filled = "; ".join(f"outer {r['outer']}, inner {r['inner']}" for r in runs)
-        rows.append(f"| nested squares 8+4 | ConAg (nearest-first) | {len(ok)}/{len(runs)} "
+        rows.append(f"| nested squares 8+4 | ConAg ({mode}) | {len(ok)}/{len(runs)} "
                     f"(sites filled: {filled}) | {fmt_steps(r['ticks'] for r in ok)} ticks "
                     f"(budget {runs[0]['budget']}) | {CONAG_RULES} | {agents} |")
     return "\n".join(rows)
@@ -341,16 +345,18 @@ def main(argv=None):
                     for s in cseeds]
             conag["moved"][seeding][a] = runs
             moves += [(seeding, a, r["move"]) for r in runs]
-    for a in agent_counts:
-        runs = [dict(conag_nested(a, seed=s, max_ticks=nested_ticks), budget=nested_ticks) for s in cseeds]
-        conag["nested"][a] = runs
+    for mode, sequencing in NESTED_MODES:
+        for a in agent_counts:
+            runs = [dict(conag_nested(a, seed=s, max_ticks=nested_ticks, sequencing=sequencing), budget=nested_ticks)
+                    for s in cseeds]
+            conag["nested"][(mode, a)] = runs
 
     outdir = Path(args.out)
     outdir.mkdir(parents=True, exist_ok=True)
     paths = pictures(square, moved, nested, outdir)
     tab = table(rseeds, square, moved, nested, conag)
     print(tab)
-    Path(args.doc).write_text(report(tab, paths, rseeds, cseeds, moves, nested, conag, q), encoding="utf-8")
+    write_section(args.doc, "R4", report(tab, paths, rseeds, cseeds, moves, nested, conag, q))
     return tab
 
 
@@ -359,13 +365,13 @@ def report(tab, paths, rseeds, cseeds, moves, nested, conag, quick):
     stray = sum(1 for _, _, m in moves if m and not m["dst_on_site"] and m["site_unfilled_after"])
     moved_runs = [r for d in conag["moved"].values() for runs in d.values() for r in runs]
     moved_ok, moved_n = sum(r["completed"] for r in moved_runs), len(moved_runs)
-    nested_shut = sum(r["outer"].split("/")[0] == r["outer"].split("/")[1] and not r["completed"]
-                      for runs in conag["nested"].values() for r in runs)
-    nested_ok = sum(r["completed"] for runs in conag["nested"].values() for r in runs)
-    nested_n = sum(len(runs) for runs in conag["nested"].values())
-    return f"""# Experiments
-
-## R4 — the reactive lattice system against ConAg (paper §5.2, Fig. 10, 12, 14)
+    def nested_counts(mode):
+        runs = [r for (m, _), rs in conag["nested"].items() if m == mode for r in rs]
+        shut = sum(r["outer"].split("/")[0] == r["outer"].split("/")[1] and not r["completed"] for r in runs)
+        return sum(r["completed"] for r in runs), len(runs), shut
+    nf_ok, nf_n, nf_shut = nested_counts("nearest-first")
+    ts_ok, ts_n, ts_shut = nested_counts("goal sequencing")
+    return f"""## R4 — the reactive lattice system against ConAg (paper §5.2, Fig. 10, 12, 14)
 
 Re-run (from the repository root):
 
@@ -420,13 +426,13 @@ empty cells away from the outer ring).
   of the agent, and an agent that wants to grab turns to the free brick first; before that fix
   ConAg completed 6/12 of these runs.)
 * Nested squares: the reactive system closes the outer ring and then no agent can enter, so the
-  inner ring is never finished. ConAg here runs with **nearest-first** drop-site selection:
-  {nested_ok}/{nested_n} nested runs completed within the tick budget; in {nested_shut}/{nested_n}
-  the outer ring was closed while the inner ring still had only its 4 seed bricks — the same
-  failure as the reactive system (all free bricks stand outside, and once the outer ring is
-  complete no brick can be carried in to the inner sites). The paper's ConAg-TS finishes nested squares by goal sequencing (§6,
-  calculateMatching: fill the inner sites before those that would block them); that is
-  **pending goal sequencing (issue #4)** and is not claimed here.
+  inner ring is never finished. ConAg with **nearest-first** drop-site selection (§4) fails the
+  same way: {nf_ok}/{nf_n} runs completed, and in {nf_shut}/{nf_n} the outer ring was closed while
+  inner sites were still empty (all free bricks stand outside, and once the outer ring is
+  complete no brick can be carried in). ConAg-TS, with **goal sequencing** (§6: calculateMatching
+  inhibits the outer sites that lie on the inner sites' paths), completed {ts_ok}/{ts_n} runs
+  ({ts_shut} closed the outer ring early); the per-scenario fill order is tested in
+  tests/test_goal_sequencing.py and reported in the G3 section.
 * Caveat: ConAg seeds often give the same tick count — the world and brains are deterministic
   except for exploration, which a ring in plain view rarely needs; the spread comes from the
   number of agents. Lattice steps and ConAg ticks are different units.
