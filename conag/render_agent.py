@@ -3,9 +3,11 @@
 `render_agent_maps` runs a scenario in-process (`conag.sim`, lockstep) for some ticks,
 asks one agent's Brain to plan, and draws one figure: on the left the bird's-eye world
 as it is now (the chosen agent ringed, its map's extent dashed), on the right the
-agent's egocentric spatial maps (food, water, brick, configuration) and its
+agent's egocentric spatial maps (food, water, brick, configuration), its
 configuration and brick navigation maps as Eq. 1-2 activations (goals 1, falling with
-path distance, unreachable 0, obstacles -1 drawn black).
+path distance, unreachable 0, obstacles -1 drawn black) and, with goal sequencing, its
+Matching grid (paper §6, Fig. 17-19: the matched paths, the sites that are goals and
+those that wait).
 
 Map panels are egocentric but not rotated: axes are cell offsets from the agent (x
 east, y north), north up, so they line up with the world panel; the agent's centre
@@ -59,14 +61,16 @@ def render_agent_maps(scenario: Scenario, out_path: str | Path, *, agent: str = 
 def _figure(scenario: Scenario, run: sim.SimRun, agent: str, brain: Brain, plans: Plans) -> Figure:
     fig = Figure(figsize=(20, 9))
     FigureCanvasAgg(fig)
-    grid = fig.add_gridspec(2, 4, width_ratios=(1.7, 1, 1, 1), wspace=0.45, hspace=0.3)
+    grid = fig.add_gridspec(2, 5, width_ratios=(1.7, 1, 1, 1, 1), wspace=0.45, hspace=0.3)
     _world_panel(fig.add_subplot(grid[:, 0]), scenario, run, agent, brain.maps.size)
-    cells = [grid[r, c] for r in range(2) for c in range(1, 4)]
+    cells = [grid[r, c] for r in range(2) for c in range(1, 4)] + [grid[0, 4], grid[1, 4]]
     for spec, (layer, name, cmap) in zip(cells, ESM_PANELS):
         _esm_panel(fig, fig.add_subplot(spec), brain.maps.maps[layer], name, cmap)
     config_obs, brick_obs = nm_obstacles(brain)
     _nm_panel(fig, fig.add_subplot(cells[4]), plans.config, config_obs, plans.config_goals, "configuration NM")
     _nm_panel(fig, fig.add_subplot(cells[5]), plans.brick, brick_obs, plans.brick_goals, "brick NM")
+    if plans.matching is not None:
+        _matching_panel(fig.add_subplot(cells[6]), fig.add_subplot(cells[7]), brain, plans)
     status = run.world.status()
     behaviour = run.behaviours.get(agent, "-")
     fig.suptitle(f"{scenario.name}: agent {agent} after {status.tick} ticks "
@@ -113,6 +117,34 @@ def _esm_panel(fig, ax, layer: np.ndarray, title: str, cmap: str) -> None:
                       extent=_extent(layer), interpolation="nearest")
     fig.colorbar(image, ax=ax, fraction=0.046, pad=0.03)
     _map_axes(ax, title)
+
+
+# Matching grid panel: what each cell is, in drawing order (later wins).
+_MATCH_KINDS = (("path (match = 1)", "#c8c8c8"), ("site, open goal", "#2a9d3a"),
+                ("site, waits (match = 1)", "#e07b00"), ("free brick", "#f2b8b8"),
+                ("matched brick", "#c0182c"), ("structure / food / water", "black"))
+
+
+def _matching_panel(ax, key, brain: Brain, plans: Plans) -> None:
+    """The Matching grid (§6, Fig. 17-19): paths, which sites are goals and which wait."""
+    from matplotlib.colors import ListedColormap
+    from matplotlib.patches import Patch
+
+    m = brain.maps.maps > 0.5
+    sites = m[CONFIG] & ~m[BRICK]
+    free = m[BRICK] & ~m[CONFIG]
+    match = plans.matching.match
+    kind = np.zeros(match.shape, int)
+    for k, mask in enumerate((match, sites & ~match, sites & match, free & ~match, free & match,
+                              m[FOOD] | m[WATER] | (m[BRICK] & m[CONFIG])), start=1):
+        kind[mask] = k
+    colours = ["white"] + [c for _, c in _MATCH_KINDS]
+    ax.imshow(kind, cmap=ListedColormap(colours), vmin=-0.5, vmax=len(colours) - 0.5, origin="upper",
+              extent=_extent(kind), interpolation="nearest")
+    key.axis("off")
+    key.legend(handles=[Patch(color=c, label=n) for n, c in _MATCH_KINDS], loc="upper left",
+               fontsize=8, title="Matching grid", frameon=False)
+    _map_axes(ax, "Matching grid (goal sequencing)")
 
 
 def _nm_panel(fig, ax, dist: np.ndarray, obstacles: np.ndarray, goals: np.ndarray, title: str) -> None:

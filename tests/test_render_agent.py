@@ -81,3 +81,19 @@ def test_agent_and_ticks_without_agent_maps_are_refused(tmp_path, capsys):
 def test_negative_ticks_are_refused(tmp_path, fig6):
     with pytest.raises(ValueError, match="ticks"):
         render_agent_maps(fig6, tmp_path / "x.png", ticks=-1)
+
+
+def test_with_goal_sequencing_the_matching_grid_is_drawn(fig6):
+    from conag.render_agent import _figure
+
+    run = sim.start(load_scenario(SCENARIOS / "fig18.toml"))
+    brain = run.brains["a1"]
+    while brain.plans is None or len(brain.plans.matching.pairs) < 2:   # until it has seen a brick
+        run.step()
+        assert run.world.tick < 3000
+    fig = _figure(run.world.scenario, run, "a1", brain, brain.plan())
+    titles = [ax.get_title() for ax in fig.axes]
+    assert "Matching grid (goal sequencing)" in titles
+    grid = next(ax for ax in fig.axes if ax.get_title().startswith("Matching grid"))
+    drawn = grid.images[0].get_array()
+    assert (drawn == 3).sum() == 1 and (drawn == 2).sum() == 1   # D1 waits, D2 is the goal
