@@ -18,7 +18,7 @@ import numpy as np
 
 from agent_runtime import steering
 from agent_runtime.config import AgentConfig
-from agent_runtime.esm import BRICK, CONFIG, FOOD, WATER, EgocentricMaps
+from agent_runtime.esm import AGENT, BRICK, CONFIG, FOOD, WATER, EgocentricMaps
 from agent_runtime.matching import Matching, calculate_matching, select_goals
 from agent_runtime.motivations import Motivations
 from agent_runtime.network import NONE, STATE_NODES, ActionNetwork, engineered
@@ -119,6 +119,9 @@ class Brain:
         """
         m = self.maps.maps > 0.5
         food, water, brick, config = m[FOOD], m[WATER], m[BRICK], m[CONFIG]
+        # Other agents in sight are in the way too: two agents heading opposite ways down a
+        # one-cell corridor would otherwise meet, back off and meet again for ever.
+        agents = m[AGENT]
         config_goals = config & ~brick          # sites still missing a brick
         brick_goals = brick & ~config           # bricks not part of the structure
         if sequenced and self.cfg.goal_sequencing:
@@ -129,8 +132,8 @@ class Brain:
             config_goals, brick_goals = select_goals(matching, brick_goals, config_goals)
         # Bricks that are not goals (the structure's, and with sequencing the unmatched free
         # ones) are in the way: a path must not lead through one to a matched brick beyond.
-        return ((config_goals, self._free_centre(food | water | brick)),
-                (brick_goals, self._free_centre(food | water | (brick & ~brick_goals))))
+        return ((config_goals, self._free_centre(food | water | brick | agents)),
+                (brick_goals, self._free_centre(food | water | agents | (brick & ~brick_goals))))
 
     def matching(self, bricks: np.ndarray, sites: np.ndarray, obstacles: np.ndarray,
                  closed: np.ndarray | None = None) -> Matching:

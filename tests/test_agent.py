@@ -160,3 +160,16 @@ def test_a_gap_opened_in_the_wall_is_used_as_a_shorter_path():
     """Paper Fig. 6c: when a gap appears, the plan goes through it instead of around."""
     around, through = _carry_trip(False), _carry_trip(True)
     assert through < 0.6 * around, (through, around)
+
+
+def test_other_agents_in_sight_are_obstacles_on_both_navigation_maps():
+    from agent_runtime.esm import AGENT
+
+    run = sim.start(load_scenario(SCENARIOS / "fig6.toml"))   # three agents start side by side
+    run.step()
+    brain = run.brains["a2"]
+    seen = brain.maps.maps[AGENT] > 0.5
+    seen[brain.centre, brain.centre] = False
+    assert seen.sum() >= 1
+    for _, obstacles in brain.nav_masks():
+        assert obstacles[seen].all()
