@@ -64,10 +64,6 @@ class Matching:
     pairs: tuple[tuple[tuple[int, int], tuple[int, int]], ...]  # (site, brick) in matching order
     unmatched: tuple[tuple[int, int], ...]              # sites no brick can reach
 
-    @property
-    def matched_sites(self) -> frozenset[tuple[int, int]]:
-        return frozenset(site for site, _ in self.pairs)
-
 
 def _grids(bricks, sites, obstacles, closed=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(S, T, walls): free bricks, open sites, and every cell no path may cross."""

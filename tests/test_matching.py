@@ -57,10 +57,11 @@ def maps(draw):
 
 
 @settings(max_examples=150, deadline=None)
-@given(maps())
-def test_compiled_matching_equals_the_whole_grid_steps_of_fig16(case):
+@given(maps(), st.integers(0, 2**32 - 1), st.booleans())
+def test_compiled_matching_equals_the_whole_grid_steps_of_fig16(case, seed, with_closed):
     bricks, sites, obstacles = case
-    fast, ref = calculate_matching(*case), calculate_matching_grid(*case)
+    closed = np.random.default_rng(seed).random(sites.shape) < 0.5 if with_closed else None
+    fast, ref = calculate_matching(*case, closed), calculate_matching_grid(*case, closed)
     np.testing.assert_array_equal(fast.match, ref.match)
     assert set(fast.pairs) == set(ref.pairs)
     assert set(fast.unmatched) == set(ref.unmatched)
@@ -127,6 +128,23 @@ def test_a_site_equally_near_two_bricks_keeps_both_ways_open():
     m = calculate_matching(g["b"], g["+"], g["#"])
     assert m.match[1, 2] and m.match[3, 2]               # both ways, not one by the tie-break
     assert m.pairs == (((2, 2), (0, 2)),)                 # the pair records the first (north)
+
+
+def test_a_closed_site_is_matched_but_no_other_path_crosses_it():
+    corridor = grid_of("""
+b..+.+
+""")
+    closed = np.zeros_like(corridor["+"])
+    closed[0, 3] = True                                   # not seen open lately
+    m = calculate_matching(corridor["b"], corridor["+"], corridor["#"], closed)
+    assert m.pairs == (((0, 3), (0, 0)),) and m.unmatched == ((0, 5),)
+    wide = grid_of("""
+b..+.+
+......
+""")
+    m = calculate_matching(wide["b"], wide["+"], wide["#"], np.pad(closed, ((0, 1), (0, 0))))
+    assert {s for s, _ in m.pairs} == {(0, 3), (0, 5)}
+    assert not m.match[0, 3] and m.match[1, 3]            # the far site's path goes round it
 
 
 def test_paths_never_cut_a_corner_between_two_discs():
