@@ -52,3 +52,13 @@ def test_conag_completes_ring_after_moved_brick():
     r = rvc.conag_moved("corners", 2, seed=0, max_ticks=3000)
     assert not r["move"]["dst_on_site"]
     assert r["completed"] and r["filled"] == r["total"]
+
+
+def test_conag_with_goal_sequencing_finishes_the_nested_squares_the_reactive_rules_cannot():
+    r = rvc.conag_nested(1, seed=0, max_ticks=6000, sequencing=True)
+    assert r["completed"] and r["inner"] == "12/12" and r["outer"] == "28/28"
+
+
+def test_conag_nearest_first_closes_the_outer_ring_first_like_the_reactive_rules():
+    r = rvc.conag_nested(1, seed=0, max_ticks=4000, sequencing=False)
+    assert not r["completed"] and r["outer"] == "28/28" and r["inner"] != "12/12"
