@@ -127,6 +127,9 @@ class Brain:
         if sequenced and self.cfg.goal_sequencing:
             obstacles = food | water | (brick & config)
             closed = config_goals & (self.maps.clear_age > self.cfg.site_memory)
+            # The cells around the agent are never in doubt: it would be touching a brick there.
+            c = self.centre
+            closed[c - 1:c + 2, c - 1:c + 2] = False
             matching = self.matching(brick_goals | (self._source_cell() & ~obstacles), config_goals, obstacles,
                                      closed)
             config_goals, brick_goals = select_goals(matching, brick_goals, config_goals)
@@ -148,15 +151,19 @@ class Brain:
     def plan(self) -> Plans:
         """Configuration and brick NMs from the ESMs, as distance fields.
 
-        If goal sequencing leaves no reachable goal on a map (every open site would block
-        another pair, or the matched bricks are out of reach) the plain goals of §4 are
-        used for that map: a blocked plan must not stall the agent.
+        Goal sequencing gives way to the plain goals of §4 where that cannot block anyone:
+        on the brick NM when no matched brick is reachable (taking any free brick blocks
+        nothing), on the configuration NM only when it leaves no site at all (every open
+        site on another's path: a loop, which must not stall the agent). A selected site
+        out of reach for now (another agent in the corridor) is waited for, not replaced by
+        one that would wall it off.
         """
         c = self.centre
         fields = []
         for k, (goals, obstacles) in enumerate(self.nav_masks()):
             field = distance_field(goals, obstacles)
-            if self.cfg.goal_sequencing and not np.isfinite(field[c, c]):
+            stuck = not goals.any() if k == 0 else not np.isfinite(field[c, c])
+            if self.cfg.goal_sequencing and stuck:
                 goals, obstacles = self.nav_masks(sequenced=False)[k]
                 field = distance_field(goals, obstacles)
             fields.append((field, goals))

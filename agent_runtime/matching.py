@@ -32,9 +32,9 @@ Choices where Fig. 16 is silent (both implementations make them alike):
   round, as step 4 matches every T[n] with hasMaxValue. Because S is fixed, the final
   grid does not depend on the order of rounds; only `Matching.pairs`' order does.
 - Closed sites (an extension for several agents, see `calculate_matching`): a site the
-  agent has not seen open lately may have been filled by another agent, so no path may
-  rely on crossing it; it is still matched (its path starts beside it), so a site behind
-  it stays protected either way.
+  agent has not seen open lately may have been filled by another agent, so paths avoid
+  crossing it; it is still matched (its path starts beside it), and a site whose every
+  way out crosses closed sites is matched as if they were open, so it stays protected.
 - succ(n) is Eq. 3 literally: the passable neighbour of largest a (smallest distance to
   a brick), ties broken by the spreading module's move order (N, E, S, W, NE, SE, SW, NW)
   and diagonals only between two free cells. Every succ is strictly nearer a brick, so a
@@ -180,17 +180,35 @@ def _matching_kernel(bricks, sites, obstacles):
     return match, done, site_r, site_c, brick_r, brick_c
 
 
+def _compiled(bricks, sites, obstacles, closed) -> Matching:
+    bricks, sites, walls = _grids(bricks, sites, obstacles, closed)
+    match, done, *cells = _matching_kernel(bricks, sites, walls)
+    return _result(match, done, *cells, sites)
+
+
+def _around_closed(matcher, bricks, sites, obstacles, closed) -> Matching:
+    """Match with `closed` sites uncrossable; sites that then reach no brick are matched
+    again with them crossable: closed sites are avoided when there is another way, but a
+    site whose every way out crosses one is still protected."""
+    first = matcher(bricks, sites, obstacles, closed)
+    if closed is None or not first.unmatched or not np.any(closed):
+        return first
+    rest = np.zeros(np.shape(sites), bool)
+    rest[tuple(np.array(first.unmatched).T)] = True
+    second = matcher(bricks, rest, obstacles, None)
+    return Matching(first.match | second.match, first.pairs + second.pairs, second.unmatched)
+
+
 def calculate_matching(bricks: np.ndarray, sites: np.ndarray, obstacles: np.ndarray,
                        closed: np.ndarray | None = None) -> Matching:
     """Fig. 16, compiled: `bricks` free bricks (S), `sites` unfilled drop sites (T),
     `obstacles` every other disc (X); bool grids of one shape, indexed [row, col].
 
-    `closed` marks sites that are matched but that no other path may cross (the agent has
-    not seen them open lately: another agent may have filled them).
+    `closed` marks sites that other paths should not cross (the agent has not seen them
+    open lately: another agent may have filled them). They are matched like any site; a
+    site whose only ways out cross closed sites is matched as if they were open.
     """
-    bricks, sites, walls = _grids(bricks, sites, obstacles, closed)
-    match, done, *cells = _matching_kernel(bricks, sites, walls)
-    return _result(match, done, *cells, sites)
+    return _around_closed(_compiled, bricks, sites, obstacles, closed)
 
 
 # --- Fig. 16 as whole-grid steps (the reference) ----------------------------------------
@@ -238,6 +256,10 @@ def _succ_grid(da: np.ndarray, exits: list[np.ndarray]) -> tuple[np.ndarray, np.
 def calculate_matching_grid(bricks: np.ndarray, sites: np.ndarray, obstacles: np.ndarray,
                             closed: np.ndarray | None = None) -> Matching:
     """Fig. 16 step by step as whole-grid operations (slow; the tests' reference)."""
+    return _around_closed(_whole_grid, bricks, sites, obstacles, closed)
+
+
+def _whole_grid(bricks, sites, obstacles, closed) -> Matching:
     bricks, sites, walls = _grids(bricks, sites, obstacles, closed)
     masks, exits = _move_masks(~walls), _exits(walls)
     da = _spread(bricks, masks)                                          # step 1
