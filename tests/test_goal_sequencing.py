@@ -98,3 +98,22 @@ def test_nested_squares_nearest_first_closes_the_ring_first_and_stalls():
     filled = fill_tick(sc, run)
     inner = [t for (r, c), t in filled.items() if 7 <= r <= 9 and 9 <= c <= 11]
     assert not run.world.status().completed and -1 in inner
+
+
+def test_the_fig13_experiment_quick_run_writes_its_table_chart_and_section(tmp_path):
+    import subprocess
+    import sys
+
+    from tests.conftest import ROOT
+
+    doc = tmp_path / "EXPERIMENTS.md"
+    r = subprocess.run([sys.executable, "experiments/goal_sequencing.py", "--quick", "--out", str(tmp_path),
+                        "--doc", str(doc)], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "[4/4]" in r.stderr                                   # progress per run
+    rows = [line for line in r.stdout.splitlines() if line.startswith("| fig18 | 1 |")]
+    assert len(rows) == 2
+    nearest, sequencing = (row.split("|")[4].strip() for row in rows)
+    assert nearest == "0/1" and sequencing == "1/1"
+    assert (tmp_path / "goal_sequencing.png").stat().st_size > 10_000
+    assert "<!-- section:G3 -->" in doc.read_text()
