@@ -115,7 +115,9 @@ class Brain:
         water and brick ESMs; the brick NM is excited by the brick ESM and inhibited by food,
         water and the bricks that are part of the structure. With goal sequencing on (and
         `sequenced`), the Matching grid also inhibits the sites that would block another
-        pair's path and leaves only the matched bricks as brick goals (§6.2).
+        pair's path and leaves only the matched bricks as brick goals (§6.2); the matching
+        counts the held brick's source as a brick and avoids crossing sites not seen open
+        for `site_memory` ticks. Other agents in sight are obstacles on both maps.
         """
         m = self.maps.maps > 0.5
         food, water, brick, config = m[FOOD], m[WATER], m[BRICK], m[CONFIG]
