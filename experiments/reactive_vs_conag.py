@@ -382,7 +382,8 @@ This file was written by {'a `--quick`' if quick else 'the full'} run.
 Reactive system: `baselines/` (Jones & Mataric lattice; one step = every agent senses its 8
 neighbours and applies the first matching transition rule, or moves at random), rng seeds
 {rseeds}, 8 agents that keep entering from the border. ConAg: `conag/sim.py` (the real world
-core and agent brains, lockstep, in one process), seeds {cseeds}, 1-3 agents, on scenarios built
+core and agent brains, lockstep, in one process; goal sequencing on, as by default, except in
+the rows marked nearest-first), seeds {cseeds}, 1-3 agents, on scenarios built
 from layout text in the script: a 6x6 ring of 20 drop sites whose 4 corners (resp. 4 side
 midpoints) are seed bricks already on their sites (`B`), 20 free bricks (16 needed + 4 spare)
 in a band around it. One tick = one world step (every agent answers once); lattice steps and
