@@ -5,6 +5,9 @@
     conag perturb OP ...      remove, add or move a disc in a running world
     conag render SCENARIO     draw a scenario as a bird's-eye PNG
     conag router              run a zenoh router (for several hosts)
+    conag agent --id ID       one agent process (--learn: a student learning from the teacher)
+    conag teacher             the teacher process: reinforces learning students (paper §5.1)
+    conag run SCENARIO        a world and its agents as processes, until the structure is done
 
 Every process that touches the bus takes --zenoh-config FILE, --connect ENDPOINT,
 --listen ENDPOINT and --mode. Ctrl-C and SIGTERM stop a process cleanly.
@@ -223,8 +226,20 @@ class _Stopped(Exception):
 
 def cmd_agent(args) -> int:
     from agent_runtime.config import AgentConfig
+    from agent_runtime.learning import Student
     from agent_runtime.link import AttachError
-    from agent_runtime.process import run_agent
+    from agent_runtime.process import AgentReport, Learning, run_agent
+
+    if not args.learn and (args.eta is not None or args.weights_out or args.save_every is not None):
+        raise ValueError("--eta, --weights-out and --save-every need --learn")
+    learning = network = None
+    if args.learn:
+        learning = Learning(eta=0.1 if args.eta is None else args.eta, weights_in=args.weights_in,
+                            weights_out=args.weights_out, save_every=args.save_every or 500)
+    elif args.weights_in:
+        network = Student.load(args.weights_in)  # a trained student, acting without learning
+    cfg = AgentConfig(map_size=args.map_size)
+    report = AgentReport()
 
     def raise_stop(signum, _frame):
         raise _Stopped()
@@ -233,8 +248,8 @@ def cmd_agent(args) -> int:
     try:
         session = open_session(_bus(args))
         try:
-            run_agent(session, args.world_id, args.id, AgentConfig(map_size=args.map_size), args.seed,
-                      attach_timeout=args.attach_timeout)
+            run_agent(session, args.world_id, args.id, cfg, args.seed, attach_timeout=args.attach_timeout,
+                      learning=learning, network=network, report=report)
         except AttachError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 1
@@ -245,6 +260,36 @@ def cmd_agent(args) -> int:
     finally:
         for s, h in previous.items():
             signal.signal(s, h)
+    if report.counts is not None:
+        c = report.counts
+        saved = f"; weights saved to {learning.weights_out}" if learning.weights_out else ""
+        print(f"agent {args.id}: {report.ticks} ticks, {c.reinforcements} reinforcements, {c.errors} errors "
+              f"({c.teacher_restarts} teacher restarts, {c.gaps} gaps){saved}", flush=True)
+    return 0
+
+
+def cmd_teacher(args) -> int:
+    from teacher.process import run_teacher
+
+    last = [""]
+
+    def ready():
+        print(f"teacher {args.id} for world {args.world_id}: reinforcing students' decisions", flush=True)
+
+    def show(teacher, present):
+        line = f"students present: {', '.join(sorted(present)) or 'none'}  {teacher.progress()}"
+        if line != last[0]:
+            print(line, flush=True)
+            last[0] = line
+
+    with _stop_on_signals() as stop:  # before the session opens: no signal finds us unprepared
+        session = open_session(_bus(args))
+        try:
+            teacher = run_teacher(session, args.world_id, stop, args.id, on_ready=ready,
+                                  on_progress=None if args.quiet else show)
+        finally:
+            session.close()
+    print(f"final: {teacher.progress()}  bad {teacher.bad_messages}", flush=True)
     return 0
 
 
@@ -327,8 +372,22 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--attach-timeout", type=float, default=30.0, help="seconds to wait for the world")
     a.add_argument("--map-size", type=int, default=AGENT_MAP_SIZE, metavar="N",
                    help=f"cells per side of the agent's maps, odd (default {AGENT_MAP_SIZE})")
+    g = a.add_argument_group("learning (paper §5.1)")
+    g.add_argument("--learn", action="store_true",
+                   help="be a student: random construction weights (from --seed) learned from the teacher")
+    g.add_argument("--eta", type=float, metavar="RATE", help="learning rate of the delta rule (default 0.1)")
+    g.add_argument("--weights-in", metavar="FILE",
+                   help="start from these weights (without --learn: act on them, learning nothing)")
+    g.add_argument("--weights-out", metavar="FILE", help="save the weights here periodically and on exit")
+    g.add_argument("--save-every", type=int, metavar="TICKS", help="ticks between saves (default 500)")
     _bus_args(a)
     a.set_defaults(func=cmd_agent)
+
+    t = sub.add_parser("teacher", help="run the teacher: reinforce learning students (paper §5.1)")
+    t.add_argument("--id", default="teacher", help="teacher id for its liveliness token (default teacher)")
+    t.add_argument("--quiet", action="store_true", help="no progress lines")
+    _bus_args(t)
+    t.set_defaults(func=cmd_teacher)
 
     u = sub.add_parser("run", help="build a scenario: a world and its agents as processes, until done")
     u.add_argument("scenario")

@@ -55,6 +55,7 @@ class Teacher:
     def __init__(self, network: ActionNetwork | None = None):
         self.network = network or engineered()
         self.students: dict[str, StudentRecord] = {}
+        self.bad_messages = 0  # decisions that could not be decoded (counted by the process)
 
     def reinforce(self, decision: Decision) -> Reinforcement:
         rec = self.students.setdefault(decision.agent_id, StudentRecord())
