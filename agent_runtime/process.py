@@ -8,7 +8,8 @@ decision step, the command to the world, the Decision for the teacher. Frames ar
 With `learning` (`conag agent --learn`) the construction network is a `Student`
 (random weights from the seed, or loaded from a file) instead of the engineered one:
 before each step the agent applies every reinforcement that has arrived to the decision
-it answers (`student_link.StudentLink`), and saves its weights every `save_every` ticks
+it answers (`student_link.StudentLink`; with a teacher present it waits up to `wait`
+seconds for the answer to its last step), and saves its weights every `save_every` ticks
 and on the way out. With no teacher on the bus it keeps acting on its current weights.
 """
 
@@ -23,7 +24,7 @@ from agent_runtime.brain import Brain
 from agent_runtime.config import AgentConfig
 from agent_runtime.learning import Student
 from agent_runtime.link import WorldLink
-from agent_runtime.student_link import LinkCounts, StudentLink
+from agent_runtime.student_link import StudentLink
 from protocol import keys
 from protocol.codec import encode
 
@@ -38,12 +39,15 @@ class Learning:
     weights_in: str | None = None     # start from these weights instead of random ones
     weights_out: str | None = None    # save here every `save_every` ticks and on exit
     save_every: int = 500
+    wait: float = 0.02                # seconds to wait for the teacher's answer to the last step (if one is there)
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.eta) and self.eta > 0):
             raise ValueError("the learning rate eta must be a number > 0")
         if self.save_every < 1:
             raise ValueError("save_every must be >= 1 tick")
+        if not self.wait >= 0:
+            raise ValueError("wait must be >= 0 seconds")
 
     def student(self, seed: int) -> Student:
         if self.weights_in:
@@ -58,7 +62,7 @@ class AgentReport:
 
     ticks: int = 0
     student: Student | None = None
-    counts: LinkCounts | None = None
+    link: StudentLink | None = None   # a learning agent's link to the teacher (counts, teachers present)
 
 
 def run_agent(session, world_id: str, agent_id: str, cfg: AgentConfig, seed: int,
@@ -75,7 +79,7 @@ def run_agent(session, world_id: str, agent_id: str, cfg: AgentConfig, seed: int
     link = WorldLink(session, world_id, agent_id)
     teacher = StudentLink(session, world_id, agent_id) if learning else None
     decisions = None if learning else session.declare_publisher(keys.decision(world_id, agent_id), express=True)
-    report.student, report.counts = student, teacher.counts if teacher else None
+    report.student, report.link = student, teacher
     try:
         welcome = link.attach(timeout=attach_timeout)
         log.info("agent %s attached to body %d at (%.2f, %.2f)%s", agent_id, welcome.body, welcome.x, welcome.y,
@@ -88,7 +92,7 @@ def run_agent(session, world_id: str, agent_id: str, cfg: AgentConfig, seed: int
             if frame is None:
                 continue
             if teacher is not None:
-                for d, r in teacher.poll():
+                for d, r in teacher.poll(wait=learning.wait):
                     student.learn(d.state, d.arm, d.motor, r.arm, r.motor, learning.eta)
             step = brain.step(frame)
             link.send(frame.tick, step.speed, step.turn, step.action)

@@ -2,8 +2,8 @@
 
 A `StudentLink` publishes the agent's Decisions reliably (zenoh RELIABLE, congestion
 control BLOCK: a decision is never dropped on the way to the teacher) and takes the
-teacher's Reinforcements from a FIFO channel (never "latest wins": a FIFO that is full
-holds the sender back instead of dropping). Each reinforcement answers the decision of
+teacher's Reinforcements from a FIFO inbox (`conag.bus.Inbox`; never "latest wins": a
+full inbox holds the sender back instead of dropping). Each reinforcement answers the decision of
 the same tick, kept here until answered; `poll` hands back the (decision, reinforcement)
 pairs in the order they came, for the student to learn from before its next step.
 
@@ -17,11 +17,13 @@ incarnation) tells a gap (none expected) from a restarted teacher.
 from __future__ import annotations
 
 import logging
+import time
 from collections import OrderedDict
 from dataclasses import dataclass
 
 import zenoh
 
+from conag.bus import Inbox
 from protocol import keys
 from protocol.codec import ProtocolError, decode, encode
 from protocol.messages import Decision, Reinforcement
@@ -52,15 +54,8 @@ class StudentLink:
         self._pub = session.declare_publisher(keys.decision(world_id, agent_id),
                                               reliability=zenoh.Reliability.RELIABLE,
                                               congestion_control=zenoh.CongestionControl.BLOCK)
-        self._sub = session.declare_subscriber(keys.reinforcement(world_id, agent_id),
-                                               zenoh.handlers.FifoChannel(FIFO_CAPACITY))
-        self._watch = session.liveliness().declare_subscriber(keys.all_teacher_tokens(world_id),
-                                                              zenoh.handlers.FifoChannel(256), history=True)
-
-    @property
-    def teacher_present(self) -> bool:
-        self._teacher_events()
-        return bool(self.teachers)
+        self._inbox = Inbox(FIFO_CAPACITY).subscribe(session, keys.reinforcement(world_id, agent_id))
+        self._watch = Inbox(256).watch(session, keys.all_teacher_tokens(world_id))
 
     def publish(self, decision: Decision) -> None:
         """Send a decision to the teacher and keep it until it is answered."""
@@ -70,11 +65,28 @@ class StudentLink:
         self._pub.put(encode(decision))
         self.counts.decisions += 1
 
-    def poll(self) -> list[tuple[Decision, Reinforcement]]:
-        """Every reinforcement that has arrived, paired with the decision it answers, in order."""
+    def poll(self, wait: float = 0.0) -> list[tuple[Decision, Reinforcement]]:
+        """Every reinforcement that has arrived, paired with the decision it answers, in order.
+
+        With `wait` > 0 and a teacher present, first wait up to `wait` seconds for the answer
+        to the newest decision, so that a step is learned from before the next one is taken
+        (the teacher answers within a fraction of a millisecond on one host); with no
+        teacher there is nothing to wait for.
+        """
         self._teacher_events()
         pairs = []
-        while (sample := self._sub.try_recv()) is not None:
+        newest = next(reversed(self._pending), None)
+        deadline = time.monotonic() + wait
+        while True:
+            sample = self._inbox.get(0)
+            if sample is None:
+                remaining = deadline - time.monotonic()
+                if not (newest in self._pending and self.teachers and remaining > 0):
+                    break
+                sample = self._inbox.get(min(remaining, 0.005))
+                self._teacher_events()  # a teacher that just went is not waited for
+                if sample is None:
+                    continue
             try:
                 r = decode(sample.payload.to_bytes(), Reinforcement)
             except ProtocolError as exc:
@@ -110,7 +122,7 @@ class StudentLink:
         self._next_seq = seq + 1
 
     def _teacher_events(self) -> None:
-        while (sample := self._watch.try_recv()) is not None:
+        while (sample := self._watch.get(0)) is not None:
             teacher = str(sample.key_expr).rsplit("/", 1)[-1]
             if sample.kind == zenoh.SampleKind.PUT:
                 self.teachers.add(teacher)
@@ -120,8 +132,9 @@ class StudentLink:
                 log.warning("agent %s: teacher %s is gone; acting on the current weights", self.agent_id, teacher)
 
     def close(self) -> None:
-        for entity in (self._watch, self._sub, self._pub):
-            try:
-                entity.undeclare()
-            except Exception:  # the session may be closing already
-                pass
+        self._watch.close()
+        self._inbox.close()
+        try:
+            self._pub.undeclare()
+        except Exception:  # the session may be closing already
+            pass

@@ -260,8 +260,8 @@ def cmd_agent(args) -> int:
     finally:
         for s, h in previous.items():
             signal.signal(s, h)
-    if report.counts is not None:
-        c = report.counts
+    if report.link is not None:
+        c = report.link.counts
         saved = f"; weights saved to {learning.weights_out}" if learning.weights_out else ""
         print(f"agent {args.id}: {report.ticks} ticks, {c.reinforcements} reinforcements, {c.errors} errors "
               f"({c.teacher_restarts} teacher restarts, {c.gaps} gaps){saved}", flush=True)

@@ -2,7 +2,8 @@
 
 It declares its liveliness token (students see whether a teacher is there), watches the
 students' tokens, takes every student's Decisions from one wildcard subscription into a
-FIFO channel (a full FIFO holds the senders back, it never drops), and answers each with
+FIFO inbox (`conag.bus.Inbox`: a full inbox holds the senders back, it never drops), and
+answers each with
 a Reinforcement on that student's key, published RELIABLE with congestion control BLOCK:
 reinforcements are neither dropped nor reordered. One loop, one thread: decisions are
 answered in the order they arrive.
@@ -19,6 +20,7 @@ import time
 
 import zenoh
 
+from conag.bus import Inbox
 from protocol import keys
 from protocol.codec import ProtocolError, decode, encode
 from protocol.messages import Decision
@@ -40,10 +42,8 @@ def run_teacher(session: zenoh.Session, world_id: str, stop, teacher_id: str = "
     teacher = teacher if teacher is not None else Teacher()
     publishers: dict[str, zenoh.Publisher] = {}
     present: set[str] = set()  # students whose liveliness token is up
-    decisions = session.declare_subscriber(keys.all_agents(world_id, "decision"),
-                                           zenoh.handlers.FifoChannel(FIFO_CAPACITY))
-    tokens = session.liveliness().declare_subscriber(keys.all_agent_tokens(world_id),
-                                                     zenoh.handlers.FifoChannel(256), history=True)
+    decisions = Inbox(FIFO_CAPACITY).subscribe(session, keys.all_agents(world_id, "decision"))
+    tokens = Inbox(256).watch(session, keys.all_agent_tokens(world_id))
     # Declared last: a student that sees the token knows the subscription is there.
     token = session.liveliness().declare_token(keys.teacher_token(world_id, teacher_id))
     if on_ready is not None:
@@ -58,10 +58,10 @@ def run_teacher(session: zenoh.Session, world_id: str, stop, teacher_id: str = "
             publishers[agent] = pub
         return pub
 
-    last_progress, pause = time.monotonic(), 0.0001
+    last_progress = time.monotonic()
     try:
         while not stop.is_set():
-            while (sample := tokens.try_recv()) is not None:
+            while (sample := tokens.get(0)) is not None:
                 agent = str(sample.key_expr).rsplit("/", 1)[-1]
                 if sample.kind == zenoh.SampleKind.PUT:
                     present.add(agent)
@@ -69,21 +69,23 @@ def run_teacher(session: zenoh.Session, world_id: str, stop, teacher_id: str = "
                 else:
                     present.discard(agent)
                     log.info("student %s is gone", agent)
-            sample = decisions.try_recv()
-            if sample is None:
-                time.sleep(pause)  # zenoh's recv has no timeout: poll, backing off to 2 ms
-                pause = min(pause * 2, 0.002)
-            else:
-                pause = 0.0001
+            sample = decisions.get(0.1)
+            if sample is not None:
                 _answer(sample, teacher, publisher)
             if on_progress is not None and time.monotonic() - last_progress >= progress_every:
                 last_progress = time.monotonic()
                 on_progress(teacher, present)
     finally:
-        for entity in (token, tokens, decisions, *publishers.values()):
+        try:
+            token.undeclare()
+        except Exception:  # the session may be closing already
+            pass
+        tokens.close()
+        decisions.close()
+        for pub in publishers.values():
             try:
-                entity.undeclare()
-            except Exception:  # the session may be closing already
+                pub.undeclare()
+            except Exception:
                 pass
     return teacher
 
