@@ -35,7 +35,7 @@ AGENT = "a1"
 @dataclass(frozen=True)
 class TrialResult:
     errors: int            # steps where the student's (arm, motor) differs from the teacher's
-    ticks: int
+    ticks: int             # steps taken
     sites_filled: int
     sites_total: int
     completed_at: int | None  # the tick the structure was first complete, if it was
@@ -47,8 +47,11 @@ def trial_seed(seed: int, run: int, trial: int) -> int:
 
 
 def run_trial(scenario: Scenario, learner, teacher: Teacher, *, ticks: int, eta: float, seed: int,
-              learn: bool = True, cfg: AgentConfig | None = None) -> TrialResult:
-    """One trial of `ticks` steps from the scenario's initial layout; `learner` learns if `learn`."""
+              learn: bool = True, cfg: AgentConfig | None = None, until_complete: bool = False) -> TrialResult:
+    """One trial of `ticks` steps from the scenario's initial layout; `learner` learns if `learn`.
+
+    With `until_complete` the trial ends early once every drop site holds a brick.
+    """
     run = sim.start(scenario, agents=1, seed=seed, cfg=cfg, network=learner)
     errors = 0
 
@@ -62,14 +65,17 @@ def run_trial(scenario: Scenario, learner, teacher: Teacher, *, ticks: int, eta:
 
     run.on_step = on_step
     completed_at = None
-    for t in range(ticks):
+    t = 0
+    for t in range(1, ticks + 1):
         run.step()
         if completed_at is None and run.world.status().completed:
-            completed_at = t + 1
+            completed_at = t
+            if until_complete:
+                break
     if learn and hasattr(learner, "end_episode"):
         learner.end_episode()
     st = run.world.status()
-    return TrialResult(errors, ticks, st.sites_filled, st.sites_total, completed_at)
+    return TrialResult(errors, t, st.sites_filled, st.sites_total, completed_at)
 
 
 def run_learning(scenario: Scenario, learner, *, trials: int, ticks: int, eta: float, seed: int, run: int = 0,
