@@ -301,11 +301,15 @@ def cmd_run(args) -> int:
     from agent_runtime.config import AgentConfig
 
     AgentConfig(map_size=args.map_size)  # a bad size is a usage error here, not in every agent
+    if not args.learn and (args.eta is not None or args.weights_dir):
+        raise ValueError("--eta and --weights-dir need --learn")
+    learn_args = ("--learn", "--eta", str(0.1 if args.eta is None else args.eta)) if args.learn else ()
     opts = RunOptions(scenario_path=args.scenario, scenario=load_scenario(args.scenario),
                       endpoint=(args.listen or [DEFAULT_ENDPOINT])[0], world_id=args.world_id,
                       agents=args.agents, seed=args.seed, max_ticks=args.max_ticks, summary=args.summary,
                       headless=args.headless, quiet=args.quiet,
-                      extra_agent_args=("--map-size", str(args.map_size)))
+                      extra_agent_args=("--map-size", str(args.map_size), *learn_args),
+                      teacher=args.teacher, weights_dir=args.weights_dir)
     with _stop_on_signals() as stop:
         summary = run(opts, stop)
     state = "complete" if summary["completed"] else "NOT complete"
@@ -402,6 +406,11 @@ def build_parser() -> argparse.ArgumentParser:
     u.add_argument("--world-id", default="w0")
     u.add_argument("--map-size", type=int, default=AGENT_MAP_SIZE, metavar="N",
                    help=f"cells per side of every agent's maps, odd (default {AGENT_MAP_SIZE})")
+    g = u.add_argument_group("learning (paper §5.1)")
+    g.add_argument("--teacher", action="store_true", help="start a teacher process too")
+    g.add_argument("--learn", action="store_true", help="agents are students with random weights (conag agent --learn)")
+    g.add_argument("--eta", type=float, metavar="RATE", help="their learning rate (default 0.1)")
+    g.add_argument("--weights-dir", metavar="DIR", help="each student saves its weights to DIR/<id>.json")
     u.set_defaults(func=cmd_run)
 
     for name, text in (("kill", "SIGKILL one agent process of a running `conag run`"),

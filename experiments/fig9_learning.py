@@ -66,7 +66,9 @@ class Plan:
 
 
 def label(kind: str, eta: float, plan: Plan) -> str:
-    return f"delta rule, eta = {eta:g}" if kind == "delta" else f"Q-learning (alpha = {eta:g}, gamma = {plan.q_gamma:g})"
+    if kind == "delta":
+        return f"delta rule, eta = {eta:g}"
+    return f"Q-learning (alpha = {eta:g}, gamma = {plan.q_gamma:g})"
 
 
 def one_run(job: tuple[str, float, int, Plan]) -> dict:

@@ -26,7 +26,7 @@ from teacher.core import Teacher, is_error, signals
 from tests.conftest import SCENARIOS
 from tests.test_deploy import Process
 from tests.test_run import LONG_WALL
-from world_server.scenario import parse_scenario
+from world_server.scenario import load_scenario, parse_scenario
 
 ENG = engineered()
 STATES = [tuple(float(v) for v in s) for s in itertools.product((0, 1), repeat=6)]
@@ -239,3 +239,25 @@ def test_weights_options_are_checked_before_anything_starts(tmp_path):
     assert r.returncode == 2 and "bad.json" in r.stderr and "not a student weights file" in r.stderr
     r = conag("agent", "--id", "a1", "--eta", "0.1", "--connect", ep)
     assert r.returncode == 2 and "need --learn" in r.stderr
+
+
+@pytest.mark.slow
+def test_conag_run_with_a_teacher_and_learning_agents_saves_their_weights(tmp_path):
+    import json
+    import subprocess
+    import sys
+
+    from tests.conftest import ROOT, free_port
+
+    out, weights = tmp_path / "summary.json", tmp_path / "weights"
+    r = subprocess.run([sys.executable, "-m", "conag", "run", "scenarios/quick_wall.toml", "--headless", "--teacher",
+                        "--learn", "--eta", "0.2", "--weights-dir", str(weights), "--max-ticks", "2000",
+                        "--summary", str(out), "--listen", f"tcp/127.0.0.1:{free_port()}"],
+                       cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert r.returncode in (0, 3), r.stdout + r.stderr                 # 3: not complete within the ticks
+    assert "quick_wall:" in r.stdout and "Traceback" not in r.stderr
+    summary = json.loads(out.read_text())
+    assert summary["ticks"] > 0 and [a["id"] for a in summary["agents"]] == ["a1"]
+    student = Student.load(weights / "a1.json")                      # saved on the way out
+    initial = Learning().student(load_scenario(SCENARIOS / "quick_wall.toml").seed)  # the agents' --seed
+    assert not np.array_equal(student.excite, initial.excite)         # it learned from the teacher
