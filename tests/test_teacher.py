@@ -261,3 +261,21 @@ def test_conag_run_with_a_teacher_and_learning_agents_saves_their_weights(tmp_pa
     student = Student.load(weights / "a1.json")                      # saved on the way out
     initial = Learning().student(load_scenario(SCENARIOS / "quick_wall.toml").seed)  # the agents' --seed
     assert not np.array_equal(student.excite, initial.excite)         # it learned from the teacher
+
+
+@pytest.mark.slow
+def test_an_agent_process_acts_on_saved_weights_without_learning(bus, start_world, tmp_path):
+    path = tmp_path / "fig8.json"
+    Student(ENG.excite, ENG.inhibit).save(path)                       # Fig. 8 as a weights file
+    world = start_world(SCENARIOS / "quick_wall.toml", max_ticks=3000, stop_when_complete=True)
+    seen = Collector(bus.client_session(), "a1", key=keys.decision, kind=Decision)
+    agent = Process("agent", "--id", "a1", "--weights-in", str(path), "--connect", bus.endpoint)
+    try:
+        world.thread.join(60)
+        assert not world.thread.is_alive() and world.result.completed, world.result
+        assert len(seen.wait(50)) >= 50                                  # it still tells a teacher what it does
+        assert agent.stop(signal.SIGTERM) == 0, agent.err
+        assert "reinforcements" not in agent.out and "Traceback" not in agent.err  # not a learner
+        assert Student.load(path).excite.tolist() == Student(ENG.excite, ENG.inhibit).excite.tolist()  # untouched
+    finally:
+        agent.kill()
