@@ -68,10 +68,17 @@ class ActionNetwork:
         return np.asarray(state, dtype=np.float64) @ (self.excite + self.inhibit)
 
     def choose(self, state: np.ndarray) -> Choice:
-        net = self.inputs(state)
-        fired = net >= self.threshold - 1e-12
-        return Choice(arm=_winner(net, fired, ARM_OUTPUTS), motor=_winner(net, fired, MOTOR_OUTPUTS),
-                      outputs=tuple(float(v) for v in net))
+        return select(self.inputs(state), self.threshold)
+
+
+def select(net: np.ndarray, threshold: float = THRESHOLD) -> Choice:
+    """Step threshold, then per group the firing output with the largest summed input `net` (7,).
+
+    Shared by the engineered network and the learning student (agent_runtime/learning.py).
+    """
+    fired = net >= threshold - 1e-12
+    return Choice(arm=_winner(net, fired, ARM_OUTPUTS), motor=_winner(net, fired, MOTOR_OUTPUTS),
+                  outputs=tuple(float(v) for v in net))
 
 
 def _winner(net: np.ndarray, fired: np.ndarray, group: tuple[str, ...]) -> str:

@@ -65,3 +65,46 @@ def open_session(opts: BusOptions, *, serve: bool = False):
 
     zenoh.init_log_from_env_or("error")
     return zenoh.open(make_config(opts, serve=serve))
+
+
+class Inbox:
+    """A FIFO subscription with a timed receive: nothing is dropped, nothing reordered.
+
+    zenoh's FifoChannel keeps every sample but its `recv` cannot time out, so a waiting
+    loop would have to poll (and sleep between polls, adding latency). Here zenoh's
+    callback puts each sample into a bounded `queue.Queue`: a full queue blocks zenoh's
+    thread (back-pressure, like a full FifoChannel), and `get(timeout)` wakes at once.
+    Liveliness subscriptions can feed the same inbox (`watch`), so one loop sees both.
+    """
+
+    def __init__(self, capacity: int = 4096):
+        import queue
+
+        self._q: queue.Queue = queue.Queue(maxsize=capacity)
+        self._entities: list = []
+
+    def subscribe(self, session, key: str) -> "Inbox":
+        self._entities.append(session.declare_subscriber(key, self._q.put))
+        return self
+
+    def watch(self, session, key: str) -> "Inbox":
+        """Liveliness tokens under `key` (those already there first) as PUT / DELETE samples."""
+        self._entities.append(session.liveliness().declare_subscriber(key, self._q.put, history=True))
+        return self
+
+    def get(self, timeout: float | None = None):
+        """The next sample, or None if none came within `timeout` (0: do not wait)."""
+        import queue
+
+        try:
+            return self._q.get_nowait() if timeout == 0 else self._q.get(timeout=timeout)
+        except queue.Empty:
+            return None
+
+    def close(self) -> None:
+        for entity in self._entities:
+            try:
+                entity.undeclare()
+            except Exception:  # the session may be closing already
+                pass
+        self._entities.clear()

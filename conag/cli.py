@@ -5,6 +5,9 @@
     conag perturb OP ...      remove, add or move a disc in a running world
     conag render SCENARIO     draw a scenario as a bird's-eye PNG
     conag router              run a zenoh router (for several hosts)
+    conag agent --id ID       one agent process (--learn: a student learning from the teacher)
+    conag teacher             the teacher process: reinforces learning students (paper §5.1)
+    conag run SCENARIO        a world and its agents as processes, until the structure is done
 
 Every process that touches the bus takes --zenoh-config FILE, --connect ENDPOINT,
 --listen ENDPOINT and --mode. Ctrl-C and SIGTERM stop a process cleanly.
@@ -223,8 +226,20 @@ class _Stopped(Exception):
 
 def cmd_agent(args) -> int:
     from agent_runtime.config import AgentConfig
+    from agent_runtime.learning import Student
     from agent_runtime.link import AttachError
-    from agent_runtime.process import run_agent
+    from agent_runtime.process import AgentReport, Learning, run_agent
+
+    if not args.learn and (args.eta is not None or args.weights_out or args.save_every is not None):
+        raise ValueError("--eta, --weights-out and --save-every need --learn")
+    learning = network = None
+    if args.learn:
+        learning = Learning(eta=0.1 if args.eta is None else args.eta, weights_in=args.weights_in,
+                            weights_out=args.weights_out, save_every=args.save_every or 500)
+    elif args.weights_in:
+        network = Student.load(args.weights_in)  # a trained student, acting without learning
+    cfg = AgentConfig(map_size=args.map_size, goal_sequencing=not args.nearest_first)
+    report = AgentReport()
 
     def raise_stop(signum, _frame):
         raise _Stopped()
@@ -233,9 +248,8 @@ def cmd_agent(args) -> int:
     try:
         session = open_session(_bus(args))
         try:
-            cfg = AgentConfig(map_size=args.map_size, goal_sequencing=not args.nearest_first)
-            run_agent(session, args.world_id, args.id, cfg, args.seed,
-                      attach_timeout=args.attach_timeout)
+            run_agent(session, args.world_id, args.id, cfg, args.seed, attach_timeout=args.attach_timeout,
+                      learning=learning, network=network, report=report)
         except AttachError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 1
@@ -246,6 +260,36 @@ def cmd_agent(args) -> int:
     finally:
         for s, h in previous.items():
             signal.signal(s, h)
+    if report.link is not None:
+        c = report.link.counts
+        saved = f"; weights saved to {learning.weights_out}" if learning.weights_out else ""
+        print(f"agent {args.id}: {report.ticks} ticks, {c.reinforcements} reinforcements, {c.errors} errors "
+              f"({c.teacher_restarts} teacher restarts, {c.gaps} gaps){saved}", flush=True)
+    return 0
+
+
+def cmd_teacher(args) -> int:
+    from teacher.process import run_teacher
+
+    last = [""]
+
+    def ready():
+        print(f"teacher {args.id} for world {args.world_id}: reinforcing students' decisions", flush=True)
+
+    def show(teacher, present):
+        line = f"students present: {', '.join(sorted(present)) or 'none'}  {teacher.progress()}"
+        if line != last[0]:
+            print(line, flush=True)
+            last[0] = line
+
+    with _stop_on_signals() as stop:  # before the session opens: no signal finds us unprepared
+        session = open_session(_bus(args))
+        try:
+            teacher = run_teacher(session, args.world_id, stop, args.id, on_ready=ready,
+                                  on_progress=None if args.quiet else show)
+        finally:
+            session.close()
+    print(f"final: {teacher.progress()}  bad {teacher.bad_messages}", flush=True)
     return 0
 
 
@@ -257,12 +301,16 @@ def cmd_run(args) -> int:
     from agent_runtime.config import AgentConfig
 
     AgentConfig(map_size=args.map_size)  # a bad size is a usage error here, not in every agent
+    if not args.learn and (args.eta is not None or args.weights_dir):
+        raise ValueError("--eta and --weights-dir need --learn")
+    learn_args = ("--learn", "--eta", str(0.1 if args.eta is None else args.eta)) if args.learn else ()
     opts = RunOptions(scenario_path=args.scenario, scenario=load_scenario(args.scenario),
                       endpoint=(args.listen or [DEFAULT_ENDPOINT])[0], world_id=args.world_id,
                       agents=args.agents, seed=args.seed, max_ticks=args.max_ticks, summary=args.summary,
                       headless=args.headless, quiet=args.quiet,
-                      extra_agent_args=("--map-size", str(args.map_size),
-                                        *(("--nearest-first",) if args.nearest_first else ())))
+                      extra_agent_args=("--map-size", str(args.map_size), *learn_args,
+                                        *(("--nearest-first",) if args.nearest_first else ())),
+                      teacher=args.teacher, weights_dir=args.weights_dir)
     with _stop_on_signals() as stop:
         summary = run(opts, stop)
     state = "complete" if summary["completed"] else "NOT complete"
@@ -331,8 +379,22 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"cells per side of the agent's maps, odd (default {AGENT_MAP_SIZE})")
     a.add_argument("--nearest-first", action="store_true",
                    help="no goal sequencing: always the nearest brick and site (the plain agent of paper §4)")
+    g = a.add_argument_group("learning (paper §5.1)")
+    g.add_argument("--learn", action="store_true",
+                   help="be a student: random construction weights (from --seed) learned from the teacher")
+    g.add_argument("--eta", type=float, metavar="RATE", help="learning rate of the delta rule (default 0.1)")
+    g.add_argument("--weights-in", metavar="FILE",
+                   help="start from these weights (without --learn: act on them, learning nothing)")
+    g.add_argument("--weights-out", metavar="FILE", help="save the weights here periodically and on exit")
+    g.add_argument("--save-every", type=int, metavar="TICKS", help="ticks between saves (default 500)")
     _bus_args(a)
     a.set_defaults(func=cmd_agent)
+
+    t = sub.add_parser("teacher", help="run the teacher: reinforce learning students (paper §5.1)")
+    t.add_argument("--id", default="teacher", help="teacher id for its liveliness token (default teacher)")
+    t.add_argument("--quiet", action="store_true", help="no progress lines")
+    _bus_args(t)
+    t.set_defaults(func=cmd_teacher)
 
     u = sub.add_parser("run", help="build a scenario: a world and its agents as processes, until done")
     u.add_argument("scenario")
@@ -349,6 +411,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"cells per side of every agent's maps, odd (default {AGENT_MAP_SIZE})")
     u.add_argument("--nearest-first", action="store_true",
                    help="agents without goal sequencing (paper §4), for comparison with ConAg-TS (§6)")
+    g = u.add_argument_group("learning (paper §5.1)")
+    g.add_argument("--teacher", action="store_true", help="start a teacher process too")
+    g.add_argument("--learn", action="store_true", help="agents are students with random weights (conag agent --learn)")
+    g.add_argument("--eta", type=float, metavar="RATE", help="their learning rate (default 0.1)")
+    g.add_argument("--weights-dir", metavar="DIR", help="each student saves its weights to DIR/<id>.json")
     u.set_defaults(func=cmd_run)
 
     for name, text in (("kill", "SIGKILL one agent process of a running `conag run`"),

@@ -1,9 +1,10 @@
 """`conag run SCENARIO`: a world and one process per agent, on loopback, until done.
 
-The world and every agent are separate processes (fresh interpreters: nothing crosses a
-fork). This process watches the world's status, shows progress, answers `conag kill` /
-`conag restart` (a RunControl query on the bus), and once the structure is complete or
-the tick limit passes, stops everything and writes the run summary.
+The world, every agent and (with `--teacher`) the teacher are separate processes (fresh
+interpreters: nothing crosses a fork). This process watches the world's status, shows
+progress, answers `conag kill` / `conag restart` (a RunControl query on the bus), and
+once the structure is complete or the tick limit passes, stops everything and writes the
+run summary.
 """
 
 from __future__ import annotations
@@ -38,6 +39,8 @@ class RunOptions:
     headless: bool = False
     quiet: bool = False
     extra_agent_args: tuple[str, ...] = ()
+    teacher: bool = False             # also run a teacher process (`conag teacher`)
+    weights_dir: str | None = None    # learning agents save their weights to weights_dir/<id>.json
 
 
 @dataclass
@@ -53,6 +56,8 @@ class Fleet:
         cmd = [sys.executable, "-m", "conag", "agent", "--id", agent_id, "--world-id", o.world_id,
                "--connect", o.endpoint, "--seed", str(o.seed if o.seed is not None else o.scenario.seed),
                *o.extra_agent_args]
+        if o.weights_dir:
+            cmd += ["--weights-out", str(Path(o.weights_dir) / f"{agent_id}.json")]
         proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL)
         with self.lock:
             self.procs[agent_id] = proc
@@ -106,6 +111,13 @@ def run(opts: RunOptions, stop: threading.Event) -> dict:
     if opts.seed is not None:
         world_cmd += ["--seed", str(opts.seed)]
     world = subprocess.Popen(world_cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
+    if opts.weights_dir:
+        Path(opts.weights_dir).mkdir(parents=True, exist_ok=True)
+    teacher = None
+    if opts.teacher:
+        teacher = subprocess.Popen([sys.executable, "-m", "conag", "teacher", "--world-id", opts.world_id,
+                                    "--connect", opts.endpoint, "--quiet"], stdin=subprocess.DEVNULL,
+                                   stdout=subprocess.DEVNULL)
     fleet = Fleet(opts)
     session = open_session(BusOptions(connect=(opts.endpoint,)))
     started = time.monotonic()
@@ -147,6 +159,8 @@ def run(opts: RunOptions, stop: threading.Event) -> dict:
         except subprocess.TimeoutExpired:
             world.kill()
         fleet.stop_all()
+        if teacher is not None:
+            _stop(teacher)
         for s in subs:
             s.undeclare()
         session.close()
@@ -160,6 +174,16 @@ def run(opts: RunOptions, stop: threading.Event) -> dict:
     if opts.summary and opts.summary != "-":
         Path(opts.summary).write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
     return summary
+
+
+def _stop(proc: subprocess.Popen, grace: float = 5.0) -> None:
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGTERM)
+    try:
+        proc.wait(grace)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait(5)
 
 
 def control(session, world_id: str, op: str, agent_id: str, timeout: float = 5.0) -> RunControlResult:

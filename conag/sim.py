@@ -6,11 +6,12 @@ that need many runs quickly. `conag run` is the real thing: one process per agen
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from agent_runtime.brain import Brain
+from agent_runtime.brain import Brain, Step
 from agent_runtime.config import AgentConfig
 from world_server.scenario import Scenario
 from world_server.world import World
@@ -22,12 +23,15 @@ class SimRun:
     brains: dict[str, Brain] = field(default_factory=dict)
     behaviours: dict[str, str] = field(default_factory=dict)
     filled_at: np.ndarray | None = None  # per site (world order), the tick it was last filled; -1: empty
+    on_step: Callable[[str, Step], None] | None = None  # sees every decision (the teacher's view)
 
     def step(self) -> None:
         """One lockstep tick: every brain answers its frame, then the world steps."""
         for frame in self.world.frames():
             s = self.brains[frame.agent_id].step(frame)
             self.behaviours[frame.agent_id] = s.behaviour
+            if self.on_step is not None:
+                self.on_step(frame.agent_id, s)
             self.world.set_command(frame.agent_id, s.speed, s.turn, s.action)
         self.world.step()
         self._record_fills()
@@ -49,7 +53,8 @@ class SimRun:
 
 
 def start(scenario: Scenario, agents: int | None = None, seed: int | None = None,
-          cfg: AgentConfig | None = None) -> SimRun:
+          cfg: AgentConfig | None = None, network=None) -> SimRun:
+    """A world and its brains; `network` (one for every agent) replaces the Fig. 8 network."""
     seed = scenario.seed if seed is None else seed
     world = World(scenario, np.random.default_rng(seed))
     run = SimRun(world)
@@ -57,5 +62,5 @@ def start(scenario: Scenario, agents: int | None = None, seed: int | None = None
     for i in range(scenario.agents if agents is None else agents):
         agent_id = f"a{i + 1}"
         welcome = world.attach(agent_id)
-        run.brains[agent_id] = Brain(welcome, cfg, np.random.default_rng([seed, i]))
+        run.brains[agent_id] = Brain(welcome, cfg, np.random.default_rng([seed, i]), network=network)
     return run

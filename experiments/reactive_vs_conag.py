@@ -445,6 +445,7 @@ transition rule sets (corners and sides, n=6) and checks that the trained networ
 square. Results: [experiments/lattice_learning.md](experiments/lattice_learning.md), curve:
 
 ![learning](experiments/lattice_learning.png)
+
 """
 
 
