@@ -49,6 +49,8 @@ class Plans:
     brick_goals: np.ndarray
     nearest_brick: tuple[float, float, float] | None  # (dx, dy, distance) in cells, or None
     matching: Matching | None = None  # the Matching grid (goal sequencing), None when it is off
+    config_obstacles: np.ndarray | None = None  # the obstacles each field was computed with
+    brick_obstacles: np.ndarray | None = None
 
 
 class Brain:
@@ -168,10 +170,11 @@ class Brain:
             if self.cfg.goal_sequencing and stuck:
                 goals, obstacles = self.nav_masks(sequenced=False)[k]
                 field = distance_field(goals, obstacles)
-            fields.append((field, goals))
-        (config, config_goals), (brick, brick_goals) = fields
+            fields.append((field, goals, obstacles))
+        (config, config_goals, config_obstacles), (brick, brick_goals, brick_obstacles) = fields
         matching = self._matching[1] if self.cfg.goal_sequencing and self._matching else None
-        self.plans = Plans(config, brick, config_goals, brick_goals, self._nearest(brick_goals), matching)
+        self.plans = Plans(config, brick, config_goals, brick_goals, self._nearest(brick_goals), matching,
+                           config_obstacles, brick_obstacles)
         return self.plans
 
     def _nearest(self, cells: np.ndarray) -> tuple[float, float, float] | None:

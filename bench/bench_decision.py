@@ -12,7 +12,7 @@ the agent's whole decision step, `brain.step(frame)` (ESM move + sense,
 motivations, the configuration and brick navigation maps, the state nodes, action
 selection), is timed on that tick's frame, and so is `brain.plan()` alone (the two
 navigation maps); the world step is not timed. The goal and obstacle masks of both maps
-(the goals the last `Brain.plan` used, with goal sequencing on as by default, and the obstacles from `Brain.nav_masks`) and the brain's fields
+(the goals and obstacles the last `Brain.plan` used, with goal sequencing on as by default) and the brain's fields
 are recorded each tick. Afterwards, in the same run, `scipy.sparse.csgraph.dijkstra`
 computes the same two fields from every recorded tick's masks (8-connected, no corner
 cutting, multi-source `indices=goal cells`, `min_only=True`), timed with the sparse
@@ -47,11 +47,11 @@ TARGET_SPEEDUP = 5.0
 
 
 def nav_masks(brain) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(goals, obstacles) of the configuration and brick NMs of the last plan: the goals the
-    plan used (goal sequencing may have fallen back to all of them), the obstacles from
-    `Brain.nav_masks`."""
-    (_, config_obstacles), (_, brick_obstacles) = brain.nav_masks()
-    return [(brain.plans.config_goals, config_obstacles), (brain.plans.brick_goals, brick_obstacles)]
+    """(goals, obstacles) the configuration and brick NMs of the last plan were computed
+    from (with goal sequencing, as by default, the plan may have fallen back to the plain
+    goals of one map)."""
+    p = brain.plans
+    return [(p.config_goals, p.config_obstacles), (p.brick_goals, p.brick_obstacles)]
 
 
 def solve(goals: np.ndarray, obstacles: np.ndarray, graph=None) -> np.ndarray:

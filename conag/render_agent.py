@@ -11,8 +11,7 @@ those that wait).
 
 Map panels are egocentric but not rotated: axes are cell offsets from the agent (x
 east, y north), north up, so they line up with the world panel; the agent's centre
-cell is marked with a cross. Obstacles for the NMs are rebuilt exactly as
-`Brain.plan` builds them (it keeps only the distance fields).
+cell is marked with a cross. The NMs' obstacles are those the plan used.
 """
 
 from __future__ import annotations
@@ -79,9 +78,9 @@ def _figure(scenario: Scenario, run: sim.SimRun, agent: str, brain: Brain, plans
 
 
 def nm_obstacles(brain: Brain) -> tuple[np.ndarray, np.ndarray]:
-    """The configuration and brick NMs' obstacle grids, from `Brain.nav_masks`."""
-    (_, config_obs), (_, brick_obs) = brain.nav_masks()
-    return config_obs, brick_obs
+    """The configuration and brick NMs' obstacle grids of the agent's last plan."""
+    plans = brain.plans if brain.plans is not None else brain.plan()
+    return plans.config_obstacles, plans.brick_obstacles
 
 
 def _world_panel(ax, scenario: Scenario, run: sim.SimRun, agent: str, map_size: int) -> None:
