@@ -646,6 +646,16 @@ def test_reattach_returns_the_same_body_and_pose():
     assert w.set_command("a", 1.0, 0.0, "none")
 
 
+def test_a_repeated_attach_from_the_same_live_process_is_not_a_restart():
+    w = make("A....\n.....\n...A.", agents=2)
+    first = w.attach("a", pid=100)
+    assert w.attach("a", pid=100).restarts == 0        # a retry, answered again
+    assert w.attach("a", pid=100).body == first.body
+    assert w.attach("a", pid=200).restarts == 1        # another process took the id over
+    w.detach("a")
+    assert w.attach("a", pid=200).restarts == 2        # the same pid after a detach: back again
+
+
 def test_detach_drops_the_brick_stops_the_body_and_refuses_commands():
     w = make(".......\n.bA...A\n.......", agents=2, sensor_noise=0.0)
     w.attach("a")

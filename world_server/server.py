@@ -200,7 +200,7 @@ class WorldServer:
             query.reply_err(b"declare your liveliness token before attaching, then retry")
             query.drop()
             return
-        welcome = self.world.attach(hello.agent_id)
+        welcome = self.world.attach(hello.agent_id, hello.pid)
         query.reply(query.key_expr, encode(welcome))
         query.drop()
         log.info("agent %s (pid %d) attached to body %d%s", hello.agent_id, hello.pid, welcome.body,

@@ -33,6 +33,7 @@ class AgentRecord:
     restarts: int = 0
     grabs: int = 0
     drops: int = 0
+    pid: int | None = None  # the process that attached last, if it said
 
 
 class World:
@@ -73,8 +74,13 @@ class World:
         return cells[:, 0] * (self.scenario.rows + 1) + cells[:, 1]
 
     # agents come and go --------------------------------------------------------------
-    def attach(self, agent_id: str) -> Welcome:
-        """Give `agent_id` its body: the same one as before, or a new one at a start."""
+    def attach(self, agent_id: str, pid: int | None = None) -> Welcome:
+        """Give `agent_id` its body: the same one as before, or a new one at a start.
+
+        A repeated request from the live process that attached last (`pid`; it retries
+        when the world is slow to answer, e.g. while compiling on a first run) is answered
+        again and is not a restart.
+        """
         rec = self.agents.get(agent_id)
         if rec is None:
             index = self.physics.add_agent(self._free_start())
@@ -82,9 +88,10 @@ class World:
             self.agents[agent_id] = rec
             self._order.append(rec)
             self._grow_arrays()
-        else:
+        elif not (rec.alive and pid is not None and rec.pid == pid):
             rec.restarts += 1
             rec.alive = True
+        rec.pid = pid
         self.alive[rec.index] = True
         self.speed[rec.index] = self.turn[rec.index] = 0.0
         self.action[rec.index] = 0
