@@ -57,7 +57,12 @@ class Fleet:
                "--connect", o.endpoint, "--seed", str(o.seed if o.seed is not None else o.scenario.seed),
                *o.extra_agent_args]
         if o.weights_dir:
-            cmd += ["--weights-out", str(Path(o.weights_dir) / f"{agent_id}.json")]
+            weights = Path(o.weights_dir) / f"{agent_id}.json"
+            cmd += ["--weights-out", str(weights)]
+            if agent_id in self.procs and weights.exists():
+                # A restarted student picks up what it had learned (saved every few hundred
+                # ticks and on exit), not its seed's random weights.
+                cmd += ["--weights-in", str(weights)]
         proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL)
         with self.lock:
             self.procs[agent_id] = proc

@@ -279,3 +279,29 @@ def test_an_agent_process_acts_on_saved_weights_without_learning(bus, start_worl
         assert Student.load(path).excite.tolist() == Student(ENG.excite, ENG.inhibit).excite.tolist()  # untouched
     finally:
         agent.kill()
+
+
+def test_a_restarted_student_in_conag_run_starts_from_its_saved_weights(tmp_path, monkeypatch):
+    import conag.run as run_mod
+
+    started = []
+
+    class FakeProcess:
+        pid = 1
+
+        def __init__(self, cmd, **_):
+            started.append(cmd)
+
+        def poll(self):
+            return 0
+
+    monkeypatch.setattr(run_mod.subprocess, "Popen", FakeProcess)
+    opts = run_mod.RunOptions(scenario_path="x", scenario=load_scenario(SCENARIOS / "fig6.toml"),
+                              endpoint="tcp/127.0.0.1:1", extra_agent_args=("--learn",), weights_dir=str(tmp_path))
+    fleet = run_mod.Fleet(opts)
+    (tmp_path / "a1.json").write_text("{}")      # left over from an earlier run: not loaded at first
+    fleet.start("a1")
+    assert "--weights-in" not in started[-1] and str(tmp_path / "a1.json") in started[-1]
+    fleet.restart("a1")                           # a restart picks up what it had saved
+    i = started[-1].index("--weights-in")
+    assert started[-1][i + 1] == str(tmp_path / "a1.json")
