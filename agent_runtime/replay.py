@@ -125,8 +125,9 @@ def lower_bound(bricks: np.ndarray, sites: np.ndarray, obstacles: np.ndarray,
     and left by at most one, every start begins at most one chain: an assignment of
     predecessors to sites (scipy's linear_sum_assignment), which relaxes the chains (it
     may close loops, and bricks may repeat) and so bounds them from below. Where distinct
-    bricks matter more (a supply used up from near to far), `assignment_bound`'s carrying
-    distance is the larger bound; the larger of the two is returned.
+    bricks matter more (a supply used up from near to far), carrying and walking back to
+    distinct bricks (`_distinct_legs_bound`) bound it higher; the larger of the two is
+    returned.
 
     Per trip the agent may stop `reach` short of the brick and start carrying from there,
     and end `centering` off the site's centre; legs may be straighter than grid paths
@@ -152,6 +153,32 @@ def lower_bound(bricks: np.ndarray, sites: np.ndarray, obstacles: np.ndarray,
     total = cost[rows, cols]
     if not np.isfinite(total).all():
         return 0.0
-    # The chains may reuse a brick; distinct bricks bound the carrying alone (same slack).
-    carry = assignment_bound(bricks, sites, obstacles) / OCTILE_SLACK - k * (reach + centering)
-    return float(max(total.sum(), carry))
+    # The chains may reuse a brick; with distinct bricks the legs bound it again.
+    leg = lambda d: np.maximum(d / OCTILE_SLACK - reach - centering, 0.0)  # noqa: E731
+    return float(max(total.sum(), _distinct_legs_bound(leg(to_sites), leg(from_starts).min(axis=1))))
+
+
+def _distinct_legs_bound(legs: np.ndarray, approach: np.ndarray) -> float:
+    """Carrying plus walking back, each leg to a distinct brick. `legs` (sites, bricks):
+    least leg length between each pair; `approach` (agents,): each agent's least walk to a
+    first brick.
+
+    Every site gets a distinct brick carried to it: at least the optimal assignment of
+    bricks to sites. After each drop but the last of each active agent the agent walks to
+    the next brick it takes, a distinct brick each time: at least the optimal assignment of
+    all but `a` sites to distinct bricks, for `a` active agents, who also walk to their
+    first bricks. The least over `a` bounds every way of sharing the work.
+    """
+    from scipy.optimize import linear_sum_assignment
+
+    k, m = len(legs), len(approach)
+    finite = np.where(np.isfinite(legs), legs, 1e9)
+    rows, cols = linear_sum_assignment(finite)
+    carry = float(legs[rows, cols].sum())
+    best = np.inf
+    for active in range(1, min(m, k) + 1):
+        # `active` sites may end a chain: dummy bricks at no cost.
+        returns = np.hstack([finite, np.zeros((k, active))])
+        r, c = linear_sum_assignment(returns)
+        best = min(best, float(returns[r, c].sum()) + float(np.sort(approach)[:active].sum()))
+    return carry + best if np.isfinite(carry) else 0.0

@@ -247,6 +247,15 @@ A+b..........b+
     assert two_agents == pytest.approx((2 + 1 + 1 + 1) / OCTILE_SLACK)
 
 
+def test_lower_bound_counts_bricks_used_up_from_near_to_far():
+    g = grid_of("""
+A++.b....b
+""")
+    # Trips may not share the near brick: carry 3 + 7 (or 2 + 8), walk back 2, first walk 4.
+    # (The best build walks 21: start-b4-site2-b9-site1.)
+    assert lower_bound(g["b"], g["+"], g["#"], [(0, 0)], reach=0.0) == pytest.approx(16 / OCTILE_SLACK)
+
+
 @pytest.mark.parametrize("name", ["fig6", "fig17", "fig18", "fig19", "fig20", "nested_squares"])
 def test_lower_bound_is_below_the_ideal_replay(name):
     bricks, sites, obstacles, start = layout(name)
