@@ -120,32 +120,10 @@ class EgocentricMaps:
             self._shift(kx, ky)
 
     def _shift(self, kx: int, ky: int) -> None:
-        """The agent entered the cell kx east, ky north: move all contents the other way."""
-        n = self.size
-        if abs(kx) >= n or abs(ky) >= n:
-            self.maps.fill(0.0)
-            self.clear_age.fill(np.inf)
-            return
-        # Content at (row, col) goes to (row + ky, col - kx): north motion pushes contents
-        # south (rows grow southwards), east motion pushes them west.
-        dst_r, src_r = _span(ky, n)
-        dst_c, src_c = _span(-kx, n)
-        # numpy copes with the overlap of source and destination (it buffers), and
-        # working in place keeps `maps` (and views of it) the same object.
-        self.maps[:, dst_r, dst_c] = self.maps[:, src_r, src_c]
-        self.clear_age[dst_r, dst_c] = self.clear_age[src_r, src_c]
-        # What came in from beyond the map is unknown: zeros.
-        if ky > 0:
-            self.maps[:, :ky, :] = 0.0
-        elif ky < 0:
-            self.maps[:, n + ky:, :] = 0.0
-        if kx > 0:
-            self.maps[:, :, n - kx:] = 0.0
-        elif kx < 0:
-            self.maps[:, :, :-kx] = 0.0
-        stale = np.ones((n, n), bool)
-        stale[dst_r, dst_c] = False
-        self.clear_age[stale] = np.inf
+        """The agent entered the cell kx east, ky north: move all contents the other way.
+        What comes in from beyond the map is unknown: empty, and never seen open."""
+        _shift_in_place(self.maps, kx, ky, 0.0)
+        _shift_in_place(self.clear_age, kx, ky, np.inf)
 
     # ------------------------------------------------------------------ sensing
 
@@ -262,6 +240,28 @@ class EgocentricMaps:
             self._geometry = (cells, dist, (cell_of_pair, sector, starts), vx, vy)
             self._geometry_key = key
         return self._geometry
+
+
+def _shift_in_place(grid: np.ndarray, kx: int, ky: int, fill: float) -> None:
+    """Move grid[..., row, col] to [..., row + ky, col - kx]: north motion pushes contents
+    south (rows grow southwards), east motion pushes them west; vacated cells get `fill`."""
+    n = grid.shape[-1]
+    if abs(kx) >= n or abs(ky) >= n:
+        grid.fill(fill)
+        return
+    dst_r, src_r = _span(ky, n)
+    dst_c, src_c = _span(-kx, n)
+    # numpy copes with the overlap of source and destination (it buffers), and working
+    # in place keeps the array (and views of it) the same object.
+    grid[..., dst_r, dst_c] = grid[..., src_r, src_c]
+    if ky > 0:
+        grid[..., :ky, :] = fill
+    elif ky < 0:
+        grid[..., n + ky:, :] = fill
+    if kx > 0:
+        grid[..., :, n - kx:] = fill
+    elif kx < 0:
+        grid[..., :, :-kx] = fill
 
 
 def _wrap(f: float) -> tuple[float, int]:

@@ -92,18 +92,24 @@ def _result(match, rounds, site_r, site_c, brick_r, brick_c, sites) -> Matching:
 
 
 @njit(cache=True)
+def _can_step(obstacles, r, c, j):
+    """Whether move j leads from (r, c) to a free cell on the grid without cutting a corner
+    (the cell (r, c) itself may be a wall: a closed site's path starts beside it)."""
+    n, m = obstacles.shape
+    rr, cc = r + _DR[j], c + _DC[j]
+    if rr < 0 or rr >= n or cc < 0 or cc >= m or obstacles[rr, cc]:
+        return False
+    return j < 4 or not (obstacles[r + _DR[j], c] or obstacles[r, c + _DC[j]])
+
+
+@njit(cache=True)
 def _nearest_neighbours(da, obstacles, r, c):
     """The passable neighbours of (r, c) nearest a brick, as a mask over the 8 moves, and
     the first of them (Eq. 3's succ, first in move order on a tie)."""
-    n, m = da.shape
     dist = np.full(8, np.inf)
     for j in range(8):
-        rr, cc = r + _DR[j], c + _DC[j]
-        if rr < 0 or rr >= n or cc < 0 or cc >= m or obstacles[rr, cc]:
-            continue
-        if j >= 4 and (obstacles[r + _DR[j], c] or obstacles[r, c + _DC[j]]):
-            continue
-        dist[j] = da[rr, cc]
+        if _can_step(obstacles, r, c, j):
+            dist[j] = da[r + _DR[j], c + _DC[j]]
     tied = dist <= dist.min() + _TIE
     return tied, np.argmax(tied)
 
@@ -123,15 +129,10 @@ def _trace(da, obstacles, match, r, c):
 def _site_value(da, obstacles, r, c):
     """A site's distance to its nearest brick through its best neighbour: da itself for an
     open site, and what it would be for a closed one (a wall to every other path)."""
-    n, m = da.shape
     best = np.inf
     for j in range(8):
-        rr, cc = r + _DR[j], c + _DC[j]
-        if rr < 0 or rr >= n or cc < 0 or cc >= m or obstacles[rr, cc]:
-            continue
-        if j >= 4 and (obstacles[r + _DR[j], c] or obstacles[r, c + _DC[j]]):
-            continue
-        best = min(best, da[rr, cc] + _STEP[j])
+        if _can_step(obstacles, r, c, j):
+            best = min(best, da[r + _DR[j], c + _DC[j]] + _STEP[j])
     return 0.0 if da[r, c] == 0.0 else best
 
 
@@ -154,14 +155,13 @@ def _matching_kernel(bricks, sites, obstacles):
     done = 0
     while True:
         db = _field_kernel(todo, obstacles)                     # step 2
-        best = np.inf                                           # step 3: the largest a + b
+        # Step 3: the largest a + b, i.e. the least distance sum (a site's own value is
+        # da + 0 when it is open, and what it would be when it is closed). One pass, no
+        # temporary grids: this runs once per round.
+        best = np.inf
         for r in range(n):
             for c in range(m):
-                s = da[r, c] + db[r, c]
-                if todo[r, c]:
-                    s = value[r, c]                             # (= da + 0 on an open site)
-                if s < best:
-                    best = s
+                best = min(best, value[r, c] if todo[r, c] else da[r, c] + db[r, c])
         if not np.isfinite(best):
             break                                               # no remaining site reaches a brick
         for r in range(n):                                      # steps 4-5, each maximal site

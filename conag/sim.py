@@ -43,6 +43,11 @@ class SimRun:
         self.filled_at[filled & (self.filled_at < 0)] = self.world.tick
         self.filled_at[~filled] = -1  # emptied again (a perturbation): not filled any more
 
+    def fill_ticks(self) -> dict[tuple[int, int], int]:
+        """The tick each site, as (row, col) of the layout, was filled at (-1: empty)."""
+        cells = self.world.scenario.to_cell(self.world.sites_xy)
+        return {(int(r), int(c)): int(t) for (c, r), t in zip(cells, self.filled_at)}
+
     def run(self, max_ticks: int, until_complete: bool = True) -> bool:
         """Step until the structure is complete (True) or `max_ticks` pass (False)."""
         for _ in range(max_ticks):
@@ -58,7 +63,7 @@ def start(scenario: Scenario, agents: int | None = None, seed: int | None = None
     seed = scenario.seed if seed is None else seed
     world = World(scenario, np.random.default_rng(seed))
     run = SimRun(world)
-    run.filled_at = np.where(world.sites_filled(), 0, -1)
+    run._record_fills()  # sites filled from the start count as filled at tick 0
     for i in range(scenario.agents if agents is None else agents):
         agent_id = f"a{i + 1}"
         welcome = world.attach(agent_id)

@@ -28,6 +28,7 @@ import sys
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
+from functools import cache
 from multiprocessing import get_context
 from pathlib import Path
 
@@ -84,6 +85,7 @@ class Job:
     stall: int
 
 
+@cache
 def scenario(name: str) -> Scenario:
     return load_scenario(ROOT / "scenarios" / f"{name}.toml")
 
@@ -101,8 +103,7 @@ def run_job(job: Job) -> dict:
         status = run.world.status()
         if status.sites_filled > filled:
             filled, progress = status.sites_filled, status.tick
-    cells = np.vstack([sc.cells("+"), sc.cells("B")])
-    fill_ticks = {(int(r), int(c)): int(t) for (c, r), t in zip(cells, run.filled_at)}
+    fill_ticks = run.fill_ticks()
     order = PAPER_ORDER.get(job.scenario)
     return dict(job=job, completed=status.completed, ticks=status.tick, filled=status.sites_filled,
                 paper_order=None if order is None else bool(order[1](fill_ticks)),

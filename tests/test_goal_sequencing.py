@@ -23,12 +23,6 @@ def build(name: str, agents: int = 1, ticks: int | None = None, cfg: AgentConfig
     return sc, run
 
 
-def fill_tick(sc, run) -> dict[tuple[int, int], int]:
-    """Tick each site (row, col) was filled at (-1: empty), sites in the world's order."""
-    cells = np.vstack([sc.cells("+"), sc.cells("B")])
-    return {(int(r), int(c)): int(t) for (c, r), t in zip(cells, run.filled_at)}
-
-
 def test_the_switch_gives_the_plain_agent_and_sequencing_is_the_default():
     _, ts = build("fig18", ticks=5)
     _, nf = build("fig18", ticks=5, cfg=NEAREST_FIRST)
@@ -57,22 +51,22 @@ def test_fig17_completes():
 
 @pytest.mark.parametrize("agents", [1, 3])
 def test_fig18_d2_is_filled_before_d1(agents):
-    sc, run = build("fig18", agents=agents, ticks=6000)
+    _, run = build("fig18", agents=agents, ticks=6000)
     assert run.world.status().completed
-    filled = fill_tick(sc, run)
+    filled = run.fill_ticks()
     assert filled[(8, 8)] < filled[(7, 8)]          # D2 (the pocket's end), then D1 (its mouth)
 
 
 def test_fig18_nearest_first_fills_d1_first_and_never_finishes():
-    sc, run = build("fig18", ticks=3000, cfg=NEAREST_FIRST)
-    filled = fill_tick(sc, run)
+    _, run = build("fig18", ticks=3000, cfg=NEAREST_FIRST)
+    filled = run.fill_ticks()
     assert filled[(7, 8)] >= 0 and filled[(8, 8)] == -1 and not run.world.status().completed
 
 
 def test_fig19_completes_and_the_farthest_wall_is_finished_first():
-    sc, run = build("fig19")
+    _, run = build("fig19")
     assert run.world.status().completed
-    filled = fill_tick(sc, run)
+    filled = run.fill_ticks()
     done = {row: max(t for (r, _), t in filled.items() if r == row) for row in (8, 11, 14)}
     assert done[14] < done[8] and done[14] < done[11]
 
@@ -85,17 +79,17 @@ def test_fig20_completes(agents):
 
 @pytest.mark.parametrize("agents", [1, 3])
 def test_nested_squares_the_inner_square_is_built_before_the_outer_ring_closes(agents):
-    sc, run = build("nested_squares", agents=agents)
+    _, run = build("nested_squares", agents=agents)
     assert run.world.status().completed
-    filled = fill_tick(sc, run)
+    filled = run.fill_ticks()
     inner = [t for (r, c), t in filled.items() if 7 <= r <= 9 and 9 <= c <= 11]
     outer = [t for (r, c), t in filled.items() if not (7 <= r <= 9 and 9 <= c <= 11)]
     assert len(inner) == 8 and max(inner) < max(outer)
 
 
 def test_nested_squares_nearest_first_closes_the_ring_first_and_stalls():
-    sc, run = build("nested_squares", ticks=6000, cfg=NEAREST_FIRST)
-    filled = fill_tick(sc, run)
+    _, run = build("nested_squares", ticks=6000, cfg=NEAREST_FIRST)
+    filled = run.fill_ticks()
     inner = [t for (r, c), t in filled.items() if 7 <= r <= 9 and 9 <= c <= 11]
     assert not run.world.status().completed and -1 in inner
 
