@@ -7,23 +7,36 @@ which sites and bricks excite them; read the six internal state nodes off them (
 then select by fixed priority
 (§4.4): eat/drink > avoid > approach food/water > the construction network of Fig. 8.
 The result is a motor command and the Decision the teacher watches.
+
+Additions for worlds nobody tuned for (each documented where it is made):
+- the blueprint is never forgotten (`far_memory.FarMemory`): sites beyond the map, and
+  bricks that scrolled off it, enter the navigation maps at the border with the distance
+  that remains;
+- fixed obstacles and the world's edge are sensed (the OBSTACLE layer) and never entered;
+- Explore is the default behaviour when no construction output fires (§4.1: it "is
+  always excited");
+- an agent that makes no headway for `stuck_ticks` (two agents avoiding each other, a
+  body pushing into something) backs off in a random direction for a random while, so
+  agents that block each other separate within a bounded number of ticks.
 """
 
 from __future__ import annotations
 
 import math
+from collections import Counter, deque
 from dataclasses import dataclass
 
 import numpy as np
 
 from agent_runtime import steering
 from agent_runtime.config import AgentConfig
-from agent_runtime.esm import AGENT, BRICK, CONFIG, FOOD, WATER, EgocentricMaps
+from agent_runtime.esm import AGENT, BRICK, CONFIG, FOOD, OBSTACLE, WATER, EgocentricMaps
+from agent_runtime.far_memory import FarMemory, border_seed
 from agent_runtime.matching import Matching, calculate_matching, select_goals
 from agent_runtime.motivations import Motivations
 from agent_runtime.network import NONE, STATE_NODES, ActionNetwork, engineered
-from agent_runtime.spreading import distance_field, gradient_step
-from protocol.messages import CHANNELS, NO_READING, Decision, SensorFrame, Welcome
+from agent_runtime.spreading import distance_field, gradient_step, seeded_distance_field
+from protocol.messages import BEHAVIOURS, CHANNELS, NO_READING, AgentState, Decision, SensorFrame, Welcome
 
 _CH = {name: CHANNELS.index(name) for name in CHANNELS}
 
@@ -53,7 +66,18 @@ class Plans:
     brick_obstacles: np.ndarray | None = None
 
 
+# Behaviours during which standing still is the point (consuming, or heading for a source).
+_STILL_IS_FINE = frozenset({"eat", "drink", "approach_food", "approach_water"})
+
+
 class Brain:
+    """One agent's mind: its maps, plans and action selection, stepped once per sensor frame.
+
+    Built from the world's Welcome (pose, blueprint, sensor layout); `step(frame)` returns
+    the motor command and the Decision. `set_blueprint` takes a changed blueprint;
+    `state_report` says what the agent is doing and what blocks it.
+    """
+
     def __init__(self, welcome: Welcome, cfg: AgentConfig | None = None,
                  rng: np.random.Generator | None = None, network: ActionNetwork | None = None):
         self.cfg = cfg or AgentConfig()
@@ -65,6 +89,22 @@ class Brain:
         self.network = network or engineered()
         self.maps = EgocentricMaps(self.cfg.map_size)
         self.maps.seed_blueprint(welcome.x, welcome.y, welcome.site_xs, welcome.site_ys, welcome.cell_size)
+        # The attach cell, in world cells: the origin of the agent's odometry frame.
+        self._origin = np.floor(np.array([welcome.x, welcome.y]) / welcome.cell_size).astype(np.int64)
+        self.far = FarMemory(self.cfg.map_size, self._site_cells(welcome.site_xs, welcome.site_ys))
+        self.blueprint_version = welcome.blueprint_version
+        self.far.config_layer(self.maps.maps[CONFIG])
+        self.behaviour = NONE
+        self.behaviour_ticks: Counter[str] = Counter()
+        self._trail: deque[tuple[float, float]] = deque(maxlen=self.cfg.stuck_ticks)
+        self._moving: deque[bool] = deque(maxlen=self.cfg.stuck_ticks)
+        self._odo = np.zeros(2)            # dead-reckoned position in cells (for headway)
+        self._unstick_left = 0             # ticks of backing off still to go
+        self._unstick_heading = 0.0
+        self._leg_heading = 0.0            # the current straight leg of Explore ...
+        self._leg_left = 0                 # ... and the ticks it has to go
+        self.unsticks = 0                  # how often it had to back off
+        self._tick = welcome.tick
         self.motivations = Motivations()
         self.centre = self.cfg.map_size // 2
         self._attach_tick = welcome.tick
@@ -77,12 +117,38 @@ class Brain:
         """Update maps and motivations from a frame; returns its readings as (channels, sectors)."""
         raw = np.asarray(frame.ranges, dtype=np.float64).reshape(len(CHANNELS), frame.sectors)
         ranges = np.where(raw != NO_READING, raw / self.cell, NO_READING)  # in cells from here on
+        self._tick = frame.tick
         if frame.tick > self._attach_tick:  # the attach pose already includes the last move
-            self.maps.move(frame.odom_dx, frame.odom_dy, self.cell)
+            self._odo += (frame.odom_dx / self.cell, frame.odom_dy / self.cell)
+            layers = self.maps.maps
+            free = (layers[BRICK] > 0.5) & (layers[CONFIG] <= 0.5)
+            kx, ky = self.maps.move(frame.odom_dx, frame.odom_dy, self.cell)
+            if kx or ky:
+                back = self.far.move(kx, ky, free)
+                layers[BRICK][back] = 1.0
+                self.far.config_layer(layers[CONFIG])
         self._track_source(frame)
         self.maps.sense(ranges, self.sensor_range)
+        self.far.observe_sites(self.maps.maps[BRICK], self.maps.clear_age)
         self.motivations.update(self.cfg, frame.ate, frame.drank)
         return ranges
+
+    # the blueprint ------------------------------------------------------------------------
+    def _site_cells(self, xs, ys) -> np.ndarray:
+        """World site coordinates -> cells (x, y) relative to the attach cell."""
+        cells = np.floor(np.column_stack([np.asarray(xs, np.float64), np.asarray(ys, np.float64)]) / self.cell)
+        return cells.astype(np.int64).reshape(-1, 2) - self._origin
+
+    def set_blueprint(self, version: int, site_xs, site_ys) -> bool:
+        """A changed blueprint from the world (a `Blueprint` message); older versions are
+        ignored. Returns whether it was taken. The agent replans from its next step."""
+        if version <= self.blueprint_version:
+            return False
+        self.blueprint_version = version
+        self.far.set_sites(self._site_cells(site_xs, site_ys))
+        self.far.config_layer(self.maps.maps[CONFIG])
+        self._matching = None
+        return True
 
     def _track_source(self, frame: SensorFrame) -> None:
         """Remember where the held brick came from, by odometry, while it is held."""
@@ -122,7 +188,8 @@ class Brain:
         for `site_memory` ticks. Other agents in sight are obstacles on both maps.
         """
         m = self.maps.maps > 0.5
-        food, water, brick, config = m[FOOD], m[WATER], m[BRICK], m[CONFIG]
+        # Fixed obstacles (walls, the world's edge) are in the way exactly as food and water are.
+        food, water, brick, config = m[FOOD] | m[OBSTACLE], m[WATER], m[BRICK], m[CONFIG]
         # Other agents in sight are in the way too: two agents heading opposite ways down a
         # one-cell corridor would otherwise meet, back off and meet again for ever.
         agents = m[AGENT]
@@ -164,18 +231,28 @@ class Brain:
         """
         c = self.centre
         fields = []
+        far = (self.far.far_open_sites(), self.far.far_bricks())
         for k, (goals, obstacles) in enumerate(self.nav_masks()):
-            field = distance_field(goals, obstacles)
-            stuck = not goals.any() if k == 0 else not np.isfinite(field[c, c])
+            field = self._field(goals, obstacles, far[k])
+            stuck = not (goals.any() or len(far[k])) if k == 0 else not np.isfinite(field[c, c])
             if self.cfg.goal_sequencing and stuck:
                 goals, obstacles = self.nav_masks(sequenced=False)[k]
-                field = distance_field(goals, obstacles)
+                field = self._field(goals, obstacles, far[k])
             fields.append((field, goals, obstacles))
         (config, config_goals, config_obstacles), (brick, brick_goals, brick_obstacles) = fields
         matching = self._matching[1] if self.cfg.goal_sequencing and self._matching else None
         self.plans = Plans(config, brick, config_goals, brick_goals, self._nearest(brick_goals), matching,
                            config_obstacles, brick_obstacles)
         return self.plans
+
+    def _field(self, goals: np.ndarray, obstacles: np.ndarray, beyond: np.ndarray) -> np.ndarray:
+        """Distance field to `goals` and to the remembered cells `beyond` the map, which
+        enter at the border carrying the distance that remains."""
+        seed = border_seed(beyond, self.cfg.map_size, obstacles)
+        if seed is None:
+            return distance_field(goals, obstacles)
+        seed[goals & ~obstacles] = 0.0
+        return seeded_distance_field(seed, obstacles)
 
     def _nearest(self, cells: np.ndarray) -> tuple[float, float, float] | None:
         """Offset and straight-line distance (cells) to the nearest marked cell, or None."""
@@ -216,14 +293,71 @@ class Brain:
 
     # deciding ----------------------------------------------------------------------------
     def step(self, frame: SensorFrame) -> Step:
+        """One decision: perceive the frame, plan, choose, and the command that carries it out."""
         ranges = self.perceive(frame)
         plans = self.plan()
         state = self.state_nodes(frame, plans)
         choice = self.network.choose(state)
         speed, turn, action, behaviour = self._select(frame, ranges, plans, choice.arm, choice.motor)
+        speed, turn, action, behaviour = self._unstick(frame, speed, turn, action, behaviour)
+        self.behaviour = behaviour
+        self.behaviour_ticks[behaviour] += 1
         decision = Decision(self.agent_id, frame.tick, tuple(state.tolist()), choice.outputs,
                             choice.arm, choice.motor)
         return Step(speed, turn, action, behaviour, decision)
+
+    def _unstick(self, frame, speed, turn, action, behaviour):
+        """Back off in a random direction for a random while after `stuck_ticks` without
+        headway (the net distance covered stays under `stuck_distance` cells).
+
+        Two agents that block each other (each avoiding, then replanning into the other)
+        or a body pressed against something it cannot see would otherwise repeat the same
+        moves for ever; the random heading and length (the injected generator) break the
+        symmetry, so such a deadlock lasts a bounded number of ticks.
+        """
+        if self._unstick_left > 0:
+            self._unstick_left -= 1
+            if self._unstick_left == 0:
+                self._trail.clear()
+                self._moving.clear()
+            return (*steering.steer_to(math.cos(self._unstick_heading), math.sin(self._unstick_heading),
+                                       frame.heading, self.cfg.cruise_speed), NONE, "unstick")
+        self._trail.append((float(self._odo[0]), float(self._odo[1])))
+        self._moving.append(behaviour not in _STILL_IS_FINE)
+        full = len(self._trail) == self._trail.maxlen
+        if full and all(self._moving):
+            pts = np.asarray(self._trail)
+            if float(np.hypot(*(pts.max(axis=0) - pts.min(axis=0)))) < self.cfg.stuck_distance:
+                self.unsticks += 1
+                self._unstick_left = int(self.rng.integers(self.cfg.stuck_ticks // 4, self.cfg.stuck_ticks // 2 + 1))
+                self._unstick_heading = float(self.rng.uniform(-math.pi, math.pi))
+        return speed, turn, action, behaviour
+
+    # reporting -----------------------------------------------------------------------------
+    def state_report(self, tick: int) -> AgentState:
+        """What the agent is doing and, if it is not building, why (an AgentState)."""
+        return AgentState(agent_id=self.agent_id, tick=max(int(tick), 0), behaviour=self.behaviour,
+                          holding=self._taken_from is not None, sites_open=self.far.open_sites(),
+                          blocker=self.blocker(), behaviour_ticks=tuple(self.behaviour_ticks[b] for b in BEHAVIOURS))
+
+    def blocker(self) -> str:
+        """In words, what keeps the agent from building now ("" when nothing does)."""
+        p, c = self.plans, self.centre
+        if p is None:
+            return "has not planned yet"
+        open_sites = self.far.open_sites()
+        if self._unstick_left > 0:
+            return f"made no headway for {self.cfg.stuck_ticks} ticks: backing off"
+        if open_sites == 0:
+            return "believes every site is filled"
+        holding = self._taken_from is not None
+        if holding and not np.isfinite(p.config[c, c]):
+            return f"holds a brick but no open site is reachable ({open_sites} believed open)"
+        if not holding and not p.brick_goals.any() and not len(self.far.bricks):
+            return "knows no free brick: exploring"
+        if not holding and not np.isfinite(p.brick[c, c]):
+            return "no known free brick is reachable"
+        return ""
 
     def _select(self, frame, ranges, plans, arm, motor):
         """Fixed priority by lateral inhibition: eat/drink > avoid > approach food/water > build."""
@@ -243,11 +377,11 @@ class Brain:
                 field = self._need_field(layer)
                 if np.isfinite(field[self.centre, self.centre]):
                     return (*self._navigate(field, frame.heading), NONE, name)
-        return (*self._construct(frame, ranges, plans, motor, arm), arm, motor)
+        return (*self._construct(frame, ranges, plans, motor, arm), arm, motor if motor != NONE else "explore")
 
     def _need_field(self, layer: int) -> np.ndarray:
         m = self.maps.maps > 0.5
-        others = (m[FOOD] | m[WATER] | m[BRICK]) & ~m[layer]
+        others = (m[FOOD] | m[WATER] | m[BRICK] | m[OBSTACLE]) & ~m[layer]
         return distance_field(m[layer], self._free_centre(others))
 
     def _construct(self, frame, ranges, plans, motor, arm=NONE) -> tuple[float, float]:
@@ -268,15 +402,40 @@ class Brain:
             if _nearest(ranges[_CH["brick"]]) < self.sensor_range:
                 return steering.away_from(*self._reading_offset(ranges[_CH["brick"]]), frame.heading, cruise)
             return steering.explore(frame.heading, self.rng, self.cfg.explore_turn, cruise)
-        if motor == "explore":
-            return steering.explore(frame.heading, self.rng, self.cfg.explore_turn, cruise)
-        return 0.0, 0.0
+        # Explore is always excited (§4.1): the default when no construction output fires.
+        return self._explore(frame.heading)
+
+    def _explore(self, heading: float) -> tuple[float, float]:
+        """Wander in straight legs of random heading and length, a new leg when something
+        fixed lies just ahead.
+
+        A heading that drifts a little every tick (a plain random walk) covers ground in
+        proportion to the square root of the time: on a large world an agent with no brick
+        in view could take tens of thousands of ticks to find the supply. Legs of 40-160
+        ticks cover it in proportion to the time, and stay random (the injected generator).
+        """
+        if self._leg_left <= 0 or self._blocked_ahead(self._leg_heading):
+            self._leg_heading = float(self.rng.uniform(-math.pi, math.pi))
+            self._leg_left = int(self.rng.integers(40, 161))
+        self._leg_left -= 1
+        speed, turn = steering.steer_to(math.cos(self._leg_heading), math.sin(self._leg_heading), heading,
+                                        self.cfg.cruise_speed)
+        # Wobble a little, as the paper's random Explore does, so two legs never retrace exactly.
+        return speed, turn + float(self.rng.uniform(-0.1, 0.1)) * self.cfg.explore_turn
+
+    def _blocked_ahead(self, angle: float) -> bool:
+        """Is the cell 1.5 cells along `angle` held by something that never moves?"""
+        r, c = self.maps.cell_of(1.5 * math.cos(angle), 1.5 * math.sin(angle))
+        if not self.maps.contains(r, c):
+            return True
+        m = self.maps.maps
+        return bool(max(m[OBSTACLE, r, c], m[FOOD, r, c], m[WATER, r, c]) > 0.5)
 
     def _navigate(self, field: np.ndarray, heading: float) -> tuple[float, float]:
         """Follow the steepest gradient: steer for the centre of the best neighbouring cell."""
         move = gradient_step(field)
         if move is None:  # nothing reachable on this map: look around
-            return steering.explore(heading, self.rng, self.cfg.explore_turn, self.cfg.cruise_speed)
+            return self._explore(heading)
         dr, dc = move
         dx, dy = self.maps.offset_of(self.centre + dr, self.centre + dc)
         return steering.steer_to(float(dx), float(dy), heading, self.cfg.cruise_speed)

@@ -30,6 +30,8 @@ class AgentConfig:
                                     # False gives the plain nearest-first agent of §4
     site_memory: float = 300.0      # an open site not seen for this many ticks may have been
                                     # filled by another agent: no planned path may cross it
+    stuck_ticks: int = 120          # no headway for this many ticks (net < stuck_distance cells)
+    stuck_distance: float = 1.5     # ... makes the agent back off for stuck_ticks/4 to /2 ticks
 
     def __post_init__(self) -> None:
         if not (isinstance(self.map_size, int) and self.map_size >= 5 and self.map_size % 2 == 1):
@@ -38,6 +40,8 @@ class AgentConfig:
             v = getattr(self, f.name)
             if isinstance(v, float) and not (math.isfinite(v) and v >= 0):
                 raise ValueError(f"agent.{f.name} must be a finite number >= 0")
+        if not (isinstance(self.stuck_ticks, int) and self.stuck_ticks >= 8):
+            raise ValueError("agent.stuck_ticks must be an integer >= 8")
         if not isinstance(self.goal_sequencing, bool):
             raise ValueError("agent.goal_sequencing must be true or false")
 

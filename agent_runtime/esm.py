@@ -1,9 +1,10 @@
 """Egocentric spatial maps (paper §4.2.1, Fig. 4; MISSION A2).
 
 One square grid per kind of thing the agent keeps track of, stacked in one float32
-array `maps[layer, row, col]`: FOOD, WATER, BRICK (written from the sector sensors),
-CONFIG (the blueprint, seeded once at attach) and AGENT (other agents, rewritten from
-scratch each step because they move). One map cell is one world cell (one disc
+array `maps[layer, row, col]`: FOOD, WATER, BRICK, OBSTACLE (fixed walls and the world's
+edge; all four written from the sector sensors), CONFIG (the blueprint: the sites of
+`blueprint.SiteMemory` that fall on the map, rewritten by the Brain) and AGENT (other
+agents, rewritten from scratch each step because they move). One map cell is one world cell (one disc
 diameter); row 0 is the northmost row, columns grow eastwards, and the agent is always
 in the centre cell (size // 2, size // 2).
 
@@ -36,12 +37,14 @@ from numba import njit
 
 from protocol.messages import CHANNELS, NO_READING
 
-FOOD, WATER, BRICK, CONFIG, AGENT = range(5)   # layer indices
-LAYERS = 5
-# Map layer fed by each sensor channel, in CHANNELS order (food, water, brick, agent).
-_CHANNEL_LAYER = np.array([{"food": FOOD, "water": WATER, "brick": BRICK, "agent": AGENT}[c] for c in CHANNELS])
+FOOD, WATER, BRICK, OBSTACLE, CONFIG, AGENT = range(6)   # layer indices
+LAYERS = 6
+# Map layer fed by each sensor channel, in CHANNELS order (food, water, brick, obstacle, agent).
+_CHANNEL_LAYER = np.array([{"food": FOOD, "water": WATER, "brick": BRICK, "obstacle": OBSTACLE,
+                            "agent": AGENT}[c] for c in CHANNELS])
 _LAYER_BASE = _CHANNEL_LAYER[:, None].astype(np.float64)  # (channels, 1), broadcast over sectors
-_DISC_CHANNELS = 3             # the first three channels are discs, cleared by their sectors
+_DISC_CHANNELS = 4             # the first four channels are fixed things, cleared by their sectors
+assert all(_CHANNEL_LAYER[:_DISC_CHANNELS] == np.arange(_DISC_CHANNELS))  # layer = channel for these
 _BRICK_CH = CHANNELS.index("brick")
 CLEAR_MARGIN = 0.75            # clear only cells nearer than reading - this (a disc's cell centre
                                # can be up to 0.71 cell nearer than the disc, plus a little noise)
@@ -50,7 +53,7 @@ BAND = 0.75                    # cells this close to a reading's distance may ho
 
 
 class EgocentricMaps:
-    """The agent's ESMs: `maps` (5, size, size) float32 and the sub-cell offset `frac`."""
+    """The agent's ESMs: `maps` (LAYERS, size, size) float32 and the sub-cell offset `frac`."""
 
     def __init__(self, size: int = 41):
         if not (isinstance(size, int) and size >= 1 and size % 2 == 1):
@@ -109,8 +112,9 @@ class EgocentricMaps:
 
     # ------------------------------------------------------------------ odometry
 
-    def move(self, dx: float, dy: float, cell_size: float = 1.0) -> None:
-        """Dead reckoning: the agent moved (dx, dy) world units (x east, y north) this tick."""
+    def move(self, dx: float, dy: float, cell_size: float = 1.0) -> tuple[int, int]:
+        """Dead reckoning: the agent moved (dx, dy) world units (x east, y north) this tick.
+        Returns the whole cells (east, north) it crossed, by which the maps shifted."""
         if not (math.isfinite(dx) and math.isfinite(dy)):
             raise ValueError(f"odometry must be finite, got ({dx!r}, {dy!r})")
         fx, kx = _wrap(float(self.frac[0]) + dx / cell_size)
@@ -118,6 +122,7 @@ class EgocentricMaps:
         self.frac[:] = (fx, fy)
         if kx or ky:
             self._shift(kx, ky)
+        return kx, ky
 
     def _shift(self, kx: int, ky: int) -> None:
         """The agent entered the cell kx east, ky north: move all contents the other way.

@@ -11,6 +11,10 @@ before each step the agent applies every reinforcement that has arrived to the d
 it answers (`student_link.StudentLink`; with a teacher present it waits up to `wait`
 seconds for the answer to its last step), and saves its weights every `save_every` ticks
 and on the way out. With no teacher on the bus it keeps acting on its current weights.
+
+Blueprint changes and state reports go through `world_feeds.AgentFeeds`: the newest
+blueprint is applied before each step, an AgentState is published every 100 ticks and
+on exit.
 """
 
 from __future__ import annotations
@@ -25,6 +29,7 @@ from agent_runtime.config import AgentConfig
 from agent_runtime.learning import Student
 from agent_runtime.link import WorldLink
 from agent_runtime.student_link import StudentLink
+from agent_runtime.world_feeds import AgentFeeds
 from protocol import keys
 from protocol.codec import encode
 
@@ -77,6 +82,8 @@ def run_agent(session, world_id: str, agent_id: str, cfg: AgentConfig, seed: int
     report = report if report is not None else AgentReport()
     student = learning.student(seed) if learning else network  # a bad weights file fails before attaching
     link = WorldLink(session, world_id, agent_id)
+    feeds = AgentFeeds(session, world_id, agent_id)  # before attaching: no blueprint change is missed
+    brain, tick = None, 0
     teacher = StudentLink(session, world_id, agent_id) if learning else None
     decisions = None if learning else session.declare_publisher(keys.decision(world_id, agent_id), express=True)
     report.student, report.link = student, teacher
@@ -94,6 +101,7 @@ def run_agent(session, world_id: str, agent_id: str, cfg: AgentConfig, seed: int
             if teacher is not None:
                 for d, r in teacher.poll(wait=learning.wait):
                     student.learn(d.state, d.arm, d.motor, r.arm, r.motor, learning.eta)
+            feeds.before_step(brain)
             step = brain.step(frame)
             link.send(frame.tick, step.speed, step.turn, step.action)
             if teacher is not None:
@@ -102,11 +110,13 @@ def run_agent(session, world_id: str, agent_id: str, cfg: AgentConfig, seed: int
                 decisions.put(encode(step.decision))
             tick = frame.tick
             report.ticks += 1
+            feeds.after_step(brain, tick)
             if learning and report.ticks % learning.save_every == 0:
                 if learning.weights_out:
                     student.save(learning.weights_out)
                 log.info("agent %s tick %d: %s", agent_id, tick, _progress(teacher))
     finally:
+        feeds.close(brain, max(tick, 0))
         if learning and learning.weights_out:
             student.save(learning.weights_out)
         if teacher is not None:

@@ -16,7 +16,7 @@ never radiate; a diagonal step from (r, c) to (r+dr, c+dc) needs both (r+dr, c) 
 touch diagonally. A goal cell that is also an obstacle is an obstacle. Arrays are
 indexed [row, col].
 
-API: `distance_field`, `activation`, `gradient_step`, `spread_iterative`. Pure numpy and
+API: `distance_field`, `seeded_distance_field`, `activation`, `gradient_step`, `spread_iterative`. Pure numpy and
 numba: no bus, no world.
 """
 
@@ -129,6 +129,87 @@ def _field_kernel(goals, obstacles):
     return dist.reshape((n + 2, w))[1:n + 1, 1:m + 1].copy()
 
 
+@njit(cache=True)
+def _seeded_kernel(seed, obstacles):
+    """dist[N, M] to the cheapest source, a source cell starting at its own cost `seed`
+    (inf: not a source). The same bucket queue as `_field_kernel`; sources enter their
+    bucket only when the search reaches it, so the ring of four buckets still suffices."""
+    n, m = seed.shape
+    w = m + 2
+    state = _padded_state(obstacles)
+    size = state.size
+    dist = np.full(size, np.inf)
+    bucket_of = np.full(size, -1, np.int32)
+    # Up to two entries per cell from relaxations, as in `_field_kernel`, plus one as a source.
+    node = np.empty(3 * size, np.int32)
+    nxt = np.empty(3 * size, np.int32)
+    head = np.full(4, -1, np.int32)
+    off = _DR * w + _DC
+    count = 0
+    for r in range(n):
+        for c in range(m):
+            if seed[r, c] < np.inf and not obstacles[r, c]:
+                count += 1
+    src = np.empty(count, np.int64)
+    src_d = np.empty(count)
+    i = 0
+    for r in range(n):
+        for c in range(m):
+            if seed[r, c] < np.inf and not obstacles[r, c]:
+                src[i] = (r + 1) * w + c + 1
+                src_d[i] = seed[r, c]
+                i += 1
+    order = np.argsort(src_d)
+    si = 0
+    used = 0
+    pending = 0
+    k = 0
+    while pending > 0 or si < count:
+        if pending == 0:
+            k = max(k, int(src_d[order[si]]))
+        while si < count and int(src_d[order[si]]) <= k:
+            u = src[order[si]]
+            d = src_d[order[si]]
+            si += 1
+            if d < dist[u] and state[u] == _OPEN:
+                dist[u] = d
+                bucket_of[u] = int(d)
+                node[used] = u
+                nxt[used] = head[int(d) & 3]
+                head[int(d) & 3] = used
+                used += 1
+                pending += 1
+        e = head[k & 3]
+        head[k & 3] = -1
+        while e != -1:
+            u = node[e]
+            e = nxt[e]
+            pending -= 1
+            if state[u] == _DONE:
+                continue
+            state[u] = _DONE
+            du = dist[u]
+            for j in range(8):
+                v = u + off[j]
+                if state[v] != _OPEN:
+                    continue
+                if j >= 4 and (state[u + _DR[j] * w] == _WALL or state[u + _DC[j]] == _WALL):
+                    continue
+                nd = du + _STEP[j]
+                if nd < dist[v]:
+                    dist[v] = nd
+                    b = int(nd)
+                    if b != bucket_of[v]:
+                        bucket_of[v] = b
+                        node[used] = v
+                        nxt[used] = head[b & 3]
+                        head[b & 3] = used
+                        used += 1
+                        pending += 1
+        k += 1
+    return dist.reshape((n + 2, w))[1:n + 1, 1:m + 1].copy()
+
+
 # --- public API -----------------------------------------------------------------------
 
 
@@ -146,6 +227,20 @@ def distance_field(goals: np.ndarray, obstacles: np.ndarray) -> np.ndarray:
     nearest goal; np.inf on obstacles and on cells that cannot reach a goal."""
     goals, obstacles = _bool_grids(goals, obstacles)
     return _field_kernel(goals, obstacles)
+
+
+def seeded_distance_field(seed: np.ndarray, obstacles: np.ndarray) -> np.ndarray:
+    """Like `distance_field`, but every cell with a finite `seed` is a goal that starts at
+    that cost instead of 0: the distance from each cell to min over goals g of
+    (path to g + seed[g]). A goal beyond the map enters at the border this way, carrying
+    the distance that remains (the activation spreads in from outside, Eq. 2 unchanged)."""
+    seed = np.ascontiguousarray(seed, dtype=np.float64)
+    _, obstacles = _bool_grids(np.zeros(seed.shape, bool), obstacles)
+    if seed.shape != obstacles.shape:
+        raise ValueError(f"seed {seed.shape} and obstacles {obstacles.shape} must be equal 2-D shapes")
+    if np.any(seed < 0) or np.any(np.isnan(seed)):
+        raise ValueError("seed costs must be >= 0 (inf: not a goal)")
+    return _seeded_kernel(seed, obstacles)
 
 
 def _default_decay(dist: np.ndarray) -> float:

@@ -2,12 +2,14 @@
 
     conag world SCENARIO      serve a world (loopback peer mode by default)
     conag status              print what a running world reports
-    conag perturb OP ...      remove, add or move a disc in a running world
+    conag perturb OP ...      remove, add or move a disc, add or remove a drop site, in a running world
     conag render SCENARIO     draw a scenario as a bird's-eye PNG
     conag router              run a zenoh router (for several hosts)
     conag agent --id ID       one agent process (--learn: a student learning from the teacher)
     conag teacher             the teacher process: reinforces learning students (paper §5.1)
     conag run SCENARIO        a world and its agents as processes, until the structure is done
+    conag generate --seed N   write seeded, buildable scenario files (or a --suite of them)
+    conag check FILE...       parse scenario files and check their structure can be built
 
 Every process that touches the bus takes --zenoh-config FILE, --connect ENDPOINT,
 --listen ENDPOINT and --mode. Ctrl-C and SIGTERM stop a process cleanly.
@@ -26,9 +28,15 @@ from contextlib import contextmanager
 from dataclasses import asdict
 
 from conag.bus import MODES, BusOptions, open_session
+from conag.layouts import add_commands as add_layout_commands
 from conag.summary import write_summary
 
 EXIT_USAGE = 2
+EXIT_INCOMPLETE = 3  # conag run: the tick limit passed (or it was stopped) before the structure was complete
+EXIT_STALLED = 4     # conag run: no site was filled for --stall-ticks ticks
+RUN_EPILOG = f"""exit codes: 0 the structure is complete; 1 an error; {EXIT_USAGE} a usage or scenario error;
+{EXIT_INCOMPLETE} not complete when the tick limit passed or the run was stopped; {EXIT_STALLED} stalled: no site was
+filled for --stall-ticks ticks (a report of every agent's position, behaviour and blocker is printed first)"""
 AGENT_MAP_SIZE = 41  # AgentConfig's default, without importing the agent for --help
 
 
@@ -96,7 +104,7 @@ def cmd_world(args) -> int:
             session.close()
     print("final: " + _status_line(final), flush=True)
     if args.summary:
-        write_summary(final, args.summary)
+        write_summary(final, args.summary, server.agent_states)
     return 0
 
 
@@ -147,6 +155,16 @@ def cmd_status(args) -> int:
         session.close()
 
 
+def _non_negative(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}")
+    return value
+
+
 def _point(text: str) -> tuple[float, float]:
     try:
         x, y = (float(v) for v in text.split(","))
@@ -164,7 +182,7 @@ def cmd_perturb(args) -> int:
         print("error: move needs --to X,Y", file=sys.stderr)
         return EXIT_USAGE
     to = args.to or (0.0, 0.0)
-    msg = Perturbation(args.op, args.at[0], args.at[1], args.kind, to[0], to[1])
+    msg = Perturbation(args.op.replace("-", "_"), args.at[0], args.at[1], args.kind, to[0], to[1])
     session = open_session(_bus(args))
     try:
         deadline = time.monotonic() + args.timeout
@@ -295,6 +313,7 @@ def cmd_teacher(args) -> int:
 
 def cmd_run(args) -> int:
     from conag.bus import DEFAULT_ENDPOINT
+    from conag.layouts import warn_if_unbuildable
     from conag.run import RunOptions, run
     from world_server.scenario import load_scenario
 
@@ -304,16 +323,18 @@ def cmd_run(args) -> int:
     if not args.learn and (args.eta is not None or args.weights_dir):
         raise ValueError("--eta and --weights-dir need --learn")
     learn_args = ("--learn", "--eta", str(0.1 if args.eta is None else args.eta)) if args.learn else ()
-    opts = RunOptions(scenario_path=args.scenario, scenario=load_scenario(args.scenario),
+    scenario = load_scenario(args.scenario)
+    warn_if_unbuildable(args.scenario, scenario, args.agents)  # still runs: a repair experiment may want it
+    opts = RunOptions(scenario_path=args.scenario, scenario=scenario,
                       endpoint=(args.listen or [DEFAULT_ENDPOINT])[0], world_id=args.world_id,
                       agents=args.agents, seed=args.seed, max_ticks=args.max_ticks, summary=args.summary,
                       headless=args.headless, quiet=args.quiet,
                       extra_agent_args=("--map-size", str(args.map_size), *learn_args,
                                         *(("--nearest-first",) if args.nearest_first else ())),
-                      teacher=args.teacher, weights_dir=args.weights_dir)
+                      teacher=args.teacher, weights_dir=args.weights_dir, stall_ticks=args.stall_ticks)
     with _stop_on_signals() as stop:
         summary = run(opts, stop)
-    state = "complete" if summary["completed"] else "NOT complete"
+    state = "complete" if summary["completed"] else "STALLED" if summary["stalled"] else "NOT complete"
     print(f"{summary['scenario']}: {state}: {summary['sites_filled']}/{summary['sites_total']} sites in "
           f"{summary['ticks']} ticks, {len(summary['agents'])} agents, total distance "
           f"{summary['total_distance']:.1f}")
@@ -321,7 +342,7 @@ def cmd_run(args) -> int:
         print(json.dumps(summary, indent=2))
     elif args.summary:
         print(f"summary written to {args.summary}")
-    return 0 if summary["completed"] else 3
+    return 0 if summary["completed"] else EXIT_STALLED if summary["stalled"] else EXIT_INCOMPLETE
 
 
 def cmd_control(args) -> int:
@@ -362,8 +383,10 @@ def build_parser() -> argparse.ArgumentParser:
     _bus_args(s)
     s.set_defaults(func=cmd_status)
 
-    q = sub.add_parser("perturb", help="remove, add or move a disc in a running world")
-    q.add_argument("op", choices=("remove", "add", "move"))
+    q = sub.add_parser("perturb", help="remove, add or move a disc, add or remove a drop site, in a running world")
+    q.add_argument("op", choices=("remove", "add", "move", "add-site", "remove-site"),
+                   help="add-site: the cell holding --at becomes a drop site; remove-site: its site leaves "
+                        "the blueprint (a brick on it stays, a free brick now)")
     q.add_argument("--at", type=_point, required=True, metavar="X,Y", help="world position (cell centres are at .5)")
     q.add_argument("--to", type=_point, metavar="X,Y", help="target position for move")
     q.add_argument("--kind", choices=("food", "water", "brick"), default="brick", help="kind for add")
@@ -396,11 +419,14 @@ def build_parser() -> argparse.ArgumentParser:
     _bus_args(t)
     t.set_defaults(func=cmd_teacher)
 
-    u = sub.add_parser("run", help="build a scenario: a world and its agents as processes, until done")
+    u = sub.add_parser("run", help="build a scenario: a world and its agents as processes, until done",
+                       epilog=RUN_EPILOG)
     u.add_argument("scenario")
     u.add_argument("--agents", type=int, help="number of agents (default: the scenario's)")
     u.add_argument("--seed", type=int, help="override the scenario's seed")
     u.add_argument("--max-ticks", type=int, help="stop after this many ticks (default: the scenario's)")
+    u.add_argument("--stall-ticks", type=_non_negative, default=3000, metavar="N",
+                   help="stop as stalled when no site has been filled for N ticks (default 3000; 0: never)")
     u.add_argument("--summary", metavar="PATH", help="write the run summary (JSON); - prints it")
     u.add_argument("--headless", action="store_true", help="plain progress lines, no terminal tricks")
     u.add_argument("--quiet", action="store_true", help="no progress lines")
@@ -434,6 +460,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--agent", metavar="ID", help="agent for --agent-maps (default a1)")
     r.add_argument("--ticks", type=int, metavar="N", help="lockstep ticks to run first (default 0)")
     r.set_defaults(func=cmd_render)
+
+    add_layout_commands(sub)  # generate, check (conag/layouts.py)
 
     z = sub.add_parser("router", help="run a zenoh router for several hosts")
     z.add_argument("--zenoh-config", metavar="FILE")

@@ -4,7 +4,9 @@ The world, every agent and (with `--teacher`) the teacher are separate processes
 interpreters: nothing crosses a fork). This process watches the world's status, shows
 progress, answers `conag kill` / `conag restart` (a RunControl query on the bus), and
 once the structure is complete or the tick limit passes, stops everything and writes the
-run summary.
+run summary. A run that fills no site for `stall_ticks` ticks is stalled: it prints why
+(`StallWatch`: each agent's position and last AgentState), stops everything and is
+marked `stalled` in the summary, so a stuck build never just sits there until the limit.
 """
 
 from __future__ import annotations
@@ -20,9 +22,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from conag.bus import BusOptions, open_session
+from conag.stall import DEFAULT_STALL_TICKS, StallClock, stall_report
 from protocol import keys
 from protocol.codec import ProtocolError, decode, encode
-from protocol.messages import RunControl, RunControlResult, WorldStatus
+from protocol.messages import AgentState, RunControl, RunControlResult, WorldStatus
 from world_server.scenario import Scenario
 
 
@@ -41,6 +44,7 @@ class RunOptions:
     extra_agent_args: tuple[str, ...] = ()
     teacher: bool = False             # also run a teacher process (`conag teacher`)
     weights_dir: str | None = None    # learning agents save their weights to weights_dir/<id>.json
+    stall_ticks: int = DEFAULT_STALL_TICKS  # stop when no site is filled for this many ticks; 0: never
 
 
 @dataclass
@@ -98,6 +102,36 @@ class Fleet:
                 p.wait(5)
 
 
+class StallWatch:
+    """Sees the world's statuses and the agents' AgentStates; once no site has been filled
+    for `limit` ticks (0: never) it keeps the stall report and sets `stalled`."""
+
+    def __init__(self, world_id: str, limit: int):
+        self.world_id = world_id
+        self.clock = StallClock(limit) if limit > 0 else None
+        self.states: dict[str, AgentState] = {}
+        self.stalled = threading.Event()
+        self.report: list[str] = []
+
+    def on_status(self, st: WorldStatus) -> None:
+        if self.clock is None or self.stalled.is_set():
+            return
+        if self.clock.observe(st.tick, st.sites_filled, st.sites_total):
+            self.report = stall_report(st, self.clock.idle(st.tick), dict(self.states))
+            self.stalled.set()
+
+    def on_state(self, sample) -> None:
+        try:
+            state = decode(sample.payload.to_bytes(), AgentState)
+        except ProtocolError:
+            return
+        if state.agent_id == keys.agent_of(str(sample.key_expr)):
+            self.states[state.agent_id] = state
+
+    def declare(self, session) -> object:
+        return session.declare_subscriber(keys.all_agents(self.world_id, "state"), self.on_state)
+
+
 def _progress(st: WorldStatus, started: float) -> str:
     return (f"tick {st.tick:>7}  sites {st.sites_filled}/{st.sites_total}  "
             f"agents alive {st.agents_alive}/{len(st.agent_ids)}  {time.monotonic() - started:6.1f} s"
@@ -106,16 +140,9 @@ def _progress(st: WorldStatus, started: float) -> str:
 
 def run(opts: RunOptions, stop: threading.Event) -> dict:
     """Run the scenario; returns the run summary (also written to opts.summary)."""
-    sc = opts.scenario
-    n_agents = sc.agents if opts.agents is None else opts.agents
-    max_ticks = opts.max_ticks or sc.max_ticks
+    n_agents = opts.scenario.agents if opts.agents is None else opts.agents
     final_path = Path(tempfile.mkdtemp(prefix="conag-run-")) / "final.json"
-    world_cmd = [sys.executable, "-m", "conag", "world", opts.scenario_path, "--world-id", opts.world_id,
-                 "--listen", opts.endpoint, "--ticks", str(max_ticks), "--stop-when-complete",
-                 "--wait-agents", str(max(n_agents, 1)), "--quiet", "--summary", str(final_path)]
-    if opts.seed is not None:
-        world_cmd += ["--seed", str(opts.seed)]
-    world = subprocess.Popen(world_cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
+    world = _start_world(opts, n_agents, final_path)
     if opts.weights_dir:
         Path(opts.weights_dir).mkdir(parents=True, exist_ok=True)
     teacher = None
@@ -124,18 +151,74 @@ def run(opts: RunOptions, stop: threading.Event) -> dict:
                                     "--connect", opts.endpoint, "--quiet"], stdin=subprocess.DEVNULL,
                                    stdout=subprocess.DEVNULL)
     fleet = Fleet(opts)
+    watch = StallWatch(opts.world_id, opts.stall_ticks)
     session = open_session(BusOptions(connect=(opts.endpoint,)))
-    started = time.monotonic()
     tty = sys.stdout.isatty() and not opts.headless
+    subs = [session.declare_subscriber(keys.status(opts.world_id), _on_status(opts, watch, tty)),
+            session.declare_queryable(keys.run_control(opts.world_id), _on_control(fleet)),
+            watch.declare(session)]
+    try:
+        for i in range(n_agents):
+            fleet.start(f"a{i + 1}")
+        while world.poll() is None and not stop.is_set() and not watch.stalled.is_set():
+            time.sleep(0.1)
+        if watch.stalled.is_set():
+            print(("\n" if tty else "") + "\n".join(watch.report), flush=True)
+    finally:
+        _stop(world, grace=10.0)
+        fleet.stop_all()
+        if teacher is not None:
+            _stop(teacher)
+        for s in subs:
+            s.undeclare()
+        session.close()
+    if tty and not watch.stalled.is_set():
+        print()
+    summary = _final_summary(final_path, world)
+    summary["stalled"] = watch.stalled.is_set()
+    if opts.summary and opts.summary != "-":
+        Path(opts.summary).write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    return summary
+
+
+def _start_world(opts: RunOptions, n_agents: int, final_path: Path) -> subprocess.Popen:
+    """The world process; it stops by itself when complete or out of ticks, writing `final_path`."""
+    cmd = [sys.executable, "-m", "conag", "world", opts.scenario_path, "--world-id", opts.world_id,
+           "--listen", opts.endpoint, "--ticks", str(opts.max_ticks or opts.scenario.max_ticks),
+           "--stop-when-complete", "--wait-agents", str(max(n_agents, 1)), "--quiet", "--summary", str(final_path)]
+    if opts.seed is not None:
+        cmd += ["--seed", str(opts.seed)]
+    return subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
+
+
+def _final_summary(final_path: Path, world: subprocess.Popen) -> dict:
+    if not final_path.exists():
+        raise RuntimeError(f"the world exited ({world.returncode}) without a final status")
+    summary = json.loads(final_path.read_text(encoding="utf-8"))
+    final_path.unlink()
+    final_path.parent.rmdir()
+    return summary
+
+
+def _on_status(opts: RunOptions, watch: StallWatch, tty: bool):
+    """The status subscriber: the stall watch sees every status; progress lines until a stall."""
+    started = time.monotonic()
 
     def on_status(sample):
         try:
             st = decode(sample.payload.to_bytes(), WorldStatus)
         except ProtocolError:
             return
-        if not opts.quiet:
+        watch.on_status(st)
+        if not opts.quiet and not watch.stalled.is_set():
             line = _progress(st, started)
             print(("\r" + line) if tty else line, end="" if tty else "\n", flush=True)
+
+    return on_status
+
+
+def _on_control(fleet: Fleet):
+    """The RunControl queryable: `conag kill` / `conag restart` of one agent process."""
 
     def on_control(query):
         try:
@@ -149,36 +232,7 @@ def run(opts: RunOptions, stop: threading.Event) -> dict:
         query.reply(query.key_expr, encode(result))
         query.drop()
 
-    subs = [session.declare_subscriber(keys.status(opts.world_id), on_status),
-            session.declare_queryable(keys.run_control(opts.world_id), on_control)]
-    try:
-        for i in range(n_agents):
-            fleet.start(f"a{i + 1}")
-        while world.poll() is None and not stop.is_set():
-            time.sleep(0.1)
-    finally:
-        if world.poll() is None:
-            world.send_signal(signal.SIGTERM)
-        try:
-            world.wait(10)
-        except subprocess.TimeoutExpired:
-            world.kill()
-        fleet.stop_all()
-        if teacher is not None:
-            _stop(teacher)
-        for s in subs:
-            s.undeclare()
-        session.close()
-    if tty:
-        print()
-    if not final_path.exists():
-        raise RuntimeError(f"the world exited ({world.returncode}) without a final status")
-    summary = json.loads(final_path.read_text(encoding="utf-8"))
-    final_path.unlink()
-    final_path.parent.rmdir()
-    if opts.summary and opts.summary != "-":
-        Path(opts.summary).write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
-    return summary
+    return on_control
 
 
 def _stop(proc: subprocess.Popen, grace: float = 5.0) -> None:

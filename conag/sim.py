@@ -2,10 +2,14 @@
 
 The same World and Brain code as the processes, in lockstep, for tests and experiments
 that need many runs quickly. `conag run` is the real thing: one process per agent.
+`SimRun.perturb` changes the world as `conag perturb` does, handing a changed blueprint
+to every brain as the Blueprint message does on the bus; `run(..., stall_ticks=N)` gives
+up as `conag run --stall-ticks N` does, and `stall_report()` says what each agent was at.
 """
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -13,8 +17,22 @@ import numpy as np
 
 from agent_runtime.brain import Brain, Step
 from agent_runtime.config import AgentConfig
+from conag.stall import StallClock, stall_report
+from protocol.messages import SITE_OPS, Perturbation, PerturbResult
 from world_server.scenario import Scenario
 from world_server.world import World
+
+
+@dataclass(frozen=True)
+class SimResult:
+    """How `SimRun.run` ended; true when the structure is complete (as the old bool was)."""
+
+    completed: bool
+    stalled: bool
+    ticks: int  # the world's tick at the end
+
+    def __bool__(self) -> bool:
+        return self.completed
 
 
 @dataclass
@@ -22,14 +40,17 @@ class SimRun:
     world: World
     brains: dict[str, Brain] = field(default_factory=dict)
     behaviours: dict[str, str] = field(default_factory=dict)
+    behaviour_ticks: dict[str, Counter] = field(default_factory=dict)  # agent -> behaviour -> ticks
     filled_at: np.ndarray | None = None  # per site (world order), the tick it was last filled; -1: empty
     on_step: Callable[[str, Step], None] | None = None  # sees every decision (the teacher's view)
+    stall: StallClock | None = None  # the last run's, when it watched for stalls
 
     def step(self) -> None:
         """One lockstep tick: every brain answers its frame, then the world steps."""
         for frame in self.world.frames():
             s = self.brains[frame.agent_id].step(frame)
             self.behaviours[frame.agent_id] = s.behaviour
+            self.behaviour_ticks.setdefault(frame.agent_id, Counter())[s.behaviour] += 1
             if self.on_step is not None:
                 self.on_step(frame.agent_id, s)
             self.world.set_command(frame.agent_id, s.speed, s.turn, s.action)
@@ -48,13 +69,46 @@ class SimRun:
         cells = self.world.scenario.to_cell(self.world.sites_xy)
         return {(int(r), int(c)): int(t) for (c, r), t in zip(cells, self.filled_at)}
 
-    def run(self, max_ticks: int, until_complete: bool = True) -> bool:
-        """Step until the structure is complete (True) or `max_ticks` pass (False)."""
+    def perturb(self, p: Perturbation) -> PerturbResult:
+        """Apply `p` to the world; a changed blueprint goes to every brain at once."""
+        before = self.fill_ticks() if p.op in SITE_OPS else None
+        result = self.world.perturb(p)
+        if result.ok and before is not None:
+            bp = self.world.blueprint()
+            for brain in self.brains.values():
+                brain.set_blueprint(bp.version, bp.site_xs, bp.site_ys)
+            # Sites kept keep their fill tick; a new one is recorded at the next step.
+            cells = self.world.scenario.to_cell(self.world.sites_xy)
+            self.filled_at = np.array([before.get((int(r), int(c)), -1) for c, r in cells], np.int64)
+        return result
+
+    def run(self, max_ticks: int, until_complete: bool = True, stall_ticks: int | None = None) -> SimResult:
+        """Step until the structure is complete, `max_ticks` pass, or (with `stall_ticks`)
+        no site has been filled for that many ticks."""
+        self.stall = StallClock(stall_ticks) if stall_ticks else None
         for _ in range(max_ticks):
-            if until_complete and self.world.status().completed:
-                return True
+            if until_complete and self.world.completed():
+                return SimResult(True, False, self.world.tick)
+            if self._stalled():
+                return SimResult(False, True, self.world.tick)
             self.step()
-        return self.world.status().completed
+        return SimResult(self.world.completed(), self._stalled(), self.world.tick)
+
+    def _stalled(self) -> bool:
+        if self.stall is None:
+            return False
+        if self.filled_at is None:
+            self._record_fills()
+        filled = int(np.count_nonzero(self.filled_at >= 0))
+        return self.stall.observe(self.world.tick, filled, len(self.filled_at))
+
+    def stall_report(self) -> list[str]:
+        """The report `conag run` prints on a stall: a headline, then one line per agent
+        (its body, and what its brain says it is doing and what blocks it)."""
+        status = self.world.status()
+        idle = self.stall.idle(status.tick) if self.stall is not None else 0
+        states = {a: brain.state_report(status.tick) for a, brain in self.brains.items()}
+        return stall_report(status, idle, states)
 
 
 def start(scenario: Scenario, agents: int | None = None, seed: int | None = None,

@@ -137,7 +137,7 @@ def nested_scenario(agents, outer=8, inner=4):
 
 def conag_ring(seeding, agents, seed=0, max_ticks=6000):
     run = sim.start(ring_scenario(seeding, agents), seed=seed)
-    done = run.run(max_ticks)
+    done = run.run(max_ticks).completed
     st = run.world.status()
     return {"completed": done, "ticks": st.tick, "filled": st.sites_filled, "total": st.sites_total}
 
@@ -166,7 +166,7 @@ def conag_moved(seeding, agents, seed=0, after_placed=3, max_ticks=8000):
             move = {"tick": world.tick, "site": i, "src": (float(x), float(y)), "dst": to,
                     "site_unfilled_after": not bool(world.sites_filled()[i]),
                     "dst_on_site": bool(np.any(np.all(np.isclose(world.sites_xy, to), axis=1)))}
-    done = run.run(max_ticks - world.tick)
+    done = run.run(max_ticks - world.tick).completed
     st = world.status()
     return {"completed": done, "ticks": st.tick, "filled": st.sites_filled,
             "total": st.sites_total, "move": move, "grabs": sum(st.agent_grabs)}
@@ -176,7 +176,7 @@ def conag_nested(agents, seed=0, max_ticks=20000, sequencing=True):
     """Build the nested rings, with goal sequencing (ConAg-TS, §6) or nearest-first (§4)."""
     sc = nested_scenario(agents)
     run = sim.start(sc, seed=seed, cfg=AgentConfig(goal_sequencing=sequencing))
-    done = run.run(max_ticks)
+    done = run.run(max_ticks).completed
     st = run.world.status()
     # inner ring: sites within 2 cells (Chebyshev) of the centre
     centre = np.array(sc.size) / 2

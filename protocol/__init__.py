@@ -7,12 +7,15 @@ no zenoh: key expressions are plain strings and messages are plain bytes.
 from protocol.codec import MAX_MESSAGE_BYTES, ProtocolError, decode, encode
 from protocol.messages import (
     ACTIONS,
+    BEHAVIOURS,
     CHANNELS,
     DISC_KINDS,
     MESSAGE_TYPES,
     PERTURB_OPS,
     SCHEMA_VERSION,
     AgentCommand,
+    AgentState,
+    Blueprint,
     Decision,
     Hello,
     Perturbation,
@@ -26,7 +29,7 @@ from protocol.messages import (
 )
 
 __all__ = [
-    "ACTIONS", "CHANNELS", "DISC_KINDS", "MAX_MESSAGE_BYTES", "MESSAGE_TYPES", "PERTURB_OPS",
-    "SCHEMA_VERSION", "AgentCommand", "Decision", "Hello", "Perturbation", "PerturbResult",
+    "ACTIONS", "BEHAVIOURS", "CHANNELS", "DISC_KINDS", "MAX_MESSAGE_BYTES", "MESSAGE_TYPES", "PERTURB_OPS",
+    "SCHEMA_VERSION", "AgentCommand", "AgentState", "Blueprint", "Decision", "Hello", "Perturbation", "PerturbResult",
     "ProtocolError", "Reinforcement", "RunControl", "RunControlResult", "SensorFrame", "Welcome", "WorldStatus", "decode", "encode",
 ]

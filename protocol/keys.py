@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import re
 
-ROOT = "conag/v1"
+ROOT = "conag/v2"
 
 # \Z, not $: `$` also matches before a trailing newline, which would let "a1\n" through.
 _ID = re.compile(r"^[A-Za-z0-9_.\-]{1,64}\Z")
@@ -36,6 +36,17 @@ def status(world: str) -> str:
 def perturb(world: str) -> str:
     """Queryable: a Perturbation in, a PerturbResult back."""
     return f"{world_root(world)}/perturb"
+
+
+def blueprint(world: str) -> str:
+    """Blueprint publications (reliable) whenever the drop sites change, and a queryable
+    answering the current one."""
+    return f"{world_root(world)}/blueprint"
+
+
+def agent_state(world: str, agent: str) -> str:
+    """AgentState publications from one agent (what it does, what blocks it)."""
+    return f"{world_root(world)}/agent/{check_id(agent, 'agent id')}/state"
 
 
 def run_control(world: str) -> str:

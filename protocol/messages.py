@@ -14,15 +14,19 @@ from dataclasses import dataclass, fields
 
 from protocol.keys import check_id
 
-SCHEMA_VERSION = 1
+# 2: the obstacle channel in sensor frames, site perturbations, Blueprint and AgentState.
+SCHEMA_VERSION = 2
 
 # Sensor channels, in the order of SensorFrame.ranges (channel-major).
-CHANNELS = ("food", "water", "brick", "agent")
+# Disc-like channels first (food, water, brick, obstacle: fixed `#` cells and the world's
+# edge, sensed at the cell centres just outside it), then other agents' bodies.
+CHANNELS = ("food", "water", "brick", "obstacle", "agent")
 # Disc kinds a scenario or a perturbation can name.
 DISC_KINDS = ("food", "water", "brick")
 # Gripper / consummatory actions an AgentCommand can carry besides the motors.
 ACTIONS = ("none", "grab", "drop", "eat", "drink")
-PERTURB_OPS = ("remove", "add", "move")
+PERTURB_OPS = ("remove", "add", "move", "add_site", "remove_site")
+SITE_OPS = ("add_site", "remove_site")  # blueprint changes: a drop site at (x, y) appears or goes
 TICK_MODES = ("lockstep", "realtime")
 NO_READING = -1.0  # a sector that senses nothing of its colour
 
@@ -91,11 +95,13 @@ class Welcome:
     cell_size: float
     site_xs: tuple[float, ...]
     site_ys: tuple[float, ...]
+    blueprint_version: int = 0   # the Blueprint version these sites are (see Blueprint)
 
     def __post_init__(self) -> None:
         check_id(self.world_id, "world id")
         check_id(self.agent_id, "agent id")
         _finite(self)
+        _require(self.blueprint_version >= 0, "Welcome.blueprint_version must be >= 0")
         _require(len(self.site_xs) == len(self.site_ys), "Welcome site_xs/site_ys differ in length")
         _require(len(self.site_xs) <= MAX_SITES, "Welcome has too many sites")
         _require(1 <= self.sectors <= MAX_SECTORS, "Welcome.sectors out of range")
@@ -179,6 +185,8 @@ class WorldStatus:
     agent_grabs: tuple[int, ...] = ()
     agent_drops: tuple[int, ...] = ()
     agent_restarts: tuple[int, ...] = ()
+    agent_x: tuple[float, ...] = ()   # where each body is now (world coordinates)
+    agent_y: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         check_id(self.world_id, "world id")
@@ -190,7 +198,8 @@ class WorldStatus:
         n = len(self.agent_ids)
         _require(n <= MAX_AGENTS_IN_STATUS, "WorldStatus lists too many agents")
         _require(len(self.scenario) <= MAX_STRING, "WorldStatus.scenario too long")
-        for name in ("agent_alive", "agent_distance", "agent_grabs", "agent_drops", "agent_restarts"):
+        for name in ("agent_alive", "agent_distance", "agent_grabs", "agent_drops", "agent_restarts",
+                     "agent_x", "agent_y"):
             _require(len(getattr(self, name)) == n, f"WorldStatus.{name} must match agent_ids")
         for a in self.agent_ids:
             check_id(a, "agent id")
@@ -198,10 +207,13 @@ class WorldStatus:
 
 @dataclass(frozen=True)
 class Perturbation:
-    """Anyone -> world (as a query): remove, add or move a disc while the world runs.
+    """Anyone -> world (as a query): change a disc or the blueprint while the world runs.
 
-    `remove` and `move` act on the disc nearest (x, y) within one cell; `add` puts a
-    disc of `kind` at (x, y); `move` puts the removed disc at (to_x, to_y).
+    `remove` and `move` act on the disc nearest (x, y) within 0.75 cell; `add` puts a
+    disc of `kind` at (x, y); `move` puts the removed disc at (to_x, to_y). `add_site`
+    makes the cell holding (x, y) a drop site; `remove_site` takes the drop site of that
+    cell out of the blueprint (a brick on it becomes a free brick). `kind` is ignored by
+    the site operations.
     """
 
     op: str
@@ -274,6 +286,60 @@ class Reinforcement:
         _require(self.tick >= 0 and self.seq >= 0, "Reinforcement counts must be >= 0")
 
 
+@dataclass(frozen=True)
+class Blueprint:
+    """World -> agents, whenever the blueprint changes (reliable): every drop site now.
+
+    `version` starts at 0 (the scenario's sites, as in Welcome) and grows by one per
+    change; an agent keeps the highest version it has seen. Coordinates are world
+    coordinates of the site cells' centres, as in Welcome.
+    """
+
+    world_id: str
+    tick: int
+    version: int
+    site_xs: tuple[float, ...]
+    site_ys: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        check_id(self.world_id, "world id")
+        _finite(self)
+        _require(self.tick >= 0 and self.version >= 0, "Blueprint counts must be >= 0")
+        _require(len(self.site_xs) == len(self.site_ys), "Blueprint site_xs/site_ys differ in length")
+        _require(len(self.site_xs) <= MAX_SITES, "Blueprint has too many sites")
+
+
+BEHAVIOURS = ("none", "eat", "drink", "avoid", "approach_water", "approach_food", "grab", "drop",
+              "config_nav", "brick_nav", "explore", "avoid_red", "approach_red", "unstick")
+
+
+@dataclass(frozen=True)
+class AgentState:
+    """Agent -> anyone, every few hundred ticks and when it changes behaviour for long:
+    what it is doing and, when it is not building, why (for stall reports).
+
+    `behaviour_ticks` counts the ticks spent in each behaviour of BEHAVIOURS, in that
+    order, since the process started. `sites_open` is how many sites it believes still
+    missing a brick; `blocker` says in words what keeps it from building ("" if nothing).
+    """
+
+    agent_id: str
+    tick: int
+    behaviour: str
+    holding: bool
+    sites_open: int
+    blocker: str
+    behaviour_ticks: tuple[int, ...]
+
+    def __post_init__(self) -> None:
+        check_id(self.agent_id, "agent id")
+        _require(self.tick >= 0 and self.sites_open >= 0, "AgentState counts must be >= 0")
+        _require(self.behaviour in BEHAVIOURS, f"AgentState.behaviour must be one of {BEHAVIOURS}")
+        _require(len(self.blocker) <= MAX_STRING, "AgentState.blocker too long")
+        _require(len(self.behaviour_ticks) == len(BEHAVIOURS), "AgentState.behaviour_ticks must match BEHAVIOURS")
+        _require(min(self.behaviour_ticks) >= 0, "AgentState.behaviour_ticks must be >= 0")
+
+
 RUN_OPS = ("kill", "restart")
 
 
@@ -303,4 +369,5 @@ class RunControlResult:
 MESSAGE_TYPES: tuple[type, ...] = (
     Hello, Welcome, SensorFrame, AgentCommand, WorldStatus,
     Perturbation, PerturbResult, Decision, Reinforcement, RunControl, RunControlResult,
+    Blueprint, AgentState,
 )

@@ -68,7 +68,7 @@ def run_trial(scenario: Scenario, learner, teacher: Teacher, *, ticks: int, eta:
     t = 0
     for t in range(1, ticks + 1):
         run.step()
-        if completed_at is None and run.world.status().completed:
+        if completed_at is None and run.world.completed():
             completed_at = t
             if until_complete:
                 break

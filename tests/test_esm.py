@@ -17,8 +17,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent_runtime.esm import AGENT, BRICK, CONFIG, FOOD, WATER, EgocentricMaps
+from agent_runtime.esm import AGENT, BRICK, CONFIG, FOOD, OBSTACLE, WATER, EgocentricMaps
 from protocol.messages import CHANNELS, NO_READING, Perturbation
+
+NCH = len(CHANNELS)
+AG = CHANNELS.index("agent")
 from world_server.discs import IN_WORLD
 from world_server.scenario import parse_scenario
 from world_server.sensors import sense as world_sense
@@ -153,10 +156,11 @@ def test_cell_of_finds_the_cell_whose_centre_offset_of_gives(fx, fy, row, col):
 
 def test_the_agent_is_in_the_centre_cell_and_the_maps_are_float32_layers():
     m = EgocentricMaps(SIZE)
-    assert m.maps.shape == (5, SIZE, SIZE) and m.maps.dtype == np.float32
+    assert m.maps.shape == (6, SIZE, SIZE) and m.maps.dtype == np.float32
     assert m.cell_of(0.0, 0.0) == (C, C)
     assert m.cell_of(1.0, 0.0) == (C, C + 1) and m.cell_of(0.0, 1.0) == (C - 1, C)
-    assert (FOOD, WATER, BRICK, CONFIG, AGENT) == (0, 1, 2, 3, 4)
+    # The sensed layers come first, in the order of the sensor channels they are fed by.
+    assert (FOOD, WATER, BRICK, OBSTACLE, CONFIG, AGENT) == (0, 1, 2, 3, 4, 5)
 
 
 # ---------------------------------------------------------------- shifting (Fig. 4c)
@@ -283,14 +287,14 @@ def test_sites_off_the_map_are_ignored():
 
 
 @settings(max_examples=50, deadline=None)
-@given(st.lists(st.one_of(st.just(NO_READING), st.floats(0.0, 6.0)), min_size=64, max_size=64),
+@given(st.lists(st.one_of(st.just(NO_READING), st.floats(0.0, 6.0)), min_size=80, max_size=80),
        st.floats(-0.5, 0.4999), st.floats(-0.5, 0.4999))
 def test_sense_never_touches_the_configuration_map(readings, fx, fy):
     m = EgocentricMaps(SIZE)
     m.seed_blueprint(10 + fx + 0.5, 10 + fy + 0.5, [9.5, 10.5, 11.5, 10.5, 12.5], [10.5, 10.5, 10.5, 11.5, 9.5])
     before = m.maps[CONFIG].copy()
-    m.sense(np.array(readings).reshape(4, 16), 6.0)
-    m.sense(np.full((4, 16), NO_READING), 6.0)
+    m.sense(np.array(readings).reshape(NCH, 16), 6.0)
+    m.sense(np.full((NCH, 16), NO_READING), 6.0)
     np.testing.assert_array_equal(m.maps[CONFIG], before)
 
 
@@ -414,7 +418,7 @@ def test_real_sensor_readings_put_discs_in_their_cells_from_any_sub_cell_positio
     ranges = world_sense(agent, np.array([True]), disc_xy, kinds, sectors, 6.0, (21.0, 21.0))[0]
     m = EgocentricMaps(SIZE)
     m.seed_blueprint(*agent[0], [], [])
-    m.maps[:3] = 1.0   # a stale map full of phantoms
+    m.maps[:OBSTACLE + 1] = 1.0   # a stale map full of phantoms
     m.sense(ranges, 6.0)
     # A reading d lands within d * 2 sin(pi / 2S) of its disc: in the disc's very cell while
     # that is below half a cell, in a neighbour of it (the sector cannot tell the angle) up to
@@ -462,7 +466,7 @@ def reference_sense(m: EgocentricMaps, ranges: np.ndarray, reach: float) -> np.n
         for col in range(n):
             ox, oy = m.offset_of(row, col)
             geometry[(row, col)] = (ox, oy, math.hypot(ox, oy), overlapped.get((row, col), set()))
-    for layer in (FOOD, WATER, BRICK):
+    for layer in (FOOD, WATER, BRICK, OBSTACLE):
         for cell, (ox, oy, d, overlapped) in geometry.items():
             if d > reach + 0.75:
                 continue
@@ -471,7 +475,7 @@ def reference_sense(m: EgocentricMaps, ranges: np.ndarray, reach: float) -> np.n
                 out[layer][cell] = 0.0
     cleared = out.copy()
     ghosts, winners, plain = [], [], []
-    for layer in (FOOD, WATER, BRICK):
+    for layer in (FOOD, WATER, BRICK, OBSTACLE):
         for s in range(sectors):
             d = ranges[layer, s]
             if d < 0:
@@ -497,9 +501,9 @@ def reference_sense(m: EgocentricMaps, ranges: np.ndarray, reach: float) -> np.n
     for layer, c in winners:
         out[layer][c] = 1.0
     out[AGENT] = 0.0
-    a_plain = [(AGENT, m.cell_of(ranges[3, s] * math.cos((s + 0.5) * 2 * math.pi / sectors),
-                                 ranges[3, s] * math.sin((s + 0.5) * 2 * math.pi / sectors)))
-               for s in range(sectors) if ranges[3, s] >= 0]
+    a_plain = [(AGENT, m.cell_of(ranges[AG, s] * math.cos((s + 0.5) * 2 * math.pi / sectors),
+                                 ranges[AG, s] * math.sin((s + 0.5) * 2 * math.pi / sectors)))
+               for s in range(sectors) if ranges[AG, s] >= 0]
     for layer, c in plain + a_plain:
         if m.contains(*c):
             out[layer][c] = 1.0
@@ -515,7 +519,7 @@ def test_sense_follows_its_rule_cell_by_cell(size, fx, fy, sectors, reach, seed)
     m.frac[:] = (fx, fy)
     m.maps[:] = rng.random(m.maps.shape) < 0.5
     for tick in range(3):   # the same map over a few ticks, moving (and standing still) in between
-        ranges = np.where(rng.random((4, sectors)) < 0.6, rng.uniform(0, reach, (4, sectors)), NO_READING)
+        ranges = np.where(rng.random((NCH, sectors)) < 0.6, rng.uniform(0, reach, (NCH, sectors)), NO_READING)
         expected = reference_sense(m, ranges, reach)
         m.sense(ranges, reach)
         np.testing.assert_array_equal(m.maps, expected)
@@ -525,7 +529,7 @@ def test_sense_follows_its_rule_cell_by_cell(size, fx, fy, sectors, reach, seed)
 
 def test_world_units_are_converted_with_the_cell_size():
     small, unit = EgocentricMaps(SIZE), EgocentricMaps(SIZE)
-    readings = np.full((4, 16), NO_READING)
+    readings = np.full((NCH, 16), NO_READING)
     readings[2, 5] = 1.5
     small.move(0.35, 0.0, cell_size=0.5)   # 0.7 cells east
     unit.move(0.7, 0.0)
@@ -540,7 +544,7 @@ def test_an_empty_sector_clears_its_wedge_only_within_range():
     m.maps[:3, C - 2, C + 3] = 1.0       # in range, sector 1
     m.maps[:3, C, C - 8] = 1.0           # beyond the 6-cell range
     m.maps[:3, C - 5, C + 2] = 1.0       # 5.4 away, sector 3
-    readings = np.full((4, 16), NO_READING)
+    readings = np.full((NCH, 16), NO_READING)
     readings[:, 3] = 5.5                 # something at 5.5 in sector 3 (written at 78.75 degrees)
     m.sense(readings, 6.0)
     for layer in (FOOD, WATER, BRICK):
@@ -554,14 +558,14 @@ def test_an_empty_sector_clears_its_wedge_only_within_range():
 
 def test_the_agent_layer_is_rebuilt_each_sense():
     m = EgocentricMaps(SIZE)
-    readings = np.full((4, 16), NO_READING)
-    readings[3, 0] = 2.0
+    readings = np.full((NCH, 16), NO_READING)
+    readings[AG, 0] = 2.0
     m.sense(readings, 6.0)
     assert marked(m, AGENT) == {(C, C + 2)}
-    readings[3, 0], readings[3, 4] = NO_READING, 3.0   # it moved north (sector 4: 101.25 degrees)
+    readings[AG, 0], readings[AG, 4] = NO_READING, 3.0   # it moved north (sector 4: 101.25 degrees)
     m.sense(readings, 6.0)
     assert marked(m, AGENT) == {(C - 3, C - 1)}
-    assert m.maps[:3].sum() == 0 and m.maps[CONFIG].sum() == 0
+    assert m.maps[:OBSTACLE + 1].sum() == 0 and m.maps[CONFIG].sum() == 0
 
 
 def test_two_agents_see_each_other_in_the_agent_layer():
@@ -577,7 +581,7 @@ def test_two_agents_see_each_other_in_the_agent_layer():
 def test_sensing_and_moving_cost_tens_of_microseconds():
     m = EgocentricMaps(41)
     rng = np.random.default_rng(0)
-    readings = np.where(rng.random((4, 16)) < 0.5, rng.uniform(0, 6, (4, 16)), NO_READING)
+    readings = np.where(rng.random((NCH, 16)) < 0.5, rng.uniform(0, 6, (NCH, 16)), NO_READING)
     best = math.inf
     for _ in range(20):
         start = time.perf_counter()

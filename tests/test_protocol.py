@@ -18,7 +18,10 @@ from hypothesis import strategies as st
 import protocol
 from protocol import (
     ACTIONS,
+    BEHAVIOURS,
     CHANNELS,
+    AgentState,
+    Blueprint,
     MAX_MESSAGE_BYTES,
     MESSAGE_TYPES,
     SCHEMA_VERSION,
@@ -69,6 +72,7 @@ EXAMPLES: dict[type, object] = {
         sites_total=5, bricks_total=9, agents_alive=2, bad_messages=1, completed=False,
         agent_ids=("a1", "a2"), agent_alive=(True, False), agent_distance=(12.5, 3.0),
         agent_grabs=(2, 0), agent_drops=(1, 0), agent_restarts=(0, 3),
+        agent_x=(2.5, 7.25), agent_y=(1.5, 0.5),
     ),
     Perturbation: Perturbation(op="move", x=1.0, y=2.0, kind="brick", to_x=3.5, to_y=-1.0),
     PerturbResult: PerturbResult(ok=True, message="moved brick", tick=501),
@@ -79,6 +83,9 @@ EXAMPLES: dict[type, object] = {
     Reinforcement: Reinforcement(agent_id="a1", tick=121, seq=17, arm=1, motor=-1),
     RunControl: RunControl(op="restart", agent_id="a2"),
     RunControlResult: RunControlResult(ok=True, message="restarted a2 (pid 4242)"),
+    Blueprint: Blueprint(world_id="w", tick=40, version=2, site_xs=(0.5, 1.5), site_ys=(3.5, 3.5)),
+    AgentState: AgentState(agent_id="a1", tick=300, behaviour="config_nav", holding=True, sites_open=3,
+                           blocker="", behaviour_ticks=tuple(range(len(BEHAVIOURS)))),
 }
 
 
@@ -91,7 +98,7 @@ def test_every_message_type_has_an_example():
 def test_public_api_exports():
     for name in protocol.__all__:
         assert hasattr(protocol, name), name
-    assert SCHEMA_VERSION == 1
+    assert SCHEMA_VERSION == 2
     assert len(set(MESSAGE_TYPES)) == len(MESSAGE_TYPES)
     assert len({c.__name__ for c in MESSAGE_TYPES}) == len(MESSAGE_TYPES)
 
@@ -287,7 +294,7 @@ def test_protocol_error_is_a_value_error():
     assert issubclass(ProtocolError, ValueError)
 
 
-@pytest.mark.parametrize("version", [0, 2, -1, 2**40, "1", b"\x01", None, True, [1], {"v": 1}])
+@pytest.mark.parametrize("version", [0, 1, 3, -1, 2**40, "2", b"\x02", None, True, [2], {"v": 2}])
 def test_wrong_schema_version(version):
     _bad(_pack("Hello", ["a1", 1], version=version))
 
@@ -458,6 +465,7 @@ def test_reinforcement_arm_out_of_range(arm):
         pytest.param(_with(EXAMPLES[WorldStatus], mode="fast"), id="bad-mode"),
         pytest.param(_with(EXAMPLES[WorldStatus], sites_filled=6), id="sites-overfilled"),
         pytest.param(_with(EXAMPLES[WorldStatus], agent_alive=[True]), id="status-list-mismatch"),
+        pytest.param(_with(EXAMPLES[WorldStatus], agent_y=b""), id="status-position-mismatch"),
         pytest.param(_with(EXAMPLES[Welcome], site_ys=[1.0]), id="sites-length-mismatch"),
         pytest.param(_with(EXAMPLES[Welcome], sensor_range=0.0), id="zero-sensor-range"),
         pytest.param(_with(EXAMPLES[Welcome], sectors=0), id="zero-sectors"),
@@ -501,7 +509,7 @@ def test_largest_legal_messages_fit():
     status = dataclasses.replace(
         EXAMPLES[WorldStatus], agent_ids=tuple(f"{i:064d}" for i in range(m)),
         agent_alive=(True,) * m, agent_distance=(1e300,) * m, agent_grabs=(2**62,) * m,
-        agent_drops=(2**62,) * m, agent_restarts=(2**62,) * m,
+        agent_drops=(2**62,) * m, agent_restarts=(2**62,) * m, agent_x=(1e300,) * m, agent_y=(-1e300,) * m,
     )
     assert decode(encode(status)) == status
 
@@ -626,7 +634,7 @@ PER_WORLD = [keys.status, keys.perturb, keys.world_token, keys.all_agent_tokens,
 
 
 def test_root_is_versioned():
-    assert keys.ROOT == "conag/v1"
+    assert keys.ROOT == "conag/v2"
 
 
 @pytest.mark.parametrize("fn", PER_WORLD, ids=lambda f: f.__name__)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from collections import deque
 from pathlib import Path
 
 import numpy as np
@@ -10,6 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from world_server.buildability import check_buildable, reachable
 from world_server.scenario import ScenarioError, load_scenario, parse_scenario
 
 SCENARIO_DIR = Path(__file__).resolve().parent.parent / "scenarios"
@@ -49,17 +49,18 @@ def test_scenario_file_loads_and_is_sane(path):
 
 @pytest.mark.parametrize("path", SCENARIOS, ids=lambda p: p.stem)
 def test_scenario_structure_can_be_built_in_some_order(path):
-    assert _safe_fill_order(load_scenario(path)) is not None
+    verdict = check_buildable(load_scenario(path))  # the grid model: world_server/buildability.py
+    assert verdict.ok, verdict.reason
 
 
 def test_fig18_filling_d1_first_walls_d2_off():
     s = load_scenario(SCENARIO_DIR / "fig18.toml")
     start = tuple(s.cells("A")[0].tolist())
     d1 = min(map(tuple, s.cells("+").tolist()), key=lambda c: abs(c[0] - start[0]) + abs(c[1] - start[1]))
-    grid = _grid(s)
+    grid = [list(row) for row in s.layout]
     grid[d1[1]][d1[0]] = "B"
     others = [tuple(c) for c in s.cells("+").tolist() if tuple(c) != d1]
-    assert len(others) == 1 and others[0] not in _component(grid, start)
+    assert len(others) == 1 and others[0] not in reachable(grid, [start])
 
 
 def test_nested_squares_closing_the_outer_ring_first_walls_the_inner_ring_off():
@@ -67,10 +68,10 @@ def test_nested_squares_closing_the_outer_ring_first_walls_the_inner_ring_off():
     sites = s.cells("+")
     (c0, r0), (c1, r1) = sites.min(axis=0), sites.max(axis=0)
     outer = [tuple(c) for c in sites.tolist() if c[0] in (c0, c1) or c[1] in (r0, r1)]
-    grid = _grid(s)
+    grid = [list(row) for row in s.layout]
     for c, r in outer:
         grid[r][c] = "B"
-    reach = _component(grid, tuple(s.cells("A")[0].tolist()))
+    reach = reachable(grid, [tuple(s.cells("A")[0].tolist())])
     inner = [tuple(c) for c in sites.tolist() if tuple(c) not in outer]
     assert inner and not any(cell in reach for cell in inner)
 
@@ -161,65 +162,3 @@ def test_any_point_in_a_cell_maps_to_that_cell(col, row, fx, fy, size):
     corner = s.to_world([[col, row]])[0] - size / 2  # south-west corner of the cell
     point = corner + np.array([fx, fy]) * size
     np.testing.assert_array_equal(s.to_cell(point), [[col, row]])
-
-
-# ---------------------------------------------------------------- a grid model of building
-
-
-def _grid(s):
-    return [list(row) for row in s.layout]
-
-
-def _component(grid, start):
-    """Cells an agent at `start` can walk to (4-neighbours; '.', 'A' and unfilled '+' are free)."""
-    seen, todo = {start}, deque([start])
-    while todo:
-        c, r = todo.popleft()
-        for n in ((c + 1, r), (c - 1, r), (c, r + 1), (c, r - 1)):
-            if n not in seen and 0 <= n[1] < len(grid) and 0 <= n[0] < len(grid[0]) \
-                    and grid[n[1]][n[0]] in ".A+":
-                seen.add(n)
-                todo.append(n)
-    return seen
-
-
-def _grabbable(grid, reach):
-    """Free bricks with a walkable 4-neighbour."""
-    return [(c, r) for r, row in enumerate(grid) for c, ch in enumerate(row) if ch == "b"
-            and any(n in reach for n in ((c + 1, r), (c - 1, r), (c, r + 1), (c, r - 1)))]
-
-
-def _obtainable(grid, reach):
-    """Free bricks that can be grabbed now or once the bricks in front of them are gone
-    (a pile is taken from its face): those joined to a grabbable one through free bricks."""
-    found, todo = set(_grabbable(grid, reach)), deque(_grabbable(grid, reach))
-    while todo:
-        c, r = todo.popleft()
-        for n in ((c + 1, r), (c - 1, r), (c, r + 1), (c, r - 1)):
-            if n not in found and 0 <= n[1] < len(grid) and 0 <= n[0] < len(grid[0]) and grid[n[1]][n[0]] == "b":
-                found.add(n)
-                todo.append(n)
-    return found
-
-
-def _safe_fill_order(s):
-    """Fill sites one by one, each time one that keeps every other empty site reachable and
-    enough bricks grabbable; return the order, or None if stuck. Greedy, so a sufficient test."""
-    grid, start, order = _grid(s), tuple(s.cells("A")[0].tolist()), []
-    while True:
-        sites = [(c, r) for r, row in enumerate(grid) for c, ch in enumerate(row) if ch == "+"]
-        if not sites:
-            return order
-        reach = _component(grid, start)
-        bricks = _grabbable(grid, reach)
-        for site in (x for x in sites if x in reach and bricks):
-            brick = bricks[0]
-            grid[brick[1]][brick[0]], grid[site[1]][site[0]] = ".", "B"
-            after = _component(grid, start)
-            rest = [x for x in sites if x != site]
-            if all(x in after for x in rest) and len(_obtainable(grid, after)) >= len(rest):
-                order.append(site)
-                break
-            grid[brick[1]][brick[0]], grid[site[1]][site[0]] = "b", "+"
-        else:
-            return None

@@ -18,7 +18,8 @@ from world_server.scenario import ScenarioError, parse_scenario
 from world_server.sensors import sense
 from world_server.world import World
 
-FOOD, WATER, BRICK, AGENT = (CHANNELS.index(c) for c in ("food", "water", "brick", "agent"))
+FOOD, WATER, BRICK, OBSTACLE, AGENT = (CHANNELS.index(c) for c in ("food", "water", "brick", "obstacle", "agent"))
+NCH = len(CHANNELS)
 TOL = 0.03  # how far a resting body may sink into a disc or a wall (pymunk contact slop)
 # There is no continuous collision detection: on the tick of impact a body can sink up to
 # one tick's travel (max_speed * dt) into what it hits, before it is pushed back out.
@@ -143,9 +144,11 @@ def test_each_colour_is_reported_in_its_channel_sector_and_distance():
     expected = np.full_like(got, NO_READING)
     for channel, (dx, dy) in ((FOOD, (2, 1)), (WATER, (-2, 3)), (BRICK, (-3, -1)), (AGENT, (1, -2))):
         expected[channel, sector_of(dx, dy, 16)] = math.hypot(dx, dy)
-    np.testing.assert_allclose(got, expected, atol=1e-9)
+    # The world's edge is on the obstacle channel (its own test below); the rest exactly.
+    discs = [FOOD, WATER, BRICK, AGENT]
+    np.testing.assert_allclose(got[discs], expected[discs], atol=1e-9)
     # The concrete sectors, so the convention (CCW from east, 16 sectors of 22.5°) is pinned.
-    assert [int(np.flatnonzero(got[c] >= 0)[0]) for c in range(4)] == [1, 5, 8, 13]
+    assert [int(np.flatnonzero(got[c] >= 0)[0]) for c in discs] == [1, 5, 8, 13]
     # The other agent sees "me" on its agent channel, north-west of it.
     theirs = ranges(w, "other")
     assert np.flatnonzero(theirs[AGENT] >= 0).tolist() == [5]
@@ -200,7 +203,8 @@ def test_an_agent_does_not_sense_itself():
     w = make("...\n.A.\n...", sensor_noise=0.0)
     w.attach("a")
     tick(w)
-    assert np.all(ranges(w, "a") == NO_READING)
+    r = ranges(w, "a")
+    assert np.all(np.delete(r, OBSTACLE, axis=0) == NO_READING)
 
 
 def test_a_carried_brick_is_invisible_to_everyone_until_dropped():
@@ -271,9 +275,9 @@ def _reference_sense(agent_xy, sensing, disc_xy, disc_ch, sectors, radius, eps=1
     obj_ch = np.concatenate([disc_ch, np.full(n, AGENT)])
     owner = np.concatenate([np.full(len(disc_xy), -1), np.arange(n)])
     width = 2 * np.pi / sectors
-    strict = np.full((n, 4, sectors), np.inf)
-    loose = np.full((n, 4, sectors), np.inf)
-    candidates = [[[set() for _ in range(sectors)] for _ in range(4)] for _ in range(n)]
+    strict = np.full((n, NCH, sectors), np.inf)
+    loose = np.full((n, NCH, sectors), np.inf)
+    candidates = [[[set() for _ in range(sectors)] for _ in range(NCH)] for _ in range(n)]
     for a in range(n):
         if not sensing[a]:
             continue
@@ -302,10 +306,10 @@ def test_compiled_sweep_agrees_with_a_brute_force_reference(case):
     radius = float(rng.uniform(0.5, 12))
     agent_xy = rng.uniform((0, 0), (width, height), size=(n, 2))
     disc_xy = rng.uniform((0, 0), (width, height), size=(m, 2))
-    disc_ch = rng.integers(0, 3, size=m)
+    disc_ch = rng.integers(0, 4, size=m)   # food, water, brick, obstacle points
     sensing = rng.random(n) < 0.8
     got = sense(agent_xy, sensing, disc_xy, disc_ch, sectors, radius, (width, height))
-    assert got.shape == (n, 4, sectors)
+    assert got.shape == (n, NCH, sectors)
     strict, loose, candidates = _reference_sense(agent_xy, sensing, disc_xy, disc_ch, sectors, radius)
     assert np.all(got[~sensing] == NO_READING)
     for a, ch, k in np.ndindex(got.shape):

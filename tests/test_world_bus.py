@@ -10,6 +10,7 @@ import sys
 import time
 
 import msgpack
+import zenoh
 import numpy as np
 import pytest
 
@@ -18,7 +19,7 @@ from protocol import keys
 from protocol.codec import decode, encode
 from world_server.scenario import load_scenario
 from world_server.world import World
-from protocol.messages import CHANNELS, NO_READING, AgentCommand, Hello, Perturbation, PerturbResult, SensorFrame
+from protocol.messages import CHANNELS, NO_READING, SCHEMA_VERSION, AgentCommand, Hello, Perturbation, PerturbResult, SensorFrame
 from tests.conftest import ROOT, Bus, RunningWorld, free_port
 from tests.scripted import ScriptedBody
 
@@ -165,7 +166,7 @@ def test_bad_messages_of_every_kind_are_counted_and_ignored(bus, start_world):
     session = bus.client_session()
     body = ScriptedBody(WorldLink(session, "w0", "a1"))
     cmd_key = keys.command("w0", "a1")
-    envelope = lambda t, f: msgpack.packb({"v": 1, "t": t, "f": f})  # noqa: E731
+    envelope = lambda t, f: msgpack.packb({"v": SCHEMA_VERSION, "t": t, "f": f})  # noqa: E731
     bad_commands = [
         b"\x00\xff garbage",                                           # not msgpack
         msgpack.packb([1, 2, 3]),                                      # not an envelope
@@ -178,9 +179,13 @@ def test_bad_messages_of_every_kind_are_counted_and_ignored(bus, start_world):
         b"\x91" * 300_000,                                             # oversize
         encode(Hello("a1", 1)),                                        # valid, but not a command
     ]
+    # BLOCK, not the default DROP: on a busy machine a dropped put made this test flaky
+    # (the world counted 11 of 14); the point is what the world does with each one.
+    block = zenoh.CongestionControl.BLOCK
     for payload in bad_commands:
-        session.put(cmd_key, payload)
-    session.put(keys.command("w0", "ghost"), encode(AgentCommand("ghost", 0, 1.0, 0.0)))  # not attached
+        session.put(cmd_key, payload, congestion_control=block)
+    session.put(keys.command("w0", "ghost"), encode(AgentCommand("ghost", 0, 1.0, 0.0)),  # not attached
+                congestion_control=block)
     for payload in (b"junk", encode(Perturbation("remove", 1.0, 1.0))):  # attach without a Hello
         replies = list(session.get(keys.attach("w0", "a1"), payload=payload, timeout=2.0))
         assert replies and replies[0].err is not None

@@ -83,9 +83,11 @@ def _unit_random(seed, counter):
 
 
 @njit(cache=True)
-def _index(agent_xy, disc_xy, disc_channel, radius, width, height):
+def _index(agent_xy, disc_xy, disc_channel, radius, width, height, agent_channel):
     """Discs then agents, bucketed: (cell, nx, ny, starts, xs, ys, channels, object ids).
 
+    `agent_channel` is an argument, not the module constant: numba's on-disk cache would
+    keep a global's old value after CHANNELS changed in another module.
     Buckets are half the sensing radius wide: an agent scans at most 5 x 5 of them,
     about 30% less area than 3 x 3 buckets of the full radius.
     """
@@ -106,7 +108,7 @@ def _index(agent_xy, disc_xy, disc_channel, radius, width, height):
         j = order[k]
         sx[k] = obj_xy[j, 0]
         sy[k] = obj_xy[j, 1]
-        sch[k] = disc_channel[j] if j < n_discs else AGENT_CHANNEL
+        sch[k] = disc_channel[j] if j < n_discs else agent_channel
     return cell, nx, ny, starts, sx, sy, sch, order
 
 
@@ -149,17 +151,19 @@ def _scan(a, agent_xy, n_discs, grid, radius, sectors, noise, seed, out):
 
 
 @njit(cache=True)
-def _sweep(agent_xy, disc_xy, disc_channel, sensing, sectors, radius, width, height, noise, seed, out):
-    grid = _index(agent_xy, disc_xy, disc_channel, radius, width, height)
+def _sweep(agent_xy, disc_xy, disc_channel, sensing, sectors, radius, width, height, noise, seed, out,
+           agent_channel):
+    grid = _index(agent_xy, disc_xy, disc_channel, radius, width, height, agent_channel)
     for a in range(agent_xy.shape[0]):
         if sensing[a]:
             _scan(a, agent_xy, disc_xy.shape[0], grid, radius, sectors, noise, seed, out)
 
 
 @njit(cache=True, parallel=True)
-def _sweep_parallel(agent_xy, disc_xy, disc_channel, sensing, sectors, radius, width, height, noise, seed, out):
+def _sweep_parallel(agent_xy, disc_xy, disc_channel, sensing, sectors, radius, width, height, noise, seed, out,
+                    agent_channel):
     """`_sweep` with the agents shared among the cores (rows of different agents never overlap)."""
-    grid = _index(agent_xy, disc_xy, disc_channel, radius, width, height)
+    grid = _index(agent_xy, disc_xy, disc_channel, radius, width, height, agent_channel)
     for a in prange(agent_xy.shape[0]):
         if sensing[a]:
             _scan(a, agent_xy, disc_xy.shape[0], grid, radius, sectors, noise, seed, out)
@@ -184,5 +188,5 @@ def sense(agent_xy: np.ndarray, sensing: np.ndarray, disc_xy: np.ndarray, disc_c
         kernel = _sweep_parallel if n >= PARALLEL_FROM else _sweep
         kernel(np.ascontiguousarray(agent_xy, np.float64), np.ascontiguousarray(disc_xy, np.float64).reshape(-1, 2),
                np.asarray(disc_channel, np.int64), np.asarray(sensing, np.bool_), sectors,
-               float(radius), float(size[0]), float(size[1]), float(noise), int(seed), out)
+               float(radius), float(size[0]), float(size[1]), float(noise), int(seed), out, AGENT_CHANNEL)
     return out

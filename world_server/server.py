@@ -14,6 +14,11 @@ Agents come and go: an agent is waited for only while its liveliness token exist
 When the token disappears (process killed), its body stops and drops any brick where it
 stands; when a process with the same id attaches again, it gets the same body back.
 Bad input of any kind is counted in `WorldStatus.bad_messages` and otherwise ignored.
+
+A perturbation that changes the blueprint (add_site, remove_site) is followed by the new
+Blueprint, published reliably (RELIABLE, congestion control BLOCK: an agent must not miss
+a site); a queryable on the same key answers the current one. The agents' AgentState
+reports are kept (the last per agent) for the final summary's behaviour counts.
 """
 
 from __future__ import annotations
@@ -28,7 +33,7 @@ import zenoh
 
 from protocol import keys
 from protocol.codec import ProtocolError, decode, encode
-from protocol.messages import AgentCommand, Hello, Perturbation, WorldStatus
+from protocol.messages import SITE_OPS, AgentCommand, AgentState, Hello, Perturbation, WorldStatus
 from world_server.world import World
 
 log = logging.getLogger("conag.world")
@@ -53,6 +58,8 @@ class WorldServer:
         self._answered: set[str] = set()
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._status_bytes = encode(world.status())
+        self._blueprint_bytes = encode(world.blueprint())
+        self.agent_states: dict[str, AgentState] = {}  # the last report of each agent (for summaries)
         self._declared: list = []
         self._last_status = float("-inf")
 
@@ -73,6 +80,19 @@ class WorldServer:
     def _on_status_query(self, query: zenoh.Query) -> None:
         query.reply(query.key_expr, self._status_bytes)  # the latest, swapped atomically
 
+    def _on_blueprint_query(self, query: zenoh.Query) -> None:
+        query.reply(query.key_expr, self._blueprint_bytes)  # swapped atomically by the loop
+
+    def _on_agent_state(self, sample: zenoh.Sample) -> None:
+        try:
+            state = decode(sample.payload.to_bytes(), AgentState)
+            if state.agent_id != keys.agent_of(str(sample.key_expr)):
+                raise ProtocolError("AgentState agent_id does not match its key")
+        except ProtocolError as exc:
+            self._events.put(("bad", f"agent state on {sample.key_expr}: {exc}"))
+            return
+        self.agent_states[state.agent_id] = state  # one dict store: safe from zenoh's thread
+
     def _declare(self) -> None:
         w, s = self.world.world_id, self.session
         self._declared = [
@@ -82,11 +102,16 @@ class WorldServer:
             s.declare_queryable(keys.all_agents(w, "attach"), lambda q: self._events.put(("attach", q))),
             s.declare_queryable(keys.perturb(w), lambda q: self._events.put(("perturb", q))),
             s.declare_queryable(keys.status(w), self._on_status_query),
+            s.declare_queryable(keys.blueprint(w), self._on_blueprint_query),
+            s.declare_subscriber(keys.all_agents(w, "state"), self._on_agent_state),
         ]
         self._status_pub = s.declare_publisher(keys.status(w))
+        self._blueprint_pub = s.declare_publisher(keys.blueprint(w), reliability=zenoh.Reliability.RELIABLE,
+                                                  congestion_control=zenoh.CongestionControl.BLOCK)
 
     def _undeclare(self) -> None:
-        for entity in self._declared + [getattr(self, "_status_pub", None)] + list(self._publishers.values()):
+        pubs = [getattr(self, "_status_pub", None), getattr(self, "_blueprint_pub", None)]
+        for entity in self._declared + pubs + list(self._publishers.values()):
             try:
                 if entity is not None:
                     entity.undeclare()
@@ -218,6 +243,10 @@ class WorldServer:
             return
         result = self.world.perturb(p)
         log.info("perturbation at tick %d: %s", self.world.tick, result.message)
+        if result.ok and p.op in SITE_OPS:
+            # Before the reply: whoever asked for the change can rely on it being out.
+            self._blueprint_bytes = encode(self.world.blueprint())
+            self._blueprint_pub.put(self._blueprint_bytes)
         query.reply(query.key_expr, encode(result))
         query.drop()
 

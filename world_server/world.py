@@ -13,13 +13,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from protocol.messages import ACTIONS, CHANNELS, DISC_KINDS, Perturbation, PerturbResult, SensorFrame, Welcome, WorldStatus
+from protocol.messages import (ACTIONS, CHANNELS, DISC_KINDS, SITE_OPS, Blueprint, Perturbation, PerturbResult,
+                               SensorFrame, Welcome, WorldStatus)
 from world_server.discs import BRICK, FOOD, WATER, DiscStore
 from world_server.physics import Physics, motor_update
 from world_server.scenario import Scenario
 from world_server.sensors import sense
 
 GRAB, DROP, EAT, DRINK = (ACTIONS.index(a) for a in ("grab", "drop", "eat", "drink"))
+OBSTACLE_CHANNEL = CHANNELS.index("obstacle")
 FLAGS = ("grabbed", "dropped", "ate", "drank")
 _LAYOUT_KINDS = {"F": FOOD, "W": WATER, "b": BRICK, "B": BRICK}
 
@@ -51,8 +53,11 @@ class World:
         self.physics = Physics(self.cfg, self.size, scenario.to_world(cells["#"]))
         for i in range(len(self.discs)):
             self.physics.add_disc(i, self.discs.xy[i])
+        self._obstacle_xy = _obstacle_points(scenario, cells["#"])
+        self._sense_inputs: tuple | None = None  # (present discs, xy, channels) with obstacles appended
         self.sites_xy = scenario.to_world(np.vstack([cells["+"], cells["B"]]))
         self._site_codes = self._cell_code(self.sites_xy)
+        self.blueprint_version = 0  # +1 per site added or removed (a Blueprint message each time)
         self._starts = scenario.to_world(cells["A"])
         self.agents: dict[str, AgentRecord] = {}
         self._order: list[AgentRecord] = []
@@ -67,6 +72,10 @@ class World:
         self.flags = np.zeros((n, len(FLAGS)), bool)
         self._ranges = np.zeros((n, len(CHANNELS), self.cfg.sensor_sectors))
         self._pending_release: dict[int, int] = {}  # dropped brick -> agent index
+        # Body positions as of the last step or attach, for status(): reading them from the
+        # physics there would share its read buffer with a step (tests read status from
+        # another thread while the server steps).
+        self._positions = np.zeros((0, 2))
         self.bad_messages = 0
 
     def _cell_code(self, xy: np.ndarray) -> np.ndarray:
@@ -96,13 +105,15 @@ class World:
         self.speed[rec.index] = self.turn[rec.index] = 0.0
         self.action[rec.index] = 0
         pos, _ = self.physics.state()
+        self._positions = pos
         self._sense()
         return Welcome(
             world_id=self.world_id, agent_id=agent_id, body=rec.index, tick=self.tick,
             x=float(pos[rec.index, 0]), y=float(pos[rec.index, 1]), heading=float(self.heading[rec.index]),
             holding=rec.holding >= 0, restarts=rec.restarts, sectors=self.cfg.sensor_sectors,
             sensor_range=self.cfg.sensor_range, cell_size=self.cfg.cell_size,
-            site_xs=tuple(self.sites_xy[:, 0].tolist()), site_ys=tuple(self.sites_xy[:, 1].tolist()))
+            site_xs=tuple(self.sites_xy[:, 0].tolist()), site_ys=tuple(self.sites_xy[:, 1].tolist()),
+            blueprint_version=self.blueprint_version)
 
     def detach(self, agent_id: str) -> None:
         """The agent's process is gone: its body stops and drops what it held, where it stands."""
@@ -171,6 +182,7 @@ class World:
         self.physics.drive(vel, desired)
         self.physics.step()
         new_pos, _ = self.physics.state()
+        self._positions = new_pos
         moved = new_pos - pos
         self.distance += np.hypot(moved[:, 0], moved[:, 1])
         self.odometry = moved
@@ -184,10 +196,21 @@ class World:
     def _sense(self, pos: np.ndarray | None = None) -> None:
         if pos is None:
             pos, _ = self.physics.state()
-        _, disc_xy, disc_kind = self.discs.present_arrays()
+        disc_xy, disc_kind = self._sensed_objects()
         seed = int(self.rng.integers(2**63)) if self.cfg.sensor_noise > 0 else 0
         self._ranges = sense(pos, self.alive, disc_xy, disc_kind, self.cfg.sensor_sectors,
                              self.cfg.sensor_range, self.size, noise=self.cfg.sensor_noise, seed=seed)
+
+    def _sensed_objects(self) -> tuple[np.ndarray, np.ndarray]:
+        """Positions and sensor channels of the present discs and the fixed obstacle points.
+
+        Rebuilt only when the discs change (the store hands out a new tuple then)."""
+        present = self.discs.present_arrays()
+        if self._sense_inputs is None or self._sense_inputs[0] is not present:
+            _, xy, kind = present
+            self._sense_inputs = (present, np.vstack([xy, self._obstacle_xy]),
+                                  np.concatenate([kind, np.full(len(self._obstacle_xy), OBSTACLE_CHANNEL)]))
+        return self._sense_inputs[1], self._sense_inputs[2]
 
     def _act(self, rec: AgentRecord, xy: np.ndarray) -> None:
         action = self.action[rec.index]
@@ -244,9 +267,19 @@ class World:
     def sites_filled(self) -> np.ndarray:
         return self.discs.filled_sites(self._site_codes, self._cell_code)
 
+    def completed(self) -> bool:
+        """Every drop site holds a brick (and there is one): status().completed, cheaply."""
+        return len(self.sites_xy) > 0 and bool(self.sites_filled().all())
+
+    def blueprint(self) -> Blueprint:
+        """The drop sites now, as the Blueprint message agents replace their site list with."""
+        return Blueprint(world_id=self.world_id, tick=self.tick, version=self.blueprint_version,
+                         site_xs=tuple(self.sites_xy[:, 0].tolist()), site_ys=tuple(self.sites_xy[:, 1].tolist()))
+
     def status(self) -> WorldStatus:
         filled = int(self.sites_filled().sum())
         total = len(self.sites_xy)
+        pos = self._positions
         return WorldStatus(
             world_id=self.world_id, scenario=self.scenario.name, seed=self.scenario.seed,
             mode=self.scenario.tick_mode, tick=self.tick, sites_filled=filled, sites_total=total,
@@ -255,7 +288,9 @@ class World:
             agent_ids=tuple(r.agent_id for r in self._order), agent_alive=tuple(r.alive for r in self._order),
             agent_distance=tuple(float(self.distance[r.index]) for r in self._order),
             agent_grabs=tuple(r.grabs for r in self._order), agent_drops=tuple(r.drops for r in self._order),
-            agent_restarts=tuple(r.restarts for r in self._order))
+            agent_restarts=tuple(r.restarts for r in self._order),
+            agent_x=tuple(float(pos[r.index, 0]) for r in self._order),
+            agent_y=tuple(float(pos[r.index, 1]) for r in self._order))
 
     def agent_poses(self) -> np.ndarray:
         """(n, 3) x, y, heading of every body, in attach order (for pictures and tests)."""
@@ -267,6 +302,8 @@ class World:
         def inside(x: float, y: float) -> bool:
             return 0 <= x <= self.size[0] and 0 <= y <= self.size[1]
 
+        if p.op in SITE_OPS:
+            return self._perturb_site(p)
         if p.op == "add":
             if not inside(p.x, p.y):
                 return PerturbResult(False, f"({p.x:g}, {p.y:g}) is outside the world", self.tick)
@@ -288,3 +325,48 @@ class World:
         self.discs.place(i, (p.to_x, p.to_y))
         self.physics.add_disc(i, self.discs.xy[i])
         return PerturbResult(True, f"moved {kind} #{i} to ({p.to_x:g}, {p.to_y:g})", self.tick)
+
+    def _perturb_site(self, p: Perturbation) -> PerturbResult:
+        """add_site / remove_site: the cell holding (x, y) joins or leaves the blueprint.
+
+        Only the site list changes: no disc is made or moved, so bricks_total stays, and a
+        brick on a removed site is from then on a free brick like any other.
+        """
+        col, row = (int(v) for v in self.scenario.to_cell((p.x, p.y))[0])
+        where = f"({p.x:g}, {p.y:g})"
+        if not (0 <= col < self.scenario.cols and 0 <= row < self.scenario.rows):
+            return PerturbResult(False, f"{where} is outside the world", self.tick)
+        centre = self.scenario.to_world((col, row))
+        code = self._cell_code(centre)[0]
+        at = np.flatnonzero(self._site_codes == code)
+        cell = f"cell ({col}, {row}) at ({centre[0, 0]:g}, {centre[0, 1]:g})"
+        if p.op == "add_site":
+            if self.scenario.layout[row][col] == "#":
+                return PerturbResult(False, f"{cell} is a fixed obstacle (#): no drop site there", self.tick)
+            if at.size:
+                return PerturbResult(False, f"{cell} is already a drop site", self.tick)
+            self._set_sites(np.vstack([self.sites_xy, centre]))
+            done = "added a drop site in"
+        else:
+            if not at.size:
+                return PerturbResult(False, f"no drop site in {cell}", self.tick)
+            self._set_sites(np.delete(self.sites_xy, at, axis=0))
+            done = "removed the drop site of"
+        return PerturbResult(True, f"{done} {cell}: {len(self.sites_xy)} sites, blueprint version "
+                                   f"{self.blueprint_version}", self.tick)
+
+    def _set_sites(self, sites_xy: np.ndarray) -> None:
+        # The cell codes are what filling and completion are computed from: always together.
+        self.sites_xy = sites_xy
+        self._site_codes = self._cell_code(sites_xy)
+        self.blueprint_version += 1
+
+
+def _obstacle_points(scenario: Scenario, walls: np.ndarray) -> np.ndarray:
+    """World positions the obstacle sensors report: every `#` cell's centre, and the
+    centre of every cell of a one-cell ring just outside the world (its edge is a wall
+    too, and an agent that cannot see it pushes into it)."""
+    cols, rows = scenario.cols, scenario.rows
+    ring = [(c, r) for c in range(-1, cols + 1) for r in (-1, rows)]
+    ring += [(c, r) for r in range(rows) for c in (-1, cols)]
+    return scenario.to_world(np.vstack([np.asarray(walls, np.int64).reshape(-1, 2), np.array(ring, np.int64)]))

@@ -1,0 +1,145 @@
+"""What lies beyond the egocentric map: the blueprint's sites and bricks seen before.
+
+The ESMs are bounded (paper §4.2.1): whatever shifts off them is forgotten. For the
+blueprint that is fatal on any world larger than the map: the far side of a ring scrolls
+off while the agent fetches bricks, and a blueprint wholly beyond the map at attach is
+never learned at all. So the agent keeps, beside its maps, a short list of cells in its
+own odometry frame (dead reckoning: whole cells crossed since attach, aligned with the
+world grid as the maps are):
+
+- every drop site of the blueprint, with whether it was last seen holding a brick;
+- free bricks that scrolled off the map (a source the agent walked away from).
+
+Nothing here is a map: the ESMs and NMs stay egocentric and of fixed size. Sites on the
+map are written into the CONFIG layer each step; remembered bricks that come back onto
+the map are written back into the BRICK layer (the sensors clear them if they are gone).
+What is still beyond the map enters the navigation maps at their border
+(`border_seed`), each border cell starting at the straight-line (octile) distance that
+remains to the nearest remembered cell behind it, so spreading activation (Eq. 2) ranks
+far goals after near ones by the whole distance.
+
+Pure numpy, no bus.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+SQRT2_M1 = math.sqrt(2.0) - 1.0
+MAX_FAR_BRICKS = 4096   # a bound on what is kept; the oldest are dropped first
+
+
+class FarMemory:
+    """Sites and remembered bricks, as (x east, y north) cells relative to the attach cell."""
+
+    def __init__(self, size: int, sites: np.ndarray):
+        self.size = size
+        self.centre = size // 2
+        self.pos = np.zeros(2, np.int64)                 # the agent's cell, (x, y) from the attach cell
+        self.sites = np.asarray(sites, np.int64).reshape(-1, 2)
+        self.site_open = np.ones(len(self.sites), bool)  # belief: no brick seen on it (yet)
+        self.bricks = np.zeros((0, 2), np.int64)
+
+    # ------------------------------------------------------------------ frames
+
+    def to_map(self, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(rows, cols) on the map of cells given relative to the attach cell."""
+        cells = np.asarray(cells, np.int64).reshape(-1, 2)
+        return self.centre - (cells[:, 1] - self.pos[1]), self.centre + (cells[:, 0] - self.pos[0])
+
+    def from_map(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """Cells relative to the attach cell of map cells (rows, cols), as seen before a move."""
+        return np.column_stack([np.asarray(cols) - self.centre + self.pos[0],
+                                self.centre - np.asarray(rows) + self.pos[1]]).astype(np.int64)
+
+    def _on_map(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        n = self.size
+        return (rows >= 0) & (rows < n) & (cols >= 0) & (cols < n)
+
+    # ------------------------------------------------------------------ blueprint
+
+    def set_sites(self, sites: np.ndarray) -> None:
+        """A new blueprint: keep what was believed of sites that are still in it."""
+        sites = np.asarray(sites, np.int64).reshape(-1, 2)
+        old = {tuple(c): o for c, o in zip(self.sites.tolist(), self.site_open.tolist())}
+        self.site_open = np.array([old.get(tuple(c), True) for c in sites.tolist()], bool).reshape(-1)
+        self.sites = sites
+
+    def config_layer(self, out: np.ndarray) -> None:
+        """Write the sites that fall on the map into `out` (the CONFIG layer), clearing it first."""
+        out.fill(0.0)
+        rows, cols = self.to_map(self.sites)
+        on = self._on_map(rows, cols)
+        out[rows[on], cols[on]] = 1.0
+
+    def observe_sites(self, brick_layer: np.ndarray, clear_age: np.ndarray) -> None:
+        """Update beliefs from the maps: a brick on a site's cell fills it; a cell seen empty of
+        bricks this step opens it again (a repair, a perturbation)."""
+        rows, cols = self.to_map(self.sites)
+        on = np.flatnonzero(self._on_map(rows, cols))
+        r, c = rows[on], cols[on]
+        self.site_open[on[brick_layer[r, c] > 0.5]] = False
+        self.site_open[on[(clear_age[r, c] == 0) & (brick_layer[r, c] <= 0.5)]] = True
+
+    def open_sites(self) -> int:
+        return int(self.site_open.sum())
+
+    # ------------------------------------------------------------------ moving
+
+    def move(self, kx: int, ky: int, free_bricks: np.ndarray) -> np.ndarray:
+        """The agent crossed kx cells east and ky north; `free_bricks` is the BRICK-but-not-site
+        mask as it was before the maps shifted. Bricks that leave the map are remembered;
+        returns the map mask of remembered bricks that came back onto it (to re-mark)."""
+        if kx == 0 and ky == 0:
+            return np.zeros((self.size, self.size), bool)
+        rows, cols = np.nonzero(free_bricks)
+        leaving = ~self._on_map(rows + ky, cols - kx)
+        if leaving.any():
+            self._remember(self.from_map(rows[leaving], cols[leaving]))
+        self.pos += (kx, ky)
+        back = np.zeros((self.size, self.size), bool)
+        if len(self.bricks):
+            r, c = self.to_map(self.bricks)
+            on = self._on_map(r, c)
+            back[r[on], c[on]] = True
+            self.bricks = self.bricks[~on]
+        return back
+
+    def _remember(self, cells: np.ndarray) -> None:
+        merged = np.unique(np.vstack([self.bricks, cells]), axis=0) if len(self.bricks) else np.unique(cells, axis=0)
+        self.bricks = merged[-MAX_FAR_BRICKS:]
+
+    # ------------------------------------------------------------------ beyond the border
+
+    def far_open_sites(self) -> np.ndarray:
+        """(rows, cols) as a (k, 2) array of open sites that are beyond the map."""
+        rows, cols = self.to_map(self.sites[self.site_open])
+        off = ~self._on_map(rows, cols)
+        return np.column_stack([rows[off], cols[off]])
+
+    def far_bricks(self) -> np.ndarray:
+        rows, cols = self.to_map(self.bricks)
+        return np.column_stack([rows, cols])
+
+
+def border_seed(targets: np.ndarray, size: int, obstacles: np.ndarray) -> np.ndarray | None:
+    """Seed costs (inf: none) on the map's border cells for `targets`, (k, 2) (row, col)
+    cells beyond the map: each free border cell gets the octile distance to its nearest
+    target (the straight way on, as nothing is known out there). None if no targets."""
+    if len(targets) == 0:
+        return None
+    n = size
+    edge = np.arange(n)
+    border = np.unique(np.vstack([
+        np.column_stack([np.zeros(n, np.int64), edge]), np.column_stack([np.full(n, n - 1), edge]),
+        np.column_stack([edge, np.zeros(n, np.int64)]), np.column_stack([edge, np.full(n, n - 1)])]), axis=0)
+    border = border[~obstacles[border[:, 0], border[:, 1]]]
+    seed = np.full((n, n), np.inf)
+    if len(border) == 0:
+        return seed
+    d = np.abs(border[:, None, :] - np.asarray(targets, np.int64)[None, :, :]).astype(np.float64)
+    octile = d.max(axis=2) + SQRT2_M1 * d.min(axis=2)
+    seed[border[:, 0], border[:, 1]] = octile.min(axis=1)
+    return seed

@@ -1,0 +1,80 @@
+"""The agent process's side traffic: blueprint changes in, state reports out.
+
+`AgentFeeds` subscribes to the world's Blueprint key through a FIFO inbox (reliable and
+never "latest wins": a blueprint change must not be lost), and must be created before
+the agent attaches: a change published after the Welcome was made is then certain to
+arrive, and the Welcome itself carries the sites and version as of attaching. Before each
+decision step the newest Blueprint that has arrived goes to the brain, which ignores
+versions it already has.
+
+Every `every` ticks, and once more on the way out, the agent publishes the brain's
+AgentState (what it is doing, what blocks it): `conag run` prints the last one per agent
+when a build stalls, and the world keeps it for the run summary's behaviour counts.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import zenoh
+
+from conag.bus import Inbox
+from protocol import keys
+from protocol.codec import ProtocolError, decode, encode
+from protocol.messages import Blueprint
+
+log = logging.getLogger("conag.agent")
+
+STATE_EVERY = 100  # ticks between AgentState reports
+
+
+class AgentFeeds:
+    def __init__(self, session: zenoh.Session, world_id: str, agent_id: str, every: int = STATE_EVERY):
+        self.world_id, self.agent_id, self.every = world_id, agent_id, every
+        self.bad = 0
+        self._last_report: int | None = None
+        self._blueprints = Inbox(256).subscribe(session, keys.blueprint(world_id))
+        self._states = session.declare_publisher(keys.agent_state(world_id, agent_id),
+                                                  reliability=zenoh.Reliability.RELIABLE)
+
+    def newest_blueprint(self) -> Blueprint | None:
+        """The highest-version Blueprint among those that arrived since the last call."""
+        best = None
+        while (sample := self._blueprints.get(0)) is not None:
+            try:
+                bp = decode(sample.payload.to_bytes(), Blueprint)
+            except ProtocolError as exc:
+                self.bad += 1
+                log.debug("agent %s ignored a bad blueprint: %s", self.agent_id, exc)
+                continue
+            if bp.world_id == self.world_id and (best is None or bp.version > best.version):
+                best = bp
+        return best
+
+    def before_step(self, brain) -> None:
+        """Hand the brain the newest blueprint, if one came (it keeps only newer versions)."""
+        bp = self.newest_blueprint()
+        if bp is not None and brain.set_blueprint(bp.version, bp.site_xs, bp.site_ys):
+            log.info("agent %s: blueprint version %d, %d sites", self.agent_id, bp.version, len(bp.site_xs))
+
+    def after_step(self, brain, tick: int) -> None:
+        """Publish the brain's state report if `every` ticks have passed since the last one."""
+        if self._last_report is None or tick - self._last_report >= self.every:
+            self.report(brain, tick)
+
+    def report(self, brain, tick: int) -> None:
+        self._states.put(encode(brain.state_report(tick)))
+        self._last_report = tick
+
+    def close(self, brain=None, tick: int = 0) -> None:
+        """A last state report (if there is a brain), then undeclare everything."""
+        try:
+            if brain is not None:
+                self.report(brain, tick)
+        except Exception as exc:  # on the way out (a signal mid-step, a closing session): never fatal
+            log.debug("agent %s: no final state report: %s", self.agent_id, exc)
+        self._blueprints.close()
+        try:
+            self._states.undeclare()
+        except Exception:  # the session may be closing already
+            pass

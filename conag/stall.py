@@ -1,0 +1,71 @@
+"""Telling a stalled build from a slow one, and saying why it stalled.
+
+`StallClock` counts the ticks since a drop site was last filled; `conag run` (from the
+world's status) and `conag.sim.SimRun` (every tick) both stop a run once that reaches
+the limit. `stall_report` is the text both print then: one line for the run, one per
+agent from the world's view of its body and the agent's own last `AgentState`.
+No bus and no agent code here, so both sides import it freely.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+from protocol.messages import AgentState, WorldStatus
+
+DEFAULT_STALL_TICKS = 3000
+
+
+class StallClock:
+    """Ticks since the last site was filled; `observe` says when that reaches `limit`.
+
+    Progress is the number of open sites (total - filled) falling, not the filled count
+    beating its best: when a perturbation takes a brick off a site, putting it back is
+    progress. A site added by a perturbation starts the count again (new work, which the
+    agents have not had a chance at). A build with nothing left to do never stalls.
+    """
+
+    def __init__(self, limit: int):
+        if limit <= 0:
+            raise ValueError("the stall limit must be > 0 ticks")
+        self.limit = limit
+        self.since: int | None = None   # the tick of the last progress
+        self._open: int | None = None
+        self._total = -1
+
+    def observe(self, tick: int, sites_filled: int, sites_total: int) -> bool:
+        """Record the state at `tick`; True once no site has been filled for `limit` ticks."""
+        open_ = sites_total - sites_filled
+        if self.since is None or open_ < self._open or sites_total > self._total:
+            self.since = tick
+        self._open, self._total = open_, sites_total
+        return open_ > 0 and self.idle(tick) >= self.limit
+
+    def idle(self, tick: int) -> int:
+        """Ticks since the last progress (0 before the first observation)."""
+        return 0 if self.since is None else tick - self.since
+
+
+def stall_report(status: WorldStatus, idle_ticks: int, states: Mapping[str, AgentState]) -> list[str]:
+    """The stall report: a headline and one line per agent (see `agent_line`)."""
+    head = (f"STALLED at tick {status.tick}: no site filled for {idle_ticks} ticks "
+            f"({status.sites_filled}/{status.sites_total} sites)")
+    return [head] + agent_lines(status, states)
+
+
+def agent_lines(status: WorldStatus, states: Mapping[str, AgentState]) -> list[str]:
+    """One line per agent of `status`, by id: where its body is and what it last said it does."""
+    lines = []
+    for i, agent in sorted(enumerate(status.agent_ids), key=lambda item: item[1]):
+        where = ""
+        if i < len(status.agent_x):  # a status from an older world has no positions
+            where = f" at ({status.agent_x[i]:.2f}, {status.agent_y[i]:.2f})"
+        alive = "alive" if status.agent_alive[i] else "GONE"
+        state = states.get(agent)
+        if state is None:
+            doing = "no AgentState received"
+        else:
+            doing = (f"{state.behaviour} (tick {state.tick}), holding {'a brick' if state.holding else 'nothing'}, "
+                     f"{state.sites_open} sites open, blocker: {state.blocker or 'none'}")
+        lines.append(f"  {agent}: {alive}{where}: {doing}")
+    return lines

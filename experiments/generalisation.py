@@ -1,0 +1,319 @@
+"""Issue 10: does the agent build layouts nobody tuned it for? The generated suite.
+
+A suite of generated layouts (`world_server/generator.py`, committed as files under
+experiments/generalisation/layouts/, so a change to the generator cannot silently change
+the benchmark) is built in-process (conag/sim.py: the real World and Brain code, lockstep,
+headless), each layout once with goal sequencing (ConAg-TS, the default agent) and once
+nearest-first (the plain agent of §4), in the same run. Every layout passed the
+buildability check when it was generated. A run stops when the structure is complete, when
+no site has been filled for `--stall` ticks (stalled), or at the scenario's `max_ticks`.
+
+Reported: completion rate per family and per size band for both agents; ticks to complete;
+the distance walked against a lower bound (agent_runtime/replay.lower_bound, on the initial
+map); every failure by its layout file, with its stall report and a picture of the state it
+stopped in (experiments/generalisation/failures/).
+
+    python3 experiments/generalisation.py              # the whole suite (about an hour on 2 cores)
+    python3 experiments/generalisation.py --quick      # a smoke run of a few small layouts
+    python3 experiments/generalisation.py --generate   # rewrite the suite's layout files
+
+Writes experiments/generalisation.json (every run), experiments/generalisation.md and the
+generalisation section of EXPERIMENTS.md (not with --quick, which writes to --out).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict, dataclass
+from multiprocessing import get_context
+from pathlib import Path
+
+import numpy as np
+
+from agent_runtime.config import AgentConfig
+from conag import sim
+from experiments.report import write_section
+from world_server.scenario import Scenario, load_scenario
+
+ROOT = Path(__file__).resolve().parent.parent
+SUITE = ROOT / "experiments" / "generalisation"
+LAYOUTS = SUITE / "layouts"
+SUITE_SEED = 2026
+SUITE_SIZE = 200
+MODES = (("goal sequencing", True), ("nearest-first", False))
+BANDS = ((15, 30), (31, 60), (61, 120))
+DEFAULT_STALL = 4000
+
+
+@dataclass(frozen=True)
+class Job:
+    layout: str        # file name under LAYOUTS (or a path for --only)
+    mode: str
+    stall: int
+
+
+@dataclass(frozen=True)
+class Outcome:
+    layout: str
+    family: str
+    cols: int
+    rows: int
+    agents: int
+    mode: str
+    completed: bool
+    stalled: bool
+    ticks: int
+    max_ticks: int
+    sites_filled: int
+    sites_total: int
+    bricks_total_start: int
+    bricks_total_end: int
+    distance: float
+    bound: float
+    seconds: float
+    report: tuple[str, ...] = ()
+    picture: str = ""
+
+
+def family_of(sc: Scenario) -> str:
+    """The generator writes `gen-<family>-<seed>` names."""
+    m = re.match(r"gen-(.+)-\d+$", sc.name)
+    return m.group(1) if m else "other"
+
+
+def band_of(cols: int, rows: int) -> str:
+    side = max(cols, rows)
+    lo, hi = next(b for b in BANDS if side <= b[1])
+    return f"{lo}-{hi}"
+
+
+def layout_path(name: str) -> Path:
+    p = Path(name)
+    return p if p.suffix == ".toml" and p.exists() else LAYOUTS / name
+
+
+def run_job(job: Job, pictures: Path | None) -> Outcome:
+    """Build one layout with one agent; stop when complete, stalled or out of ticks."""
+    sc = load_scenario(layout_path(job.layout))
+    run = sim.start(sc, cfg=AgentConfig(goal_sequencing=dict(MODES)[job.mode]))
+    starts = [tuple(int(v) for v in cell[::-1]) for cell in sc.to_cell(run.world.agent_poses()[:, :2])]
+    bricks_start = run.world.discs.bricks_total()
+    began = time.perf_counter()
+    result = run.run(sc.max_ticks, stall_ticks=job.stall)
+    status = run.world.status()
+    report, picture = (), ""
+    if not result.completed:
+        report = tuple(run.stall_report())
+        if pictures is not None:
+            picture = str(_picture(run, sc, job, pictures).relative_to(ROOT))
+    return Outcome(layout=Path(job.layout).name, family=family_of(sc), cols=sc.cols, rows=sc.rows,
+                   agents=len(starts), mode=job.mode, completed=result.completed, stalled=result.stalled,
+                   ticks=result.ticks, max_ticks=sc.max_ticks, sites_filled=status.sites_filled,
+                   sites_total=status.sites_total, bricks_total_start=bricks_start,
+                   bricks_total_end=status.bricks_total, distance=float(sum(status.agent_distance)),
+                   bound=_bound(sc, starts), seconds=time.perf_counter() - began, report=report,
+                   picture=picture)
+
+
+def _bound(sc: Scenario, starts: list[tuple[int, int]]) -> float:
+    """Lower bound on the total distance (world units), on the initial map."""
+    from agent_runtime.replay import lower_bound
+
+    reach = sc.world.grab_reach / sc.world.cell_size
+    return lower_bound(sc.grid("b"), sc.grid("+"), sc.grid("FWB#"), starts, reach,
+                       AgentConfig().drop_centering) * sc.world.cell_size
+
+
+def _picture(run: sim.SimRun, sc: Scenario, job: Job, folder: Path) -> Path:
+    """The world as the run left it: discs where they are now, agents where they stand."""
+    from protocol.messages import DISC_KINDS
+    from world_server.render import render_scenario
+
+    idx, xy, kind = run.world.discs.present_arrays()
+    discs = [(x, y, DISC_KINDS[k]) for (x, y), k in zip(xy.tolist(), kind.tolist())]
+    st = run.world.status()
+    slug = "nearest" if job.mode == "nearest-first" else "ts"
+    return render_scenario(sc, folder / f"{Path(job.layout).stem}-{slug}.png", agents=run.world.agent_poses().tolist(),
+                           discs=discs, title=f"{sc.name} ({job.mode}): {st.sites_filled}/{st.sites_total} "
+                                              f"at tick {st.tick}")
+
+
+def run_all(jobs: list[Job], workers: int, pictures: Path | None) -> list[Outcome]:
+    """Every job on `workers` processes (spawned: nothing crosses a fork), with progress."""
+    out: list[Outcome] = []
+    began = time.monotonic()
+    with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
+        futures = {pool.submit(run_job, j, pictures): j for j in jobs}
+        for k, fut in enumerate(as_completed(futures), 1):
+            o = fut.result()
+            what = (f"complete in {o.ticks} ticks" if o.completed else
+                    f"{'STALLED' if o.stalled else 'OUT OF TICKS'} at {o.sites_filled}/{o.sites_total}")
+            print(f"[{k}/{len(jobs)} {time.monotonic() - began:6.0f} s] {o.layout} ({o.family}, {o.cols}x{o.rows}, "
+                  f"{o.agents} agents) {o.mode}: {what} ({o.seconds:.0f} s)", file=sys.stderr, flush=True)
+            out.append(o)
+    return sorted(out, key=lambda o: (o.layout, o.mode))
+
+
+# ------------------------------------------------------------------ tables
+
+def _rate(runs: list[Outcome]) -> str:
+    done = sum(o.completed for o in runs)
+    return f"{done}/{len(runs)} ({100.0 * done / len(runs):.0f}%)" if runs else "—"
+
+
+def _median(values: list[float], fmt: str = ".0f") -> str:
+    return format(float(np.median(values)), fmt) if values else "—"
+
+
+def group_table(outcomes: list[Outcome], key, title: str) -> str:
+    """Completion, ticks and distance / bound per group, both agents side by side."""
+    groups = sorted({key(o) for o in outcomes})
+    head = (f"| {title} | layouts | goal sequencing: completed | ticks (median) | distance / bound (median) "
+            f"| nearest-first: completed | ticks (median) |")
+    lines = [head, "|---|---|---|---|---|---|---|"]
+    for g in groups + ["all"]:
+        mine = [o for o in outcomes if g == "all" or key(o) == g]
+        ts = [o for o in mine if o.mode == "goal sequencing"]
+        nf = [o for o in mine if o.mode == "nearest-first"]
+        ratios = [o.distance / o.bound for o in ts if o.completed and o.bound > 0]
+        lines.append(f"| {g} | {len(ts)} | {_rate(ts)} | {_median([o.ticks for o in ts if o.completed])} | "
+                     f"{_median(ratios, '.2f')} | {_rate(nf)} | {_median([o.ticks for o in nf if o.completed])} |")
+    return "\n".join(lines)
+
+
+def goals(outcomes: list[Outcome]) -> str:
+    ts = [o for o in outcomes if o.mode == "goal sequencing"]
+    small = [o for o in ts if o.agents <= 3 and max(o.cols, o.rows) <= 60]
+    rate = lambda runs: 100.0 * sum(o.completed for o in runs) / len(runs) if runs else float("nan")  # noqa: E731
+    lost = [o for o in outcomes if o.bricks_total_end != o.bricks_total_start]
+    return "\n".join([
+        "| goal | target | measured | met |", "|---|---|---|---|",
+        f"| goal sequencing completes buildable layouts | >= 98% | {rate(ts):.1f}% of {len(ts)} | "
+        f"{'yes' if rate(ts) >= 98 else 'no'} |",
+        f"| ... with <= 3 agents in worlds up to 60 x 60 | 100% | {rate(small):.1f}% of {len(small)} | "
+        f"{'yes' if small and rate(small) == 100 else 'no'} |",
+        f"| bricks_total never changes | every run | {len(outcomes) - len(lost)}/{len(outcomes)} runs | "
+        f"{'yes' if not lost else 'no'} |"])
+
+
+def failures(outcomes: list[Outcome]) -> str:
+    bad = [o for o in outcomes if not o.completed]
+    if not bad:
+        return "None: every run completed."
+    lines = []
+    for o in bad:
+        why = "stalled" if o.stalled else "out of ticks"
+        pic = f" ![]({Path(o.picture).relative_to('experiments').as_posix()})" if o.picture else ""
+        lines.append(f"- `{o.layout}` ({o.family}, {o.cols} x {o.rows}, {o.agents} agents), **{o.mode}**: {why} at "
+                     f"tick {o.ticks}, {o.sites_filled}/{o.sites_total} sites.{pic}")
+        lines += [f"  - `{line.strip()}`" for line in o.report[1:]]
+    return "\n".join(lines)
+
+
+def markdown(outcomes: list[Outcome], args: argparse.Namespace, seconds: float) -> str:
+    layouts = len({o.layout for o in outcomes})
+    return f"""## Generalisation: generated layouts (issue 10)
+
+`python3 experiments/generalisation.py` builds {layouts} generated layouts (committed under
+`experiments/generalisation/layouts/`, made by `python3 experiments/generalisation.py --generate`:
+`world_server/generator.py` suite seed {SUITE_SEED}, every layout passing the buildability check), each
+with goal sequencing and nearest-first in the same run, in-process (conag/sim.py, lockstep, the default
+`AgentConfig` but for goal sequencing, hunger and thirst on). A run stops when complete, after
+{args.stall} ticks with no site filled (stalled), or at the layout's `max_ticks`. Distance / bound:
+the distance all agents walked over `agent_runtime/replay.lower_bound` on the initial map (completed runs).
+Wall time of this run: {seconds / 60:.0f} min on {args.jobs} worker processes.
+
+### Goals
+
+{goals(outcomes)}
+
+### Per family
+
+{group_table(outcomes, lambda o: o.family, "family")}
+
+### Per size band (the world's longer side, cells)
+
+{group_table(outcomes, lambda o: band_of(o.cols, o.rows), "size")}
+
+### Per agent count
+
+{group_table(outcomes, lambda o: f"{o.agents:>2} agents", "agents")}
+
+### Every run that did not complete
+
+{failures(outcomes)}
+"""
+
+
+# ------------------------------------------------------------------ the suite's files
+
+def generate_layouts(count: int, seed: int) -> None:
+    from world_server.generator import generate_suite
+
+    LAYOUTS.mkdir(parents=True, exist_ok=True)
+    for old in LAYOUTS.glob("*.toml"):
+        old.unlink()
+    for k, g in enumerate(generate_suite(count, seed)):
+        sc = g.scenario()
+        path = LAYOUTS / f"{k:03d}-{sc.name}.toml"
+        path.write_text(g.text, encoding="utf-8")
+        print(f"{path.name}: {sc.cols}x{sc.rows}, {len(sc.cells('+'))} open sites, {sc.agents} agents",
+              file=sys.stderr)
+
+
+def suite_files() -> list[str]:
+    return sorted(p.name for p in LAYOUTS.glob("*.toml"))
+
+
+def quick_files(n: int) -> list[str]:
+    """The `n` smallest layouts of the suite (by cells x agents): a smoke run in seconds."""
+    def work(name: str) -> tuple[int, str]:
+        sc = load_scenario(LAYOUTS / name)
+        return sc.cols * sc.rows * max(sc.agents, 1) + 50 * len(sc.cells("+")), name
+    return [name for _, name in sorted(map(work, suite_files()))[:n]]
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--quick", action="store_true", help="a few small layouts; results go to --out only")
+    ap.add_argument("--generate", action="store_true", help=f"rewrite the suite's {SUITE_SIZE} layout files")
+    ap.add_argument("--only", nargs="+", metavar="LAYOUT", help="these layout files (names under the suite, or paths)")
+    ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="worker processes")
+    ap.add_argument("--stall", type=int, default=DEFAULT_STALL, help="ticks with no site filled that stop a run")
+    ap.add_argument("--out", type=Path, default=None, help="folder for the json and md (default experiments/)")
+    args = ap.parse_args(argv)
+    if args.jobs < 1 or args.stall < 1:
+        ap.error("--jobs and --stall must be >= 1")
+    if args.generate:
+        generate_layouts(SUITE_SIZE, SUITE_SEED)
+        return 0
+    names = args.only or (quick_files(4) if args.quick else suite_files())
+    if not names:
+        ap.error(f"no layouts in {LAYOUTS}: run with --generate first")
+    out = args.out or (None if args.quick else ROOT / "experiments")
+    if out is None:
+        ap.error("--quick needs --out (it must not overwrite the committed results)")
+    out.mkdir(parents=True, exist_ok=True)
+    pictures = out / "generalisation" / "failures" if args.out else SUITE / "failures"
+    for old in pictures.glob("*.png") if pictures.exists() and not (args.only or args.quick) else ():
+        old.unlink()
+    jobs = [Job(name, mode, args.stall) for name in names for mode, _ in MODES]
+    began = time.monotonic()
+    outcomes = run_all(jobs, args.jobs, pictures)
+    text = markdown(outcomes, args, time.monotonic() - began)
+    (out / "generalisation.json").write_text(json.dumps([asdict(o) for o in outcomes], indent=1), encoding="utf-8")
+    (out / "generalisation.md").write_text(text, encoding="utf-8")
+    if not (args.quick or args.only or args.out):
+        write_section(ROOT / "EXPERIMENTS.md", "generalisation", text)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

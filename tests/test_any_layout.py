@@ -1,0 +1,256 @@
+"""Issue 10's failure classes, each on a layout written for it (tests/layouts/), plus the
+core pieces behind the fixes: the far memory, the seeded field, the obstacle channel,
+Explore as the default and backing off when stuck."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from agent_runtime.brain import Brain
+from agent_runtime.config import AgentConfig
+from agent_runtime.esm import CONFIG, OBSTACLE
+from agent_runtime.far_memory import FarMemory, border_seed
+from agent_runtime.spreading import distance_field, seeded_distance_field
+from conag import sim
+from protocol.messages import BEHAVIOURS, CHANNELS, NO_READING, SensorFrame, Welcome
+from world_server.scenario import load_scenario, parse_scenario
+from world_server.world import World
+
+LAYOUTS = Path(__file__).resolve().parent / "layouts"
+OBST = CHANNELS.index("obstacle")
+
+
+def _build(name: str, ticks: int, **cfg) -> sim.SimRun:
+    run = sim.start(load_scenario(LAYOUTS / f"{name}.toml"), cfg=AgentConfig(**cfg))
+    run.run(ticks)
+    return run
+
+
+def _status(run: sim.SimRun):
+    return run.world.status()
+
+
+# ------------------------------------------------------------------ the failure classes, end to end
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sequencing", [True, False], ids=["goal-sequencing", "nearest-first"])
+def test_a_blueprint_beyond_the_map_at_attach_is_built(sequencing):
+    # Before: the agents never learned the blueprint and stood still (distance 0) to the limit.
+    run = _build("far_blueprint", 12000, goal_sequencing=sequencing)
+    st = _status(run)
+    assert st.completed, f"{st.sites_filled}/{st.sites_total} at tick {st.tick}"
+
+
+@pytest.mark.slow
+def test_the_far_side_of_a_ring_is_not_forgotten_while_fetching_bricks():
+    # Before: 18 of 25 sites after 60,000 ticks, one agent idle and two wandering.
+    run = _build("ring_pillar", 12000)
+    st = _status(run)
+    assert st.completed, f"{st.sites_filled}/{st.sites_total} at tick {st.tick}"
+
+
+@pytest.mark.slow
+def test_agents_route_through_the_gaps_of_a_wall_they_sense():
+    # Before: an agent carrying a brick pushed against a `#` wall it could not see.
+    run = _build("hash_walls", 20000)
+    st = _status(run)
+    assert st.completed, f"{st.sites_filled}/{st.sites_total} at tick {st.tick}"
+
+
+@pytest.mark.slow
+def test_two_agents_at_the_end_of_an_edge_wall_do_not_livelock():
+    # Before: two agents spent thousands of ticks avoiding each other at the wall's end.
+    run = _build("edge_wall_livelock", 15000)
+    st = _status(run)
+    assert st.completed, f"{st.sites_filled}/{st.sites_total} at tick {st.tick}"
+    for brain in run.brains.values():
+        assert brain.behaviour_ticks["avoid"] < 1000
+
+
+# ------------------------------------------------------------------ obstacles are sensed and mapped
+
+WALLED = """
+.......
+...#...
+.A.#.+.
+...#...
+.b.....
+"""
+
+
+def _scenario(layout: str, agents: int = 1, **world):
+    extra = "".join(f"{k} = {v}\n" for k, v in world.items())
+    return parse_scenario(f'name = "t"\nseed = 1\nagents = {agents}\nlayout = """{layout}"""\n[world]\n{extra}')
+
+
+def test_fixed_walls_and_the_world_edge_are_on_the_obstacle_channel():
+    w = World(_scenario(WALLED, sensor_noise=0.0), np.random.default_rng(0))
+    w.attach("a")
+    r = np.array(w.frame("a").ranges).reshape(len(CHANNELS), -1)
+    # The wall's nearest cell is 2 cells east (sector 0 or 15 by the border), the west edge
+    # ring cell is 2 cells west (sector 7 or 8).
+    def nearest(sectors):
+        return min(v for v in r[OBST][sectors] if v >= 0)
+    assert nearest([0, 15]) == pytest.approx(2.0)
+    assert nearest([7, 8]) == pytest.approx(2.0)
+    # Nothing else reports them.
+    assert np.all(r[CHANNELS.index("food")] == NO_READING)
+
+
+def test_the_agent_maps_walls_and_plans_around_them():
+    run = sim.start(_scenario(WALLED, sensor_noise=0.0))
+    run.step()
+    brain = run.brains["a1"]
+    c = brain.centre
+    walls = {(int(r) - c, int(col) - c) for r, col in zip(*np.nonzero(brain.maps.maps[OBSTACLE] > 0.5))}
+    assert {(-1, 2), (0, 2), (1, 2)} <= walls   # the three `#` cells east of the agent
+    plans = brain.plan()
+    assert np.all(np.isinf(plans.config[brain.maps.maps[OBSTACLE] > 0.5]))
+
+
+# ------------------------------------------------------------------ Explore is the default
+
+def _welcome(sites=((),()), x=50.5, y=50.5) -> Welcome:
+    return Welcome(world_id="w", agent_id="a1", body=0, tick=0, x=x, y=y, heading=0.0, holding=False,
+                   restarts=0, sectors=16, sensor_range=6.0, cell_size=1.0,
+                   site_xs=tuple(sites[0]), site_ys=tuple(sites[1]))
+
+
+def _frame(tick: int, dx: float = 0.0, dy: float = 0.0, holding: bool = False) -> SensorFrame:
+    return SensorFrame(agent_id="a1", tick=tick, heading=0.0, odom_dx=dx, odom_dy=dy, sectors=16,
+                       ranges=(NO_READING,) * (16 * len(CHANNELS)), holding=holding)
+
+
+def test_an_agent_with_nothing_on_its_maps_explores():
+    brain = Brain(_welcome(([80.5], [50.5])), AgentConfig(), np.random.default_rng(0))
+    step = brain.step(_frame(1))
+    assert step.behaviour == "explore" and step.speed > 0
+
+
+# ------------------------------------------------------------------ stuck agents back off
+
+def test_an_agent_without_headway_backs_off_for_a_bounded_while():
+    cfg = AgentConfig(stuck_ticks=40)
+    brain = Brain(_welcome(([60.5], [50.5])), cfg, np.random.default_rng(3))
+    behaviours = [brain.step(_frame(t, holding=True)).behaviour for t in range(1, 200)]
+    # Pinned in place (odometry 0) while it wants to move: it backs off, and not for ever.
+    first = behaviours.index("unstick")
+    assert first == cfg.stuck_ticks   # the window is full after stuck_ticks steps
+    run = next(i for i in range(first, len(behaviours)) if behaviours[i] != "unstick") - first
+    assert cfg.stuck_ticks // 4 <= run <= cfg.stuck_ticks // 2
+    assert brain.unsticks >= 2   # still pinned afterwards: it tries again
+
+
+def test_an_agent_that_moves_never_backs_off():
+    brain = Brain(_welcome(([60.5], [50.5])), AgentConfig(stuck_ticks=40), np.random.default_rng(3))
+    for t in range(1, 200):
+        assert brain.step(_frame(t, dx=0.2 if (t // 60) % 2 == 0 else -0.2)).behaviour != "unstick"
+
+
+# ------------------------------------------------------------------ the far memory
+
+def test_sites_beyond_the_map_stay_known_and_pull_the_agent_towards_them():
+    brain = Brain(_welcome(([90.5, 91.5], [50.5, 50.5])), AgentConfig(map_size=21), np.random.default_rng(0))
+    assert brain.maps.maps[CONFIG].sum() == 0          # 40 cells east: not on a 21-cell map
+    brain.step(_frame(1, holding=True))
+    plans = brain.plans
+    c = brain.centre
+    assert np.isfinite(plans.config[c, c])             # a drop site is available ...
+    assert plans.config[c, c] == pytest.approx(40.0)   # ... 40 cells away, through the border
+    assert plans.config[c, c + 1] < plans.config[c, c]  # and the way is east
+
+
+def test_a_site_that_scrolls_off_the_map_comes_back_in_its_cell():
+    brain = Brain(_welcome(([52.5], [50.5])), AgentConfig(map_size=11), np.random.default_rng(0))
+    for t in range(1, 41):                              # 8 cells west
+        brain.perceive(_frame(t, dx=-0.2))
+    assert brain.maps.maps[CONFIG].sum() == 0           # 10 cells east of a radius-5 map
+    brain.far.site_open[:] = False                      # believed filled (say, seen so)
+    brain.perceive(_frame(41))
+    assert brain.far.open_sites() == 0                  # out of sight: the belief stands
+    for t in range(42, 82):                             # 8 cells east, back where it started
+        brain.perceive(_frame(t, dx=0.2))
+    r, col = np.argwhere(brain.maps.maps[CONFIG] > 0.5)[0]
+    assert (r - brain.centre, col - brain.centre) == (0, 2)
+    assert brain.far.open_sites() == 1                  # in sensor range and seen empty: open again
+
+
+def test_bricks_that_leave_the_map_are_remembered_and_come_back():
+    mem = FarMemory(5, np.zeros((0, 2)))
+    free = np.zeros((5, 5), bool)
+    free[2, 4] = True                       # a brick 2 cells east of the centre
+    for _ in range(3):                      # walk 3 cells west: it leaves on the east side
+        back = mem.move(-1, 0, free)
+        free = np.zeros((5, 5), bool)
+        assert not back.any()
+    assert mem.bricks.tolist() == [[2, 0]]
+    assert mem.far_bricks().tolist() == [[2, 7]]   # row 2, col 7: beyond the east border
+    back = mem.move(1, 0, free)                    # one step east: col 6, still off
+    back = mem.move(1, 0, free)                    # col 5 -> still off (cols 0-4)
+    back = mem.move(1, 0, free)                    # col 4: on the map again
+    assert back[2, 4] and len(mem.bricks) == 0
+
+
+def test_blueprint_changes_keep_beliefs_of_sites_that_stay():
+    mem = FarMemory(9, np.array([[1, 0], [2, 0]]))
+    mem.site_open[:] = (False, True)
+    mem.set_sites(np.array([[1, 0], [3, 0]]))
+    assert mem.site_open.tolist() == [False, True]
+
+
+def test_set_blueprint_ignores_older_versions_and_replans():
+    brain = Brain(_welcome(([52.5], [50.5])), AgentConfig(), np.random.default_rng(0))
+    assert brain.set_blueprint(2, [48.5], [50.5])
+    assert not brain.set_blueprint(1, [60.5], [50.5])
+    r, col = np.argwhere(brain.maps.maps[CONFIG] > 0.5)[0]
+    assert (r - brain.centre, col - brain.centre) == (0, -2)
+
+
+def test_border_seed_is_the_octile_distance_that_remains():
+    seed = border_seed(np.array([[2, 10]]), 5, np.zeros((5, 5), bool))
+    assert seed[2, 4] == pytest.approx(6.0)                       # straight east
+    assert seed[0, 4] == pytest.approx(6 + 2 * (math.sqrt(2) - 1))  # two rows off: two diagonals
+    blocked = np.zeros((5, 5), bool)
+    blocked[:, 4] = True
+    assert np.isinf(border_seed(np.array([[2, 10]]), 5, blocked)[:, 4]).all()
+    assert border_seed(np.zeros((0, 2)), 5, blocked) is None
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(3, 14), st.integers(0, 2**32 - 1))
+def test_seeded_field_is_the_cheapest_goal_plus_its_cost(n, seed):
+    rng = np.random.default_rng(seed)
+    obstacles = rng.random((n, n)) < 0.25
+    goals = rng.random((n, n)) < 0.1
+    cost = rng.uniform(0, 15, (n, n))
+    got = seeded_distance_field(np.where(goals, cost, np.inf), obstacles)
+    expected = np.full((n, n), np.inf)
+    for r, c in zip(*np.nonzero(goals & ~obstacles)):
+        one = np.zeros((n, n), bool)
+        one[r, c] = True
+        expected = np.minimum(expected, distance_field(one, obstacles) + cost[r, c])
+    np.testing.assert_allclose(np.where(np.isinf(got), -1, got), np.where(np.isinf(expected), -1, expected))
+    zero = seeded_distance_field(np.where(goals, 0.0, np.inf), obstacles)
+    np.testing.assert_array_equal(zero, distance_field(goals, obstacles))
+
+
+def test_seeded_field_rejects_negative_costs():
+    with pytest.raises(ValueError):
+        seeded_distance_field(np.full((3, 3), -1.0), np.zeros((3, 3), bool))
+
+
+# ------------------------------------------------------------------ what the agent reports
+
+def test_the_state_report_names_what_blocks_the_agent():
+    brain = Brain(_welcome(([52.5], [50.5])), AgentConfig(), np.random.default_rng(0))
+    brain.step(_frame(1))
+    report = brain.state_report(1)
+    assert report.behaviour == "explore" and report.sites_open == 1
+    assert "no free brick" in report.blocker
+    assert sum(report.behaviour_ticks) == 1 and report.behaviour_ticks[BEHAVIOURS.index("explore")] == 1

@@ -1,0 +1,128 @@
+"""A run never stalls in silence (issue #10, part 4): the stall clock, the report, the
+in-process simulator's stall stop, and `conag run --stall-ticks` (exit code 4, the report
+naming every agent, `stalled` and behaviour counts in the summary)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from conag import sim
+from conag.stall import StallClock, stall_report
+from conag.summary import run_summary
+from protocol.messages import BEHAVIOURS, AgentState, Perturbation, WorldStatus
+from tests.conftest import free_port
+from tests.test_run import conag
+from world_server.scenario import parse_scenario
+
+# The only site is walled in by `#`: no agent can ever bring a brick to it.
+WALLED = '''
+name = "walled"
+seed = 5
+agents = 2
+max_ticks = 20000
+layout = """
+...........
+.b..A.A..b.
+...........
+......###..
+......#+#..
+......###..
+"""
+'''
+
+
+def state(agent: str, behaviour: str = "explore", **kw) -> AgentState:
+    ticks = tuple(7 if b == behaviour else 0 for b in BEHAVIOURS)
+    return AgentState(**{"agent_id": agent, "tick": 300, "behaviour": behaviour, "holding": True, "sites_open": 1,
+                         "blocker": "holds a brick but no open site is reachable", "behaviour_ticks": ticks, **kw})
+
+
+STATUS = WorldStatus(world_id="w0", scenario="walled", seed=5, mode="lockstep", tick=900, sites_filled=0,
+                     sites_total=1, bricks_total=2, agents_alive=1, bad_messages=0, completed=False,
+                     agent_ids=("a1", "a2"), agent_alive=(True, False), agent_distance=(3.0, 1.0),
+                     agent_grabs=(1, 0), agent_drops=(0, 0), agent_restarts=(0, 0),
+                     agent_x=(4.25, 6.5), agent_y=(4.5, 4.5))
+
+
+# ---------------------------------------------------------------- the clock and the report
+
+
+def test_the_clock_stops_a_run_only_after_limit_ticks_without_a_fill():
+    c = StallClock(100)
+    assert not c.observe(0, 0, 3) and not c.observe(99, 0, 3)
+    assert c.observe(100, 0, 3) and c.idle(100) == 100
+    assert not c.observe(150, 1, 3) and c.idle(150) == 0           # a site filled: progress
+    assert not c.observe(240, 0, 3)                                # a brick taken off a site
+    assert not c.observe(300, 1, 3) and c.since == 300             # ... and put back: progress again
+    assert not c.observe(390, 1, 4) and c.since == 390             # a site added: a fresh count
+    assert c.observe(490, 1, 4)
+    assert not c.observe(10_000, 4, 4)                             # nothing left to do: never stalled
+    with pytest.raises(ValueError):
+        StallClock(0)
+
+
+def test_the_report_names_every_agent_with_its_position_and_last_state():
+    lines = stall_report(STATUS, 600, {"a1": state("a1", "brick_nav")})
+    assert lines[0] == "STALLED at tick 900: no site filled for 600 ticks (0/1 sites)"
+    assert lines[1] == ("  a1: alive at (4.25, 4.50): brick_nav (tick 300), holding a brick, 1 sites open, "
+                        "blocker: holds a brick but no open site is reachable")
+    assert lines[2] == "  a2: GONE at (6.50, 4.50): no AgentState received"
+
+
+def test_the_summary_has_stalled_and_each_agents_behaviour_ticks():
+    s = run_summary(STATUS, {"a1": state("a1", "config_nav")}, stalled=True)
+    assert s["stalled"] is True and s["completed"] is False
+    assert [a["behaviour_ticks"] for a in s["agents"]] == [{"config_nav": 7}, {}]
+    assert run_summary(STATUS)["stalled"] is False
+
+
+# ---------------------------------------------------------------- in process (conag.sim)
+
+
+def test_a_simrun_that_cannot_progress_stops_as_stalled_and_reports_why():
+    run = sim.start(parse_scenario(WALLED))
+    result = run.run(5000, stall_ticks=300)
+    assert (result.completed, result.stalled, result.ticks) == (False, True, 300)
+    assert not result                                              # falsy, as the old bool
+    assert {a: sum(c.values()) for a, c in run.behaviour_ticks.items()} == {"a1": 300, "a2": 300}
+    lines = run.stall_report()
+    assert lines[0] == "STALLED at tick 300: no site filled for 300 ticks (0/1 sites)"
+    assert [line.split(":")[0] for line in lines[1:]] == ["  a1", "  a2"]
+    assert all("alive at (" in line and "blocker:" in line for line in lines[1:]), lines
+
+
+def test_a_simrun_counts_from_each_run_and_a_fill_restarts_the_count():
+    run = sim.start(parse_scenario(WALLED))
+    assert run.run(120) == sim.SimResult(False, False, 120)        # no limit: runs to max_ticks
+    result = run.run(400, stall_ticks=300)                         # the count starts with this run
+    assert result.stalled and result.ticks == 420
+    assert run.perturb(Perturbation("add_site", 2.5, 3.5)).ok        # a site the agents can reach
+    result = run.run(5000, stall_ticks=300)
+    assert result.stalled and run.world.status().sites_filled == 1
+    filled_at = int(run.filled_at.max())
+    assert filled_at > 420 and result.ticks == filled_at + 300
+
+
+# ---------------------------------------------------------------- conag run
+
+
+@pytest.mark.slow
+def test_conag_run_stops_a_stalled_build_with_exit_code_4_and_a_report(tmp_path):
+    scenario, out = tmp_path / "walled.toml", tmp_path / "summary.json"
+    scenario.write_text(WALLED)
+    r = conag("run", scenario, "--headless", "--stall-ticks", 300, "--summary", out,
+              "--listen", f"tcp/127.0.0.1:{free_port()}", timeout=120)
+    assert r.returncode == 4, r.stdout + r.stderr
+    lines = r.stdout.splitlines()
+    head = next(i for i, line in enumerate(lines) if line.startswith("STALLED at tick "))
+    assert "no site filled for" in lines[head] and "(0/1 sites)" in lines[head]
+    for agent, line in zip(("a1", "a2"), lines[head + 1:head + 3]):
+        assert line.startswith(f"  {agent}: alive at (") and "blocker:" in line, line
+    assert "walled: STALLED: 0/1 sites" in r.stdout
+    s = json.loads(out.read_text())
+    assert s["stalled"] is True and s["completed"] is False
+    assert [a["id"] for a in s["agents"]] == ["a1", "a2"]
+    for a in s["agents"]:
+        assert set(a["behaviour_ticks"]) <= set(BEHAVIOURS) and sum(a["behaviour_ticks"].values()) > 0, a
