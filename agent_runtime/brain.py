@@ -31,7 +31,7 @@ import numpy as np
 from agent_runtime import steering
 from agent_runtime.config import AgentConfig
 from agent_runtime.esm import AGENT, BRICK, CONFIG, FOOD, OBSTACLE, WATER, EgocentricMaps
-from agent_runtime.far_memory import FarMemory, border_seed
+from agent_runtime.far_memory import FarMemory, border_seed, on_border
 from agent_runtime.matching import Matching, calculate_matching, select_goals
 from agent_runtime.motivations import Motivations
 from agent_runtime.network import NONE, STATE_NODES, ActionNetwork, engineered
@@ -91,7 +91,8 @@ class Brain:
         self.maps.seed_blueprint(welcome.x, welcome.y, welcome.site_xs, welcome.site_ys, welcome.cell_size)
         # The attach cell, in world cells: the origin of the agent's odometry frame.
         self._origin = np.floor(np.array([welcome.x, welcome.y]) / welcome.cell_size).astype(np.int64)
-        self.far = FarMemory(self.cfg.map_size, self._site_cells(welcome.site_xs, welcome.site_ys))
+        self.far = FarMemory(self.cfg.map_size, self._site_cells(welcome.site_xs, welcome.site_ys),
+                             self._world_bounds(welcome))
         self.blueprint_version = welcome.blueprint_version
         self.far.config_layer(self.maps.maps[CONFIG])
         self.behaviour = NONE
@@ -129,7 +130,11 @@ class Brain:
                 self.far.config_layer(layers[CONFIG])
         self._track_source(frame)
         self.maps.sense(ranges, self.sensor_range)
+        outside = self.far.outside_world()
+        if outside is not None:
+            self.maps.maps[OBSTACLE][outside] = 1.0
         self.far.observe_sites(self.maps.maps[BRICK], self.maps.clear_age)
+        self.far.mark_seen(self.sensor_range - 1.0)
         self.motivations.update(self.cfg, frame.ate, frame.drank)
         return ranges
 
@@ -138,6 +143,13 @@ class Brain:
         """World site coordinates -> cells (x, y) relative to the attach cell."""
         cells = np.floor(np.column_stack([np.asarray(xs, np.float64), np.asarray(ys, np.float64)]) / self.cell)
         return cells.astype(np.int64).reshape(-1, 2) - self._origin
+
+    def _world_bounds(self, welcome: Welcome) -> tuple[int, int, int, int] | None:
+        """The world's cells relative to the attach cell, (x0, y0, x1, y1), if it said."""
+        if welcome.world_width <= 0 or welcome.world_height <= 0:
+            return None
+        w, h = (round(v / self.cell) for v in (welcome.world_width, welcome.world_height))
+        return -int(self._origin[0]), -int(self._origin[1]), w - int(self._origin[0]), h - int(self._origin[1])
 
     def set_blueprint(self, version: int, site_xs, site_ys) -> bool:
         """A changed blueprint from the world (a `Blueprint` message); older versions are
@@ -161,7 +173,8 @@ class Brain:
             self._taken_from -= (frame.odom_dx / self.cell, frame.odom_dy / self.cell)
 
     def _source_cell(self) -> np.ndarray:
-        """The cell the held brick was taken from, as a mask (empty when not holding).
+        """The cell the held brick was taken from, as a mask (empty when not holding); when
+        it lies beyond the map, the border cell towards it.
 
         While an agent carries a brick it may know no free brick at all (the last one in
         view is in its hand, or another agent took it). The Matching grid then has no
@@ -172,8 +185,20 @@ class Brain:
         mask = np.zeros((self.cfg.map_size,) * 2, bool)
         if self._taken_from is not None:
             r, c = self.maps.cell_of(*self._taken_from)
-            if self.maps.contains(r, c):
-                mask[r, c] = True
+            mask[on_border(np.array([[r, c]]), self.cfg.map_size)] = True
+        return mask
+
+    def _supply_beyond(self) -> np.ndarray:
+        """Remembered bricks beyond the map, as the border cells towards them (a mask).
+
+        The Matching grid only holds the map: with the supply 50 cells away it would hold
+        no brick, protect no path, and sites would be filled nearest-first even where that
+        walls off others. Bricks beyond the border enter it at the border, as they enter
+        the brick NM."""
+        mask = np.zeros((self.cfg.map_size,) * 2, bool)
+        far = self.far.far_bricks()
+        if len(far):
+            mask[on_border(far, self.cfg.map_size)] = True
         return mask
 
     def nav_masks(self, sequenced: bool = True) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
@@ -201,8 +226,8 @@ class Brain:
             # The cells around the agent are never in doubt: it would be touching a brick there.
             c = self.centre
             closed[c - 1:c + 2, c - 1:c + 2] = False
-            matching = self.matching(brick_goals | (self._source_cell() & ~obstacles), config_goals, obstacles,
-                                     closed)
+            supply = (self._source_cell() | self._supply_beyond()) & ~obstacles & ~config
+            matching = self.matching(brick_goals | supply, config_goals, obstacles, closed)
             config_goals, brick_goals = select_goals(matching, brick_goals, config_goals)
         # Bricks that are not goals (the structure's, and with sequencing the unmatched free
         # ones) are in the way: a path must not lead through one to a matched brick beyond.
@@ -406,6 +431,30 @@ class Brain:
         return self._explore(frame.heading)
 
     def _explore(self, heading: float) -> tuple[float, float]:
+        """Head for the nearest part of the world not yet seen (its extent came with the
+        Welcome), planned on the map like any goal; with the extent unknown, or no way
+        there on the map, wander in straight legs.
+
+        Searching at random for a supply out of sensor range took thousands of ticks on
+        large worlds (a lone pile in 87 x 84 cells was not found in 3,000 ticks by six
+        agents); squares of BLOCK cells marked seen when the agent passes near them turn
+        that into a sweep. The choice among near squares is a little random so agents
+        spread out."""
+        target = self.far.unseen_target(self.rng)
+        if target is not None:
+            m = self.maps.maps > 0.5
+            obstacles = self._free_centre(m[FOOD] | m[WATER] | m[BRICK] | m[OBSTACLE] | m[AGENT])
+            goals = np.zeros_like(obstacles)
+            if self.maps.contains(*target):
+                goals[target[0], target[1]] = True
+                field = distance_field(goals, obstacles)
+            else:
+                field = self._field(goals, obstacles, target[None])
+            if gradient_step(field) not in (None, (0, 0)):
+                return self._navigate(field, heading)
+        return self._wander(heading)
+
+    def _wander(self, heading: float) -> tuple[float, float]:
         """Wander in straight legs of random heading and length, a new leg when something
         fixed lies just ahead.
 

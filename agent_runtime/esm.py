@@ -15,6 +15,9 @@ shift by whole cells, opposite to the motion, so sub-cell motion is never lost a
 map stays aligned with the world grid the blueprint was given in. Whatever is shifted
 off the map is forgotten.
 
+Fixed obstacles (see `obstacle_trust`) are written only from readings near enough to put
+them in their own cell, so a one-cell gap in a wall is never sealed by a misplaced mark.
+
 Sensing (see `sense`) clears what a sector proves empty (nothing of its colour nearer
 than its reading, or nothing at all within range) and writes each reading at the cell
 holding the point at that distance along the sector's centre angle. A sector cannot
@@ -46,6 +49,7 @@ _LAYER_BASE = _CHANNEL_LAYER[:, None].astype(np.float64)  # (channels, 1), broad
 _DISC_CHANNELS = 4             # the first four channels are fixed things, cleared by their sectors
 assert all(_CHANNEL_LAYER[:_DISC_CHANNELS] == np.arange(_DISC_CHANNELS))  # layer = channel for these
 _BRICK_CH = CHANNELS.index("brick")
+_OBSTACLE_CH = CHANNELS.index("obstacle")
 CLEAR_MARGIN = 0.75            # clear only cells nearer than reading - this (a disc's cell centre
                                # can be up to 0.71 cell nearer than the disc, plus a little noise)
 RANGE_MARGIN = 0.5             # with no reading, clear only cells well inside the sensor range
@@ -159,7 +163,15 @@ class EgocentricMaps:
         # Each reading may be explained by any cell its wedge overlaps: the (cell, sector) pairs.
         explained = self._associate(r, cells[:, k], dist[k], sector, vx[k], vy[k])
         self.maps[AGENT].fill(0.0)
-        self._write_readings(np.where(explained, NO_READING, r), sectors)
+        unexplained = np.where(explained, NO_READING, r)
+        # A fixed obstacle is written only where the sector's centre angle lands in its own
+        # cell: farther off, the mark may fall in the cell beside it, and a one-cell gap in
+        # a wall (which every sector along the wall keeps reporting at about the same
+        # distance, so nothing ever clears it) would be sealed for good. Farther readings
+        # still clear the cells in front of them, and the wall is mapped as it comes near.
+        far = unexplained[_OBSTACLE_CH] > obstacle_trust(sectors)
+        unexplained[_OBSTACLE_CH][far] = NO_READING
+        self._write_readings(unexplained, sectors)
 
     def _associate(self, r, cells, dist, sector, vx, vy) -> np.ndarray:
         """Attribute each disc reading to one cell of its band; True where that was done.
@@ -245,6 +257,12 @@ class EgocentricMaps:
             self._geometry = (cells, dist, (cell_of_pair, sector, starts), vx, vy)
             self._geometry_key = key
         return self._geometry
+
+
+def obstacle_trust(sectors: int) -> float:
+    """Distance (cells) within which a reading written at its sector's centre angle lies
+    within 0.45 cell of the true direction, i.e. in the cell of an object on a cell centre."""
+    return 0.45 / math.sin(min(math.pi / sectors, math.pi / 2))
 
 
 def _shift_in_place(grid: np.ndarray, kx: int, ky: int, fill: float) -> None:

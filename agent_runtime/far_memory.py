@@ -8,7 +8,9 @@ own odometry frame (dead reckoning: whole cells crossed since attach, aligned wi
 world grid as the maps are):
 
 - every drop site of the blueprint, with whether it was last seen holding a brick;
-- free bricks that scrolled off the map (a source the agent walked away from).
+- free bricks that scrolled off the map (a source the agent walked away from);
+- the world's extent (from the Welcome), so its edge is a wall on the maps wherever the
+  agent is, not only where its sensors have just seen it.
 
 Nothing here is a map: the ESMs and NMs stay egocentric and of fixed size. Sites on the
 map are written into the CONFIG layer each step; remembered bricks that come back onto
@@ -28,19 +30,28 @@ import math
 import numpy as np
 
 SQRT2_M1 = math.sqrt(2.0) - 1.0
+BLOCK = 5          # cells per side of the squares Explore keeps track of having seen
 MAX_FAR_BRICKS = 4096   # a bound on what is kept; the oldest are dropped first
 
 
 class FarMemory:
     """Sites and remembered bricks, as (x east, y north) cells relative to the attach cell."""
 
-    def __init__(self, size: int, sites: np.ndarray):
+    def __init__(self, size: int, sites: np.ndarray, bounds: tuple[int, int, int, int] | None = None):
         self.size = size
         self.centre = size // 2
         self.pos = np.zeros(2, np.int64)                 # the agent's cell, (x, y) from the attach cell
         self.sites = np.asarray(sites, np.int64).reshape(-1, 2)
         self.site_open = np.ones(len(self.sites), bool)  # belief: no brick seen on it (yet)
         self.bricks = np.zeros((0, 2), np.int64)
+        # (x0, y0, x1, y1): the world's cells, relative to the attach cell, x0 <= x < x1 and
+        # y0 <= y < y1; None when the world did not say. Everything outside is wall.
+        self.bounds = bounds
+        self.seen: np.ndarray | None = None     # per BLOCK square of the world: been near it
+        self._target: tuple[int, int] | None = None  # the square Explore is heading for
+        if bounds is not None:
+            x0, y0, x1, y1 = bounds
+            self.seen = np.zeros((-(-(x1 - x0) // BLOCK), -(-(y1 - y0) // BLOCK)), bool)
 
     # ------------------------------------------------------------------ frames
 
@@ -111,6 +122,48 @@ class FarMemory:
         merged = np.unique(np.vstack([self.bricks, cells]), axis=0) if len(self.bricks) else np.unique(cells, axis=0)
         self.bricks = merged[-MAX_FAR_BRICKS:]
 
+    # ------------------------------------------------------------------ exploring
+
+    def mark_seen(self, radius: float) -> None:
+        """The squares whose centre lies within `radius` cells of the agent have been seen."""
+        if self.seen is None:
+            return
+        centres = self._block_centres()
+        near = np.hypot(centres[..., 0] - self.pos[0], centres[..., 1] - self.pos[1]) <= radius
+        self.seen |= near
+
+    def _block_centres(self) -> np.ndarray:
+        x0, y0, x1, y1 = self.bounds
+        bx = x0 + np.minimum(np.arange(self.seen.shape[0]) * BLOCK + BLOCK // 2, x1 - x0 - 1)
+        by = y0 + np.minimum(np.arange(self.seen.shape[1]) * BLOCK + BLOCK // 2, y1 - y0 - 1)
+        return np.stack(np.meshgrid(bx, by, indexing="ij"), axis=-1)
+
+    def unseen_target(self, rng: np.random.Generator) -> np.ndarray | None:
+        """(row, col) on the map (possibly beyond it) of the nearest square not yet seen, a
+        little randomised so agents spread out; when all are seen, start over. None when
+        the world's extent is unknown."""
+        if self.seen is None:
+            return None
+        if self._target is None or self.seen[self._target]:
+            if self.seen.all():
+                self.seen[:] = False
+            free = np.argwhere(~self.seen)
+            centres = self._block_centres()[~self.seen]
+            d = np.hypot(centres[:, 0] - self.pos[0], centres[:, 1] - self.pos[1]) * rng.uniform(1.0, 1.5, len(free))
+            self._target = tuple(free[int(np.argmin(d))])
+        rows, cols = self.to_map(self._block_centres()[self._target][None])
+        return np.array([rows[0], cols[0]])
+
+    def outside_world(self) -> np.ndarray | None:
+        """Mask of the map cells beyond the world's edge (None if its extent is unknown)."""
+        if self.bounds is None:
+            return None
+        x0, y0, x1, y1 = self.bounds
+        offs = np.arange(self.size) - self.centre
+        xs = self.pos[0] + offs                 # per column
+        ys = self.pos[1] - offs                 # per row (row 0 is the north)
+        return ((xs < x0) | (xs >= x1))[None, :] | ((ys < y0) | (ys >= y1))[:, None]
+
     # ------------------------------------------------------------------ beyond the border
 
     def far_open_sites(self) -> np.ndarray:
@@ -122,6 +175,12 @@ class FarMemory:
     def far_bricks(self) -> np.ndarray:
         rows, cols = self.to_map(self.bricks)
         return np.column_stack([rows, cols])
+
+
+def on_border(targets: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, cols) of the map cells nearest to `targets` (k, 2), clamped onto the map."""
+    t = np.asarray(targets, np.int64).reshape(-1, 2)
+    return np.clip(t[:, 0], 0, size - 1), np.clip(t[:, 1], 0, size - 1)
 
 
 def border_seed(targets: np.ndarray, size: int, obstacles: np.ndarray) -> np.ndarray | None:

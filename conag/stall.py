@@ -19,10 +19,13 @@ DEFAULT_STALL_TICKS = 3000
 class StallClock:
     """Ticks since the last site was filled; `observe` says when that reaches `limit`.
 
-    Progress is the number of open sites (total - filled) falling, not the filled count
-    beating its best: when a perturbation takes a brick off a site, putting it back is
-    progress. A site added by a perturbation starts the count again (new work, which the
-    agents have not had a chance at). A build with nothing left to do never stalls.
+    Progress is the filled count beating its best since the blueprint last changed. Not
+    merely the open count falling: agents that lift a brick off the structure and put it
+    back (a nearest-first agent walled out of the rest does) would otherwise look busy for
+    ever. A site added or removed by a perturbation starts the count again (new work,
+    which the agents have not had a chance at). A build with nothing left to do never
+    stalls. A repair after a brick was knocked off counts once the count is back above
+    its best, so a repair slower than `limit` ticks is reported as a stall.
     """
 
     def __init__(self, limit: int):
@@ -30,16 +33,17 @@ class StallClock:
             raise ValueError("the stall limit must be > 0 ticks")
         self.limit = limit
         self.since: int | None = None   # the tick of the last progress
-        self._open: int | None = None
+        self._best = -1
         self._total = -1
 
     def observe(self, tick: int, sites_filled: int, sites_total: int) -> bool:
         """Record the state at `tick`; True once no site has been filled for `limit` ticks."""
-        open_ = sites_total - sites_filled
-        if self.since is None or open_ < self._open or sites_total > self._total:
-            self.since = tick
-        self._open, self._total = open_, sites_total
-        return open_ > 0 and self.idle(tick) >= self.limit
+        if self.since is None or sites_total != self._total:
+            self.since, self._best = tick, sites_filled
+        elif sites_filled > self._best:
+            self.since, self._best = tick, sites_filled
+        self._total = sites_total
+        return sites_filled < sites_total and self.idle(tick) >= self.limit
 
     def idle(self, tick: int) -> int:
         """Ticks since the last progress (0 before the first observation)."""

@@ -48,7 +48,7 @@ SUITE_SEED = 2026
 SUITE_SIZE = 200
 MODES = (("goal sequencing", True), ("nearest-first", False))
 BANDS = ((15, 30), (31, 60), (61, 120))
-DEFAULT_STALL = 4000
+DEFAULT_STALL = 3000
 
 
 @dataclass(frozen=True)
@@ -111,7 +111,7 @@ def run_job(job: Job, pictures: Path | None) -> Outcome:
     if not result.completed:
         report = tuple(run.stall_report())
         if pictures is not None:
-            picture = str(_picture(run, sc, job, pictures).relative_to(ROOT))
+            picture = str(_picture(run, sc, job, pictures).resolve())
     return Outcome(layout=Path(job.layout).name, family=family_of(sc), cols=sc.cols, rows=sc.rows,
                    agents=len(starts), mode=job.mode, completed=result.completed, stalled=result.stalled,
                    ticks=result.ticks, max_ticks=sc.max_ticks, sites_filled=status.sites_filled,
@@ -202,21 +202,22 @@ def goals(outcomes: list[Outcome]) -> str:
         f"{'yes' if not lost else 'no'} |"])
 
 
-def failures(outcomes: list[Outcome]) -> str:
+def failures(outcomes: list[Outcome], base: Path) -> str:
+    """Every run that did not complete; pictures linked relative to `base` (the document's folder)."""
     bad = [o for o in outcomes if not o.completed]
     if not bad:
         return "None: every run completed."
     lines = []
     for o in bad:
         why = "stalled" if o.stalled else "out of ticks"
-        pic = f" ![]({Path(o.picture).relative_to('experiments').as_posix()})" if o.picture else ""
+        pic = f" ![]({os.path.relpath(o.picture, base)})" if o.picture else ""
         lines.append(f"- `{o.layout}` ({o.family}, {o.cols} x {o.rows}, {o.agents} agents), **{o.mode}**: {why} at "
                      f"tick {o.ticks}, {o.sites_filled}/{o.sites_total} sites.{pic}")
         lines += [f"  - `{line.strip()}`" for line in o.report[1:]]
     return "\n".join(lines)
 
 
-def markdown(outcomes: list[Outcome], args: argparse.Namespace, seconds: float) -> str:
+def markdown(outcomes: list[Outcome], args: argparse.Namespace, seconds: float, base: Path) -> str:
     layouts = len({o.layout for o in outcomes})
     return f"""## Generalisation: generated layouts (issue 10)
 
@@ -247,7 +248,7 @@ Wall time of this run: {seconds / 60:.0f} min on {args.jobs} worker processes.
 
 ### Every run that did not complete
 
-{failures(outcomes)}
+{failures(outcomes, base)}
 """
 
 
@@ -306,11 +307,13 @@ def main(argv: list[str] | None = None) -> int:
     jobs = [Job(name, mode, args.stall) for name in names for mode, _ in MODES]
     began = time.monotonic()
     outcomes = run_all(jobs, args.jobs, pictures)
-    text = markdown(outcomes, args, time.monotonic() - began)
-    (out / "generalisation.json").write_text(json.dumps([asdict(o) for o in outcomes], indent=1), encoding="utf-8")
+    seconds = time.monotonic() - began
+    text = markdown(outcomes, args, seconds, out.resolve())
+    rows = [asdict(o) | {"picture": os.path.relpath(o.picture, out.resolve()) if o.picture else ""} for o in outcomes]
+    (out / "generalisation.json").write_text(json.dumps(rows, indent=1), encoding="utf-8")
     (out / "generalisation.md").write_text(text, encoding="utf-8")
     if not (args.quick or args.only or args.out):
-        write_section(ROOT / "EXPERIMENTS.md", "generalisation", text)
+        write_section(ROOT / "EXPERIMENTS.md", "generalisation", markdown(outcomes, args, seconds, ROOT))
     print(text)
     return 0
 

@@ -75,7 +75,8 @@ class Hello:
 
 @dataclass(frozen=True)
 class Welcome:
-    """World -> agent: the body it got, its pose now, the blueprint and the sensor layout.
+    """World -> agent: the body it got, its pose now, the blueprint, the world's extent and
+    the sensor layout.
 
     Site coordinates are world coordinates (x east, y north, one unit = one cell).
     The agent seeds its configuration map from them and its pose, once, at attach.
@@ -96,12 +97,15 @@ class Welcome:
     site_xs: tuple[float, ...]
     site_ys: tuple[float, ...]
     blueprint_version: int = 0   # the Blueprint version these sites are (see Blueprint)
+    world_width: float = 0.0     # the world's extent (x from 0 to width, y from 0 to height),
+    world_height: float = 0.0    # in world units; 0 when not told. Its edge is a wall.
 
     def __post_init__(self) -> None:
         check_id(self.world_id, "world id")
         check_id(self.agent_id, "agent id")
         _finite(self)
         _require(self.blueprint_version >= 0, "Welcome.blueprint_version must be >= 0")
+        _require(self.world_width >= 0 and self.world_height >= 0, "Welcome world size must be >= 0")
         _require(len(self.site_xs) == len(self.site_ys), "Welcome site_xs/site_ys differ in length")
         _require(len(self.site_xs) <= MAX_SITES, "Welcome has too many sites")
         _require(1 <= self.sectors <= MAX_SECTORS, "Welcome.sectors out of range")

@@ -254,3 +254,33 @@ def test_the_state_report_names_what_blocks_the_agent():
     assert report.behaviour == "explore" and report.sites_open == 1
     assert "no free brick" in report.blocker
     assert sum(report.behaviour_ticks) == 1 and report.behaviour_ticks[BEHAVIOURS.index("explore")] == 1
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.tuples(st.floats(-5.0, 5.0), st.floats(-5.0, 5.0)), min_size=1, max_size=30),
+       st.integers(0, 2**32 - 1))
+def test_a_one_cell_gap_in_a_wall_is_never_sealed_by_the_map(path, seed):
+    """Seen from anywhere around it, with noise, a wall's one-cell gap stays open on the map
+    (a mark written beside the true cell would close the only way through for good)."""
+    from agent_runtime.esm import EgocentricMaps
+    from world_server.sensors import sense
+
+    wall = np.array([(10.5, y + 0.5) for y in range(21) if y != 10])      # x = 10, gap at (10, 10)
+    sectors, reach = 16, 6.0
+    maps = EgocentricMaps(41)
+    rng = np.random.default_rng(seed)
+    here = np.array([7.3, 10.5])
+    maps.seed_blueprint(*here, [], [])
+    for dx, dy in path:
+        step = np.array([min(max(7.3 + dx, 5.0), 9.6), 10.5 + dy]) - here
+        maps.move(*step)
+        here = here + step
+        ranges = sense(here[None], np.array([True]), wall, np.full(len(wall), OBST), sectors, reach, (30.0, 30.0),
+                       noise=0.02, seed=int(rng.integers(2**62)))[0]
+        maps.sense(ranges, reach)
+        gap = maps.cell_of(10.5 - here[0], 10.5 - here[1])
+        assert maps.maps[OBSTACLE][gap] == 0.0
+    # And the wall beside it is mapped once the agent has been near it.
+    near = maps.cell_of(10.5 - here[0], 11.5 - here[1])
+    if np.hypot(10.5 - here[0], 11.5 - here[1]) < 2.0:
+        assert maps.maps[OBSTACLE][near] == 1.0

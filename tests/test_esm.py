@@ -17,7 +17,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent_runtime.esm import AGENT, BRICK, CONFIG, FOOD, OBSTACLE, WATER, EgocentricMaps
+from agent_runtime.esm import AGENT, BRICK, CONFIG, FOOD, OBSTACLE, WATER, EgocentricMaps, obstacle_trust
 from protocol.messages import CHANNELS, NO_READING, Perturbation
 
 NCH = len(CHANNELS)
@@ -492,8 +492,8 @@ def reference_sense(m: EgocentricMaps, ranges: np.ndarray, reach: float) -> np.n
             best = min(scored)[0] if scored else None
             won = [c for score, c, marked, bp in scored if score <= best and (marked or bp)]
             winners += [(layer, c) for c in won]
-            if not won:
-                plain.append((layer, m.cell_of(px, py)))
+            if not won and not (layer == OBSTACLE and d > obstacle_trust(sectors)):
+                plain.append((layer, m.cell_of(px, py)))   # far walls are not written (see obstacle_trust)
             if layer == BRICK:  # ghosts of the one brick this sector saw, attributed or written plainly
                 ghosts += [(layer, c) for score, c, marked, bp in scored if marked and not bp and c not in won]
     for layer, c in ghosts:

@@ -182,11 +182,15 @@ def test_a_200_layout_suite_plan_is_balanced():
     assert len({p["seed"] for p in plan}) == 200
     bands = collections.Counter(next(i for i, (lo, hi) in enumerate(SIZE_BANDS) if lo <= min(p["size"])
                                      and max(p["size"]) <= hi) for p in plan)
-    assert bands == {0: 90, 1: 80, 2: 30}
-    for key, n in (("family", 7), ("agents", 12), ("source", 3)):
+    assert bands == {0: 100, 1: 76, 2: 24}
+    for key, n in (("family", 7), ("source", 3)):
         counts = collections.Counter(p[key] for p in plan).values()
         assert len(counts) == n and max(counts) - min(counts) <= 1
-    assert all(p["max_sites"] <= 60 for p in plan)
+    # Every team size from 1 to 12, small teams (1-3) three times as often as each larger one.
+    teams = collections.Counter(p["agents"] for p in plan)
+    assert sorted(teams) == list(range(1, 13))
+    assert min(teams[k] for k in (1, 2, 3)) >= 2.5 * max(teams[k] for k in range(4, 13))
+    assert all(p["max_sites"] <= 40 for p in plan)
     assert suite_plan(200, 1) == plan and suite_plan(200, 2) != plan
 
 

@@ -54,10 +54,11 @@ def test_the_clock_stops_a_run_only_after_limit_ticks_without_a_fill():
     assert not c.observe(0, 0, 3) and not c.observe(99, 0, 3)
     assert c.observe(100, 0, 3) and c.idle(100) == 100
     assert not c.observe(150, 1, 3) and c.idle(150) == 0           # a site filled: progress
-    assert not c.observe(240, 0, 3)                                # a brick taken off a site
-    assert not c.observe(300, 1, 3) and c.since == 300             # ... and put back: progress again
-    assert not c.observe(390, 1, 4) and c.since == 390             # a site added: a fresh count
-    assert c.observe(490, 1, 4)
+    assert not c.observe(240, 0, 3)                                # a brick taken off a site ...
+    assert c.observe(250, 1, 3) and c.since == 150                 # ... and put back is no progress:
+    assert not c.observe(260, 2, 3) and c.since == 260             # only beating the best (1) is
+    assert not c.observe(390, 2, 4) and c.since == 390             # a site added: a fresh count
+    assert c.observe(490, 2, 4)
     assert not c.observe(10_000, 4, 4)                             # nothing left to do: never stalled
     with pytest.raises(ValueError):
         StallClock(0)

@@ -113,6 +113,7 @@ class World:
             holding=rec.holding >= 0, restarts=rec.restarts, sectors=self.cfg.sensor_sectors,
             sensor_range=self.cfg.sensor_range, cell_size=self.cfg.cell_size,
             site_xs=tuple(self.sites_xy[:, 0].tolist()), site_ys=tuple(self.sites_xy[:, 1].tolist()),
+            world_width=float(self.size[0]), world_height=float(self.size[1]),
             blueprint_version=self.blueprint_version)
 
     def detach(self, agent_id: str) -> None:
