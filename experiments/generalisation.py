@@ -6,7 +6,8 @@ the benchmark) is built in-process (conag/sim.py: the real World and Brain code,
 headless), each layout once with goal sequencing (ConAg-TS, the default agent) and once
 nearest-first (the plain agent of §4), in the same run. Every layout passed the
 buildability check when it was generated. A run stops when the structure is complete, when
-no site has been filled for `--stall` ticks (stalled), or at the scenario's `max_ticks`.
+no site has been filled for `--stall` ticks (stalled; on a large world the longer of that and
+its cells per agent), or at the scenario's `max_ticks`.
 
 Reported: completion rate per family and per size band for both agents; ticks to complete;
 the distance walked against a lower bound (agent_runtime/replay.lower_bound, on the initial
@@ -93,6 +94,13 @@ def band_of(cols: int, rows: int) -> str:
     return f"{lo}-{hi}"
 
 
+def stall_limit(sc: Scenario, floor: int) -> int:
+    """Ticks with no site filled that stop a run: `floor`, or on a large world the cells
+    per agent if more (about the time a team needs to sweep the world for a supply out of
+    sensor range before the first fill: 82 x 106 cells took two agents 3,500 ticks)."""
+    return max(floor, sc.cols * sc.rows // max(sc.agents, 1))
+
+
 def layout_path(name: str) -> Path:
     p = Path(name)
     return p if p.suffix == ".toml" and p.exists() else LAYOUTS / name
@@ -105,7 +113,7 @@ def run_job(job: Job, pictures: Path | None) -> Outcome:
     starts = [tuple(int(v) for v in cell[::-1]) for cell in sc.to_cell(run.world.agent_poses()[:, :2])]
     bricks_start = run.world.discs.bricks_total()
     began = time.perf_counter()
-    result = run.run(sc.max_ticks, stall_ticks=job.stall)
+    result = run.run(sc.max_ticks, stall_ticks=stall_limit(sc, job.stall))
     status = run.world.status()
     report, picture = (), ""
     if not result.completed:
@@ -226,7 +234,8 @@ def markdown(outcomes: list[Outcome], args: argparse.Namespace, seconds: float, 
 `world_server/generator.py` suite seed {SUITE_SEED}, every layout passing the buildability check), each
 with goal sequencing and nearest-first in the same run, in-process (conag/sim.py, lockstep, the default
 `AgentConfig` but for goal sequencing, hunger and thirst on). A run stops when complete, after
-{args.stall} ticks with no site filled (stalled), or at the layout's `max_ticks`. Distance / bound:
+{args.stall} ticks with no site filled (stalled; on large worlds the world's cells per agent if
+that is more, the time to sweep it for a supply), or at the layout's `max_ticks`. Distance / bound:
 the distance all agents walked over `agent_runtime/replay.lower_bound` on the initial map (completed runs).
 Wall time of this run: {seconds / 60:.0f} min on {args.jobs} worker processes.
 

@@ -284,3 +284,45 @@ def test_a_one_cell_gap_in_a_wall_is_never_sealed_by_the_map(path, seed):
     near = maps.cell_of(10.5 - here[0], 11.5 - here[1])
     if np.hypot(10.5 - here[0], 11.5 - here[1]) < 2.0:
         assert maps.maps[OBSTACLE][near] == 1.0
+
+
+# ------------------------------------------------------------------ the world's extent, exploring, the supply beyond
+
+def _sized_welcome(x: float, y: float, w: float, h: float, sites=((), ())) -> Welcome:
+    return Welcome(world_id="w", agent_id="a1", body=0, tick=0, x=x, y=y, heading=0.0, holding=False,
+                   restarts=0, sectors=16, sensor_range=6.0, cell_size=1.0, site_xs=tuple(sites[0]),
+                   site_ys=tuple(sites[1]), world_width=w, world_height=h)
+
+
+def test_the_world_edge_is_a_wall_on_the_map_wherever_the_agent_is():
+    brain = Brain(_sized_welcome(2.5, 3.5, 30.0, 20.0), AgentConfig(map_size=11), np.random.default_rng(0))
+    brain.perceive(_frame(1))
+    walls = brain.maps.maps[OBSTACLE] > 0.5
+    c = brain.centre
+    # Two cells of the world lie west of the agent (x = 0.5, 1.5), three south (y = 0.5 .. 2.5).
+    assert walls[:, :c - 2].all() and not walls[c, c - 2:].any()
+    assert walls[c + 4:, :].all() and not walls[:c + 4, c - 2:].any()
+    for t in range(2, 42):                      # 8 cells east: the west edge scrolls off
+        brain.perceive(_frame(t, dx=0.2))
+    walls = brain.maps.maps[OBSTACLE] > 0.5
+    assert not walls[:c + 4, :].any() and walls[c + 4:, :].all()
+
+
+def test_explore_heads_for_squares_of_the_world_not_yet_seen():
+    # A 40 x 10 world, the agent at its west end, nothing to see: it sweeps east.
+    brain = Brain(_sized_welcome(2.5, 5.5, 40.0, 10.0, ([38.5], [5.5])), AgentConfig(), np.random.default_rng(1))
+    step = brain.step(_frame(1))
+    assert step.behaviour == "explore" and step.speed > 0
+    target = brain.far.unseen_target(brain.rng)
+    assert target[1] > brain.centre                          # east of the agent
+    seen_before = int(brain.far.seen.sum())
+    for t in range(2, 200):                                  # walking east marks squares seen
+        brain.perceive(_frame(t, dx=0.2))
+    assert brain.far.seen.sum() > seen_before
+
+
+def test_bricks_beyond_the_map_stand_in_the_matching_at_the_border():
+    brain = Brain(_welcome(([50.5], [52.5])), AgentConfig(map_size=11), np.random.default_rng(0))
+    brain.far.bricks = np.array([[30, 0]])                   # a pile 30 cells east of the attach cell
+    supply = brain._supply_beyond()
+    assert supply.sum() == 1 and supply[brain.centre, -1]    # the east border cell on the agent's row
