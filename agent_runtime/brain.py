@@ -228,7 +228,12 @@ class Brain:
             closed[c - 1:c + 2, c - 1:c + 2] = False
             supply = (self._source_cell() | self._supply_beyond()) & ~obstacles & ~config
             matching = self.matching(brick_goals | supply, config_goals, obstacles, closed)
+            open_sites, supply_bricks = config_goals, brick_goals | supply
             config_goals, brick_goals = select_goals(matching, brick_goals, config_goals)
+            held = open_sites & ~config_goals
+            if held.any():
+                depth = distance_field(supply_bricks, obstacles | closed)
+                config_goals &= ~_mouth_side(held, config_goals, depth)
         # Bricks that are not goals (the structure's, and with sequencing the unmatched free
         # ones) are in the way: a path must not lead through one to a matched brick beyond.
         return ((config_goals, self._free_centre(food | water | brick | agents)),
@@ -452,6 +457,7 @@ class Brain:
                 field = self._field(goals, obstacles, target[None])
             if gradient_step(field) not in (None, (0, 0)):
                 return self._navigate(field, heading)
+            self.far.give_up_target()
         return self._wander(heading)
 
     def _wander(self, heading: float) -> tuple[float, float]:
@@ -494,6 +500,25 @@ class Brain:
         k = int(np.argmin(np.where(readings >= 0, readings, np.inf)))
         angle = (k + 0.5) * 2 * math.pi / len(readings)
         return readings[k] * math.cos(angle), readings[k] * math.sin(angle)
+
+
+def _mouth_side(held: np.ndarray, sites: np.ndarray, depth: np.ndarray) -> np.ndarray:
+    """Sites of `sites` beside a site the Matching grid holds open (`held`, match = 1) and
+    no farther from the supply (`depth`, path distance from the bricks) than it.
+
+    In a corridor two or more cells wide the matched path runs down one side; two agents,
+    each with its own view, would otherwise fill the two cells of its mouth together and
+    seal the far end (a pocket two cells wide stalled at 9 of 30 sites this way). Sites
+    deeper than the held one (Fig. 18's D2 beside D1) stay goals: they are what the path
+    is kept open for."""
+    out = np.zeros_like(sites)
+    n, m = sites.shape
+    for dr, dc in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+        src = (slice(max(-dr, 0), n - max(dr, 0)), slice(max(-dc, 0), m - max(dc, 0)))
+        dst = (slice(max(dr, 0), n - max(-dr, 0)), slice(max(dc, 0), m - max(-dc, 0)))
+        # A cell at dst has the held neighbour at src: (r, c) = (r' + dr, c' + dc).
+        out[dst] |= held[src] & (depth[dst] <= depth[src] + 1e-9)
+    return out & sites
 
 
 def _nearest(readings: np.ndarray) -> float:

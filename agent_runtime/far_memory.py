@@ -31,6 +31,7 @@ import numpy as np
 
 SQRT2_M1 = math.sqrt(2.0) - 1.0
 BLOCK = 5          # cells per side of the squares Explore keeps track of having seen
+PATIENCE = 300     # explore steps spent on one square before it counts as seen anyway
 MAX_FAR_BRICKS = 4096   # a bound on what is kept; the oldest are dropped first
 
 
@@ -49,6 +50,7 @@ class FarMemory:
         self.bounds = bounds
         self.seen: np.ndarray | None = None     # per BLOCK square of the world: been near it
         self._target: tuple[int, int] | None = None  # the square Explore is heading for
+        self._target_age = 0                          # explore steps spent on it
         if bounds is not None:
             x0, y0, x1, y1 = bounds
             self.seen = np.zeros((-(-(x1 - x0) // BLOCK), -(-(y1 - y0) // BLOCK)), bool)
@@ -144,7 +146,13 @@ class FarMemory:
         the world's extent is unknown."""
         if self.seen is None:
             return None
+        self._target_age += 1
+        if self._target is not None and self._target_age > PATIENCE:
+            # Behind a long wall, with hunger pulling it away, the agent may never get
+            # there: move on, as a person would, rather than circle one square for ever.
+            self.seen[self._target] = True
         if self._target is None or self.seen[self._target]:
+            self._target_age = 0
             if self.seen.all():
                 self.seen[:] = False
             free = np.argwhere(~self.seen)
@@ -153,6 +161,13 @@ class FarMemory:
             self._target = tuple(free[int(np.argmin(d))])
         rows, cols = self.to_map(self._block_centres()[self._target][None])
         return np.array([rows[0], cols[0]])
+
+    def give_up_target(self) -> None:
+        """The square Explore was heading for cannot be reached from here (walls, water):
+        count it as seen, so the next call picks another instead of wandering for ever."""
+        if self._target is not None and self.seen is not None:
+            self.seen[self._target] = True
+        self._target = None
 
     def outside_world(self) -> np.ndarray | None:
         """Mask of the map cells beyond the world's edge (None if its extent is unknown)."""

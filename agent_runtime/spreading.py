@@ -67,6 +67,40 @@ def _padded_state(obstacles):
     return state
 
 
+@njit(cache=True, inline="always")
+def _settle_bucket(k, head, node, nxt, state, dist, bucket_of, off, w, used, pending):
+    """Settle every cell of bucket k and relax its neighbours; returns (used, pending)."""
+    e = head[k & 3]
+    head[k & 3] = -1
+    while e != -1:
+        u = node[e]
+        e = nxt[e]
+        pending -= 1
+        if state[u] == _DONE:
+            continue  # a stale entry: the cell moved down to an earlier bucket
+        state[u] = _DONE
+        du = dist[u]
+        for j in range(8):
+            v = u + off[j]
+            if state[v] != _OPEN:
+                continue
+            # No corner cutting: both cells flanking a diagonal step must be free.
+            if j >= 4 and (state[u + _DR[j] * w] == _WALL or state[u + _DC[j]] == _WALL):
+                continue
+            nd = du + _STEP[j]
+            if nd < dist[v]:
+                dist[v] = nd
+                b = int(nd)
+                if b != bucket_of[v]:
+                    bucket_of[v] = b
+                    node[used] = v
+                    nxt[used] = head[b & 3]
+                    head[b & 3] = used
+                    used += 1
+                    pending += 1
+    return used, pending
+
+
 @njit(cache=True)
 def _field_kernel(goals, obstacles):
     """dist[N, M] to the nearest free goal (see the comment above for the method)."""
@@ -97,34 +131,7 @@ def _field_kernel(goals, obstacles):
     pending = used
     k = 0
     while pending > 0:
-        e = head[k & 3]
-        head[k & 3] = -1
-        while e != -1:
-            u = node[e]
-            e = nxt[e]
-            pending -= 1
-            if state[u] == _DONE:
-                continue  # a stale entry: the cell moved down to an earlier bucket
-            state[u] = _DONE
-            du = dist[u]
-            for j in range(8):
-                v = u + off[j]
-                if state[v] != _OPEN:
-                    continue
-                # No corner cutting: both cells flanking a diagonal step must be free.
-                if j >= 4 and (state[u + _DR[j] * w] == _WALL or state[u + _DC[j]] == _WALL):
-                    continue
-                nd = du + _STEP[j]
-                if nd < dist[v]:
-                    dist[v] = nd
-                    b = int(nd)
-                    if b != bucket_of[v]:
-                        bucket_of[v] = b
-                        node[used] = v
-                        nxt[used] = head[b & 3]
-                        head[b & 3] = used
-                        used += 1
-                        pending += 1
+        used, pending = _settle_bucket(k, head, node, nxt, state, dist, bucket_of, off, w, used, pending)
         k += 1
     return dist.reshape((n + 2, w))[1:n + 1, 1:m + 1].copy()
 
@@ -179,33 +186,7 @@ def _seeded_kernel(seed, obstacles):
                 head[int(d) & 3] = used
                 used += 1
                 pending += 1
-        e = head[k & 3]
-        head[k & 3] = -1
-        while e != -1:
-            u = node[e]
-            e = nxt[e]
-            pending -= 1
-            if state[u] == _DONE:
-                continue
-            state[u] = _DONE
-            du = dist[u]
-            for j in range(8):
-                v = u + off[j]
-                if state[v] != _OPEN:
-                    continue
-                if j >= 4 and (state[u + _DR[j] * w] == _WALL or state[u + _DC[j]] == _WALL):
-                    continue
-                nd = du + _STEP[j]
-                if nd < dist[v]:
-                    dist[v] = nd
-                    b = int(nd)
-                    if b != bucket_of[v]:
-                        bucket_of[v] = b
-                        node[used] = v
-                        nxt[used] = head[b & 3]
-                        head[b & 3] = used
-                        used += 1
-                        pending += 1
+        used, pending = _settle_bucket(k, head, node, nxt, state, dist, bucket_of, off, w, used, pending)
         k += 1
     return dist.reshape((n + 2, w))[1:n + 1, 1:m + 1].copy()
 
