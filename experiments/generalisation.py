@@ -17,6 +17,7 @@ stopped in (experiments/generalisation/failures/).
     python3 experiments/generalisation.py              # the whole suite (about an hour on 2 cores)
     python3 experiments/generalisation.py --quick      # a smoke run of a few small layouts
     python3 experiments/generalisation.py --generate   # rewrite the suite's layout files
+    python3 experiments/generalisation.py --report-only   # the tables again from generalisation.json
 
 Writes experiments/generalisation.json (every run), experiments/generalisation.md and the
 generalisation section of EXPERIMENTS.md (not with --quick, which writes to --out).
@@ -210,6 +211,38 @@ def goals(outcomes: list[Outcome]) -> str:
         f"{'yes' if not lost else 'no'} |"])
 
 
+FAILURE_CLASSES = (
+    ("sealed", "an agent holds a brick and no open site is reachable for it: the structure (or an agent's "
+               "body inside it) closed the way to the sites left"),
+    ("no supply", "no agent knows a reachable free brick: the supply was not found, or what is left is "
+                  "out of reach"),
+    ("busy, no fill", "agents navigate with a brick or to a brick, yet no site is filled (stale beliefs, "
+                      "agents in each other's way)"),
+    ("out of ticks", "still filling sites when the layout's max_ticks ran out"),
+)
+
+
+def failure_class(o: Outcome) -> str:
+    """One of FAILURE_CLASSES, read off the run's stall report."""
+    if not o.stalled:
+        return "out of ticks"
+    lines = " ".join(o.report[1:])
+    if "no open site is reachable" in lines:
+        return "sealed"
+    if all(("no free brick" in line or "no known free brick" in line) for line in o.report[1:]):
+        return "no supply"
+    return "busy, no fill"
+
+
+def class_table(outcomes: list[Outcome]) -> str:
+    lines = ["| class | what the stall reports say | goal sequencing | nearest-first |", "|---|---|---:|---:|"]
+    for name, what in FAILURE_CLASSES:
+        count = {m: sum(1 for o in outcomes if o.mode == m and not o.completed and failure_class(o) == name)
+                 for m, _ in MODES}
+        lines.append(f"| {name} | {what} | {count['goal sequencing']} | {count['nearest-first']} |")
+    return "\n".join(lines)
+
+
 def failures(outcomes: list[Outcome], base: Path) -> str:
     """Every run that did not complete; pictures linked relative to `base` (the document's folder)."""
     bad = [o for o in outcomes if not o.completed]
@@ -220,7 +253,7 @@ def failures(outcomes: list[Outcome], base: Path) -> str:
         why = "stalled" if o.stalled else "out of ticks"
         pic = f" ![]({os.path.relpath(o.picture, base)})" if o.picture else ""
         lines.append(f"- `{o.layout}` ({o.family}, {o.cols} x {o.rows}, {o.agents} agents), **{o.mode}**: {why} at "
-                     f"tick {o.ticks}, {o.sites_filled}/{o.sites_total} sites.{pic}")
+                     f"tick {o.ticks}, {o.sites_filled}/{o.sites_total} sites ({failure_class(o)}).{pic}")
         lines += [f"  - `{line.strip()}`" for line in o.report[1:]]
     return "\n".join(lines)
 
@@ -254,6 +287,10 @@ Wall time of this run: {seconds / 60:.0f} min on {args.jobs} worker processes.
 ### Per agent count
 
 {group_table(outcomes, lambda o: f"{o.agents:>2} agents", "agents")}
+
+### Why runs did not complete
+
+{class_table(outcomes)}
 
 ### Every run that did not complete
 
@@ -289,6 +326,21 @@ def quick_files(n: int) -> list[str]:
     return [name for _, name in sorted(map(work, suite_files()))[:n]]
 
 
+def rewrite_report(args: argparse.Namespace) -> int:
+    """The markdown and the EXPERIMENTS.md section again, from experiments/generalisation.json."""
+    out = ROOT / "experiments"
+    rows = json.loads((out / "generalisation.json").read_text(encoding="utf-8"))
+    outcomes = [Outcome(**(r | {"report": tuple(r["report"]),
+                                "picture": str((out / r["picture"]).resolve()) if r["picture"] else ""}))
+                for r in rows]
+    meta = json.loads((out / "generalisation.meta.json").read_text(encoding="utf-8"))
+    args.jobs, args.stall = meta["jobs"], meta["stall"]
+    (out / "generalisation.md").write_text(markdown(outcomes, args, meta["seconds"], out.resolve()), encoding="utf-8")
+    write_section(ROOT / "EXPERIMENTS.md", "generalisation", markdown(outcomes, args, meta["seconds"], ROOT))
+    print((out / "generalisation.md").read_text(encoding="utf-8"))
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="a few small layouts; results go to --out only")
@@ -297,12 +349,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="worker processes")
     ap.add_argument("--stall", type=int, default=DEFAULT_STALL, help="ticks with no site filled that stop a run")
     ap.add_argument("--out", type=Path, default=None, help="folder for the json and md (default experiments/)")
+    ap.add_argument("--report-only", action="store_true",
+                    help="rewrite the tables from the committed generalisation.json, running nothing")
     args = ap.parse_args(argv)
     if args.jobs < 1 or args.stall < 1:
         ap.error("--jobs and --stall must be >= 1")
     if args.generate:
         generate_layouts(SUITE_SIZE, SUITE_SEED)
         return 0
+    if args.report_only:
+        return rewrite_report(args)
     names = args.only or (quick_files(4) if args.quick else suite_files())
     if not names:
         ap.error(f"no layouts in {LAYOUTS}: run with --generate first")
@@ -320,6 +376,8 @@ def main(argv: list[str] | None = None) -> int:
     text = markdown(outcomes, args, seconds, out.resolve())
     rows = [asdict(o) | {"picture": os.path.relpath(o.picture, out.resolve()) if o.picture else ""} for o in outcomes]
     (out / "generalisation.json").write_text(json.dumps(rows, indent=1), encoding="utf-8")
+    (out / "generalisation.meta.json").write_text(json.dumps({"jobs": args.jobs, "stall": args.stall,
+                                                              "seconds": seconds}), encoding="utf-8")
     (out / "generalisation.md").write_text(text, encoding="utf-8")
     if not (args.quick or args.only or args.out):
         write_section(ROOT / "EXPERIMENTS.md", "generalisation", markdown(outcomes, args, seconds, ROOT))

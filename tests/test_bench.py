@@ -17,3 +17,12 @@ def test_world_benchmark_quick_run_prints_both_tables():
     assert all(float(row.split("|")[3].replace(",", "")) > 0 for row in rows)
     rtt = [line for line in r.stdout.splitlines() if line.startswith("| loopback")]
     assert rtt and 0 < float(rtt[0].split("|")[2]) < 100
+
+
+def test_agent_step_benchmark_quick_run_prints_a_row_per_layout():
+    r = subprocess.run([sys.executable, "bench/bench_agent_step.py", "--quick"], cwd=ROOT, capture_output=True,
+                       text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    rows = [line for line in r.stdout.splitlines() if line.startswith("| ") and "---" not in line][1:]
+    assert len(rows) == 4
+    assert all(float(row.split("|")[4].split()[0]) > 0 for row in rows)
