@@ -88,7 +88,13 @@ def test_with_goal_sequencing_the_matching_grid_is_drawn(fig6):
 
     run = sim.start(load_scenario(SCENARIOS / "fig18.toml"))
     brain = run.brains["a1"]
-    while brain.plans is None or len(brain.plans.matching.pairs) < 2:   # until it has seen a brick
+    from agent_runtime.esm import BRICK, CONFIG
+
+    def d1_waits() -> bool:   # it has seen a brick and the pocket: D2's path runs through D1
+        m = brain.maps.maps > 0.5
+        return brain.plans is not None and bool((brain.plans.matching.match & m[CONFIG] & ~m[BRICK]).any())
+
+    while not d1_waits():
         run.step()
         assert run.world.tick < 3000
     fig = _figure(run.world.scenario, run, "a1", brain, brain.plan())
