@@ -66,6 +66,9 @@ class Plans:
     brick_obstacles: np.ndarray | None = None
 
 
+# Goal sites within this many cells (on each axis) of the agent are checked for sealing.
+SEAL_RADIUS = 2
+
 # Behaviours during which standing still is the point (consuming, or heading for a source).
 _STILL_IS_FINE = frozenset({"eat", "drink", "approach_food", "approach_water"})
 
@@ -105,6 +108,7 @@ class Brain:
         self._leg_heading = 0.0            # the current straight leg of Explore ...
         self._leg_left = 0                 # ... and the ticks it has to go
         self.unsticks = 0                  # how often it had to back off
+        self.searched = 0                  # squares of the world first seen while searching for bricks
         self._tick = welcome.tick
         self.motivations = Motivations()
         self.centre = self.cfg.map_size // 2
@@ -134,7 +138,9 @@ class Brain:
         if outside is not None:
             self.maps.maps[OBSTACLE][outside] = 1.0
         self.far.observe_sites(self.maps.maps[BRICK], self.maps.clear_age)
-        self.far.mark_seen(self.sensor_range - 1.0)
+        new = self.far.mark_seen(self.sensor_range - 1.0)
+        if self.searching():
+            self.searched += new
         self.motivations.update(self.cfg, frame.ate, frame.drank)
         return ranges
 
@@ -210,7 +216,9 @@ class Brain:
         `sequenced`), the Matching grid also inhibits the sites that would block another
         pair's path and leaves only the matched bricks as brick goals (§6.2); the matching
         counts the held brick's source as a brick and avoids crossing sites not seen open
-        for `site_memory` ticks. Other agents in sight are obstacles on both maps.
+        for `site_memory` ticks. With goal sequencing on, sequenced or not, a site near the
+        agent whose brick would seal another off (`sealing`) is no goal either. Other
+        agents in sight are obstacles on both maps.
         """
         m = self.maps.maps > 0.5
         # Fixed obstacles (walls, the world's edge) are in the way exactly as food and water are.
@@ -220,24 +228,66 @@ class Brain:
         agents = m[AGENT]
         config_goals = config & ~brick          # sites still missing a brick
         brick_goals = brick & ~config           # bricks not part of the structure
+        obstacles = food | water | (brick & config)
+        open_sites = config_goals
+        if self.cfg.goal_sequencing:
+            supply = (self._source_cell() | self._supply_beyond()) & ~obstacles & ~config
+            supply_bricks = brick_goals | supply
         if sequenced and self.cfg.goal_sequencing:
-            obstacles = food | water | (brick & config)
             closed = config_goals & (self.maps.clear_age > self.cfg.site_memory)
             # The cells around the agent are never in doubt: it would be touching a brick there.
             c = self.centre
             closed[c - 1:c + 2, c - 1:c + 2] = False
-            supply = (self._source_cell() | self._supply_beyond()) & ~obstacles & ~config
-            matching = self.matching(brick_goals | supply, config_goals, obstacles, closed)
-            open_sites, supply_bricks = config_goals, brick_goals | supply
+            matching = self.matching(supply_bricks, config_goals, obstacles, closed)
             config_goals, brick_goals = select_goals(matching, brick_goals, config_goals)
             held = open_sites & ~config_goals
             if held.any():
-                depth = distance_field(supply_bricks, obstacles | closed)
+                # Closed sites are passable for this: the depth of a site behind one must
+                # stay finite, or every site would count as "no deeper" than its neighbour.
+                depth = distance_field(supply_bricks, obstacles)
                 config_goals &= ~_mouth_side(held, config_goals, depth)
+        if self.cfg.goal_sequencing:
+            # Also when sequencing gives way (plan's fallback): no site that seals another.
+            config_goals &= ~self.sealing(config_goals, open_sites, obstacles, supply_bricks)
         # Bricks that are not goals (the structure's, and with sequencing the unmatched free
         # ones) are in the way: a path must not lead through one to a matched brick beyond.
         return ((config_goals, self._free_centre(food | water | brick | agents)),
                 (brick_goals, self._free_centre(food | water | agents | (brick & ~brick_goals))))
+
+    def sealing(self, goals: np.ndarray, open_sites: np.ndarray, blocked: np.ndarray,
+                supply: np.ndarray) -> np.ndarray:
+        """The goal sites near the agent (within SEAL_RADIUS cells) whose brick would cut an
+        open site off from the supply, on the ground the agent has seen open.
+
+        The Matching grid plans on the maps, where a cell never seen is empty: inside a
+        corridor of food whose far walls no sensor has seen past the nearest disc, every
+        deep site seems to have a way out sideways, so the mouth is filled and the rest
+        sealed (generated pockets stalled this way). Here only cells seen free (`known`)
+        and open sites are passable, from the supply and the seen edge of the map; a site
+        whose filling disconnects another open site waits, and the agent goes deeper,
+        seeing the walls as it goes. A few distance fields, only for sites in reach.
+        """
+        c, r = self.centre, SEAL_RADIUS
+        unsafe = np.zeros_like(goals)
+        near = np.zeros_like(goals)
+        near[c - r:c + r + 1, c - r:c + r + 1] = goals[c - r:c + r + 1, c - r:c + r + 1]
+        if not near.any():
+            return unsafe
+        passable = (self.maps.known | open_sites) & ~blocked
+        edge = np.zeros_like(passable)
+        edge[[0, -1], :] = edge[:, [0, -1]] = True
+        reference = (supply | (edge & self.maps.known)) & passable
+        if not reference.any():
+            return unsafe
+        before = np.isfinite(distance_field(reference, ~passable))
+        for row, col in zip(*np.nonzero(near & before)):
+            wall = ~passable
+            wall[row, col] = True
+            after = np.isfinite(distance_field(reference, wall))
+            cut = open_sites & before & ~after
+            cut[row, col] = False
+            unsafe[row, col] = cut.any()
+        return unsafe
 
     def matching(self, bricks: np.ndarray, sites: np.ndarray, obstacles: np.ndarray,
                  closed: np.ndarray | None = None) -> Matching:
@@ -383,11 +433,16 @@ class Brain:
         holding = self._taken_from is not None
         if holding and not np.isfinite(p.config[c, c]):
             return f"holds a brick but no open site is reachable ({open_sites} believed open)"
-        if not holding and not p.brick_goals.any() and not len(self.far.bricks):
+        if self.searching():
             return "knows no free brick: exploring"
         if not holding and not np.isfinite(p.brick[c, c]):
             return "no known free brick is reachable"
         return ""
+
+    def searching(self) -> bool:
+        """Is the agent looking for bricks: holding none and knowing of none?"""
+        return (self.plans is not None and self._taken_from is None and not self.plans.brick_goals.any()
+                and not len(self.far.bricks))
 
     def _select(self, frame, ranges, plans, arm, motor):
         """Fixed priority by lateral inhibition: eat/drink > avoid > approach food/water > build."""
@@ -445,7 +500,10 @@ class Brain:
         agents); squares of BLOCK cells marked seen when the agent passes near them turn
         that into a sweep. The choice among near squares is a little random so agents
         spread out."""
-        target = self.far.unseen_target(self.rng)
+        # Sweep only while searching for the supply: an agent that holds a brick, or knows
+        # of one, is waiting for a way to open (a site held open by the Matching grid), and
+        # a sweep would walk it away from where it is needed.
+        target = self.far.unseen_target(self.rng) if self.searching() else None
         if target is not None:
             m = self.maps.maps > 0.5
             obstacles = self._free_centre(m[FOOD] | m[WATER] | m[BRICK] | m[OBSTACLE] | m[AGENT])
@@ -517,7 +575,8 @@ def _mouth_side(held: np.ndarray, sites: np.ndarray, depth: np.ndarray) -> np.nd
         src = (slice(max(-dr, 0), n - max(dr, 0)), slice(max(-dc, 0), m - max(dc, 0)))
         dst = (slice(max(dr, 0), n - max(-dr, 0)), slice(max(dc, 0), m - max(-dc, 0)))
         # A cell at dst has the held neighbour at src: (r, c) = (r' + dr, c' + dc).
-        out[dst] |= held[src] & (depth[dst] <= depth[src] + 1e-9)
+        # A site no path reaches (depth inf) is on no side of a mouth.
+        out[dst] |= held[src] & (depth[dst] <= depth[src] + 1e-9) & np.isfinite(depth[dst])
     return out & sites
 
 

@@ -54,6 +54,8 @@ CLEAR_MARGIN = 0.75            # clear only cells nearer than reading - this (a 
                                # can be up to 0.71 cell nearer than the disc, plus a little noise)
 RANGE_MARGIN = 0.5             # with no reading, clear only cells well inside the sensor range
 BAND = 0.75                    # cells this close to a reading's distance may hold what it saw
+SITE_BRICK_OFFSET = 0.35       # a brick on a drop site lies this close to its cell's centre (agents
+                               # drop within drop_centering = 0.3 of it; a little noise on top)
 
 
 class EgocentricMaps:
@@ -72,6 +74,11 @@ class EgocentricMaps:
         # onto the map). Other agents fill sites out of sight, so an open site is only
         # known to be open as of when it was seen (goal sequencing uses this).
         self.clear_age = np.full((size, size), np.inf, np.float32)
+        # Cells seen free of food, water and fixed obstacles at least once since they came
+        # onto the map. Behind the nearest disc of a wall a sector sees nothing, so a map
+        # shows a food wall as a few discs with gaps; `known` tells those unseen cells from
+        # cells seen open (the seal check in brain.py trusts only the latter).
+        self.known = np.zeros((size, size), bool)
         self._windows: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._sector_dirs: dict[int, np.ndarray] = {}
         self._geometry_key: tuple | None = None
@@ -107,6 +114,7 @@ class EgocentricMaps:
         """
         self.maps.fill(0.0)
         self.clear_age.fill(np.inf)
+        self.known.fill(False)
         gx, gy = x / cell_size, y / cell_size
         ax, ay = math.floor(gx), math.floor(gy)
         self.frac[:] = (gx - ax - 0.5, gy - ay - 0.5)
@@ -133,6 +141,7 @@ class EgocentricMaps:
         What comes in from beyond the map is unknown: empty, and never seen open."""
         _shift_in_place(self.maps, kx, ky, 0.0)
         _shift_in_place(self.clear_age, kx, ky, np.inf)
+        _shift_in_place(self.known, kx, ky, False)
 
     # ------------------------------------------------------------------ sensing
 
@@ -151,15 +160,24 @@ class EgocentricMaps:
         r = np.asarray(ranges, np.float64).reshape(len(CHANNELS), -1) / cell_size
         sectors = r.shape[1]
         reach = sensor_range / cell_size
-        cells, dist, (k, sector, starts), vx, vy = self._geometry_for(sectors, reach)
+        cells, dist, (k, sector, starts), vx, vy, (_, core_sector, core_starts) = self._geometry_for(sectors, reach)
         disc = r[:_DISC_CHANNELS]
         limit = np.where(disc >= 0.0, disc - CLEAR_MARGIN, reach - RANGE_MARGIN)
-        # A cell is known empty when it is nearer than what every sector it overlaps saw.
+        # A cell is known empty when it is nearer than what every sector it overlaps saw;
+        # of a site cell, only the sectors where a brick on it could lie. Else a site in a
+        # pocket, beside structure bricks seen at about its distance, is never seen open
+        # again once a ghost lands on it, and the pocket's mouth is filled over it.
         cell_limit = np.minimum.reduceat(limit[:, sector], starts, axis=1)
+        site = self._all[cells[0] - FOOD * self.size ** 2 + CONFIG * self.size ** 2] > 0.5
+        core_limit = np.minimum.reduceat(limit[_BRICK_CH, core_sector], core_starts)
+        cell_limit[_BRICK_CH] = np.where(site, core_limit, cell_limit[_BRICK_CH])
         clear = dist < cell_limit
         self._all[cells[clear]] = 0.0
         self.clear_age += 1.0
         self.clear_age.reshape(-1)[cells[_BRICK_CH][clear[_BRICK_CH]] - BRICK * self.size ** 2] = 0.0
+        open_ground = clear[FOOD] & clear[WATER] & clear[_OBSTACLE_CH]
+        self.known.reshape(-1)[cells[FOOD][open_ground] - FOOD * self.size ** 2] = True
+        self.known[self.centre, self.centre] = True  # the agent stands there
         # Each reading may be explained by any cell its wedge overlaps: the (cell, sector) pairs.
         explained = self._associate(r, cells[:, k], dist[k], sector, vx[k], vy[k])
         self.maps[AGENT].fill(0.0)
@@ -245,18 +263,26 @@ class EgocentricMaps:
             dist = np.hypot(vx, vy)
             # A cell has width: it overlaps every sector within half a cell of its centre's
             # direction (a disc on a sector border may be reported by either neighbour).
-            half = np.arcsin(np.minimum(0.5 / np.maximum(dist, 1e-9), 1.0))
-            per = sectors / (2.0 * np.pi)
-            lo = np.floor((angle - half) * per).astype(np.int64)
-            span = np.minimum(np.floor((angle + half) * per).astype(np.int64) - lo + 1, sectors)
-            # Every (cell, sector) pair the cell overlaps, grouped by cell in window order.
-            cell_of_pair = np.repeat(np.arange(dist.size), span)
-            starts = np.cumsum(span) - span
-            step = np.arange(cell_of_pair.size) - np.repeat(starts, span)
-            sector = (np.repeat(lo, span) + step) % sectors
-            self._geometry = (cells, dist, (cell_of_pair, sector, starts), vx, vy)
+            pairs = _sector_pairs(angle, dist, 0.5, sectors)
+            # A brick on a drop site lies within SITE_BRICK_OFFSET of the cell's centre (it is
+            # dropped there), so for site cells only the sectors of that core count.
+            core = _sector_pairs(angle, dist, SITE_BRICK_OFFSET, sectors)
+            self._geometry = (cells, dist, pairs, vx, vy, core)
             self._geometry_key = key
         return self._geometry
+
+
+def _sector_pairs(angle: np.ndarray, dist: np.ndarray, radius: float, sectors: int):
+    """(cell of pair, sector, starts): every (cell, sector) pair where the sector comes
+    within `radius` cells of the cell's centre, grouped by cell in window order."""
+    half = np.arcsin(np.minimum(radius / np.maximum(dist, 1e-9), 1.0))
+    per = sectors / (2.0 * np.pi)
+    lo = np.floor((angle - half) * per).astype(np.int64)
+    span = np.minimum(np.floor((angle + half) * per).astype(np.int64) - lo + 1, sectors)
+    cell_of_pair = np.repeat(np.arange(dist.size), span)
+    starts = np.cumsum(span) - span
+    step = np.arange(cell_of_pair.size) - np.repeat(starts, span)
+    return cell_of_pair, (np.repeat(lo, span) + step) % sectors, starts
 
 
 def obstacle_trust(sectors: int) -> float:

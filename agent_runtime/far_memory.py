@@ -49,11 +49,13 @@ class FarMemory:
         # y0 <= y < y1; None when the world did not say. Everything outside is wall.
         self.bounds = bounds
         self.seen: np.ndarray | None = None     # per BLOCK square of the world: been near it
+        self.ever_seen: np.ndarray | None = None  # the same, never reset by a new sweep
         self._target: tuple[int, int] | None = None  # the square Explore is heading for
         self._target_age = 0                          # explore steps spent on it
         if bounds is not None:
             x0, y0, x1, y1 = bounds
             self.seen = np.zeros((-(-(x1 - x0) // BLOCK), -(-(y1 - y0) // BLOCK)), bool)
+            self.ever_seen = self.seen.copy()
 
     # ------------------------------------------------------------------ frames
 
@@ -126,13 +128,17 @@ class FarMemory:
 
     # ------------------------------------------------------------------ exploring
 
-    def mark_seen(self, radius: float) -> None:
-        """The squares whose centre lies within `radius` cells of the agent have been seen."""
+    def mark_seen(self, radius: float) -> int:
+        """The squares whose centre lies within `radius` cells of the agent have been seen;
+        returns how many had never been seen before."""
         if self.seen is None:
-            return
+            return 0
         centres = self._block_centres()
         near = np.hypot(centres[..., 0] - self.pos[0], centres[..., 1] - self.pos[1]) <= radius
+        new = int(np.count_nonzero(near & ~self.ever_seen))
         self.seen |= near
+        self.ever_seen |= near
+        return new
 
     def _block_centres(self) -> np.ndarray:
         x0, y0, x1, y1 = self.bounds

@@ -100,7 +100,8 @@ class SimRun:
         if self.filled_at is None:
             self._record_fills()
         filled = int(np.count_nonzero(self.filled_at >= 0))
-        return self.stall.observe(self.world.tick, filled, len(self.filled_at))
+        searched = sum(brain.searched for brain in self.brains.values())
+        return self.stall.observe(self.world.tick, filled, len(self.filled_at), searched)
 
     def stall_report(self) -> list[str]:
         """The report `conag run` prints on a stall: a headline, then one line per agent

@@ -24,7 +24,9 @@ class StallClock:
     back (a nearest-first agent walled out of the rest does) would otherwise look busy for
     ever. A site added or removed by a perturbation starts the count again (new work,
     which the agents have not had a chance at). A build with nothing left to do never
-    stalls. A repair after a brick was knocked off counts once the count is back above
+    stalls. Where the agents say how much of the world they have first seen while
+    searching for bricks (`searched`), more of it is progress too: on a large world the
+    supply may lie far from everyone, and a team still sweeping for it is not stuck. A repair after a brick was knocked off counts once the count is back above
     its best, so a repair slower than `limit` ticks is reported as a stall.
     """
 
@@ -35,13 +37,16 @@ class StallClock:
         self.since: int | None = None   # the tick of the last progress
         self._best = -1
         self._total = -1
+        self._searched = 0
 
-    def observe(self, tick: int, sites_filled: int, sites_total: int) -> bool:
-        """Record the state at `tick`; True once no site has been filled for `limit` ticks."""
+    def observe(self, tick: int, sites_filled: int, sites_total: int, searched: int = 0) -> bool:
+        """Record the state at `tick`; True once no site has been filled (and, with
+        `searched`, no new part of the world seen by a searching agent) for `limit` ticks."""
         if self.since is None or sites_total != self._total:
             self.since, self._best = tick, sites_filled
-        elif sites_filled > self._best:
-            self.since, self._best = tick, sites_filled
+        elif sites_filled > self._best or searched > self._searched:
+            self.since, self._best = tick, max(sites_filled, self._best)
+        self._searched = max(self._searched, searched)
         self._total = sites_total
         return sites_filled < sites_total and self.idle(tick) >= self.limit
 

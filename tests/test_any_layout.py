@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent_runtime.brain import Brain
+from agent_runtime.brain import Brain, _mouth_side
 from agent_runtime.config import AgentConfig
 from agent_runtime.esm import CONFIG, OBSTACLE
 from agent_runtime.far_memory import FarMemory, border_seed
@@ -71,6 +71,57 @@ def test_two_agents_at_the_end_of_an_edge_wall_do_not_livelock():
     assert st.completed, f"{st.sites_filled}/{st.sites_total} at tick {st.tick}"
     for brain in run.brains.values():
         assert brain.behaviour_ticks["avoid"] < 1000
+
+
+@pytest.mark.slow
+def test_a_food_corridor_is_filled_from_its_far_end_and_never_sealed():
+    # Before: 3 of 11 sites. The agent at the mouth saw ways out sideways where the walls'
+    # far discs hide behind the near ones, filled the mouth and sealed the rest.
+    run = _build("food_corridor", 8000)
+    st = _status(run)
+    assert st.completed, f"{st.sites_filled}/{st.sites_total} at tick {st.tick}"
+
+
+@pytest.mark.slow
+def test_pockets_beside_structure_bricks_are_not_sealed_over_a_ghost():
+    # Before: 24 of 25 sites. A ghost brick on a deep open site (a structure brick beside it
+    # seen at the same distance) was never cleared, and the mouth was filled over it.
+    run = _build("twin_pockets", 8000)
+    st = _status(run)
+    assert st.completed, f"{st.sites_filled}/{st.sites_total} at tick {st.tick}"
+
+
+def test_a_mouth_site_waits_while_the_site_behind_it_is_open_on_seen_ground():
+    # A corridor of food one cell wide, its far walls unseen: filling the mouth would cut
+    # the deeper sites off on the ground the agent has seen, so it is no goal; the deepest is.
+    brain = Brain(_welcome(), AgentConfig(), np.random.default_rng(0))
+    n, c = brain.cfg.map_size, brain.centre
+    goals = np.zeros((n, n), bool)
+    open_sites = goals.copy()
+    open_sites[c, c:c + 4] = True                       # the agent stands at the mouth
+    goals[c, c] = goals[c, c + 3] = True
+    blocked = np.zeros((n, n), bool)
+    blocked[[c - 1, c + 1], c:c + 2] = True             # the walls it has seen
+    blocked[c, c + 4] = True                            # the corridor's end
+    brain.maps.known[:, :c + 1] = True                  # seen ground: west of the agent only
+    supply = np.zeros((n, n), bool)
+    supply[c, c - 8] = True
+    unsafe = brain.sealing(goals, open_sites, blocked, supply)
+    assert unsafe[c, c] and not unsafe[c, c + 3]        # the far end is not near: not checked
+    brain.maps.known[:] = True                          # seen open all round: no seal
+    assert not brain.sealing(goals, open_sites, blocked, supply).any()
+
+
+def test_a_site_no_path_reaches_is_not_beside_a_mouth():
+    held = np.zeros((5, 5), bool)
+    held[2, 2] = True
+    sites = np.zeros((5, 5), bool)
+    sites[2, 1] = sites[2, 3] = True
+    depth = np.full((5, 5), 3.0)
+    depth[2, 3] = 4.0                                   # deeper: stays a goal
+    assert _mouth_side(held, sites, depth).tolist() == ((np.arange(25).reshape(5, 5) == 11)).tolist()
+    depth[2, 1] = np.inf                                # behind closed sites: no depth
+    assert not _mouth_side(held, sites, depth).any()
 
 
 # ------------------------------------------------------------------ obstacles are sensed and mapped

@@ -445,7 +445,8 @@ def reference_sense(m: EgocentricMaps, ranges: np.ndarray, reach: float) -> np.n
     """The rule of EgocentricMaps.sense, cell by cell (slow and plain), on a copy of the maps.
 
     1. A cell is cleared when it is nearer than (reading - 0.75) of every sector it
-       overlaps (reach - 0.5 for a sector with no reading).
+       overlaps (reach - 0.5 for a sector with no reading); on the brick layer, a site
+       cell only needs the sectors within 0.35 cell of its centre.
     2. Each disc reading is attributed to the best cell of its band (cells overlapping its
        wedge within 0.75 of its distance): score = distance to the measured point, minus 2
        if the cell is marked in that layer, minus 1 for a brick on a blueprint cell; the best
@@ -457,10 +458,12 @@ def reference_sense(m: EgocentricMaps, ranges: np.ndarray, reach: float) -> np.n
     n, sectors = m.size, ranges.shape[1]
     # Which sectors each cell overlaps is taken from the map's own geometry: at exact sector
     # borders numpy and math round a hair apart. The real-sensor tests check that geometry.
-    cells, _, (k, sector, _), _, _ = m._geometry_for(sectors, reach)
-    overlapped = {}
+    cells, _, (k, sector, _), _, _, (core_k, core_sector, _) = m._geometry_for(sectors, reach)
+    overlapped, core = {}, {}
     for i, s in zip(k.tolist(), sector.tolist()):
         overlapped.setdefault(divmod(int(cells[0, i]), n), set()).add(s)
+    for i, s in zip(core_k.tolist(), core_sector.tolist()):
+        core.setdefault(divmod(int(cells[0, i]), n), set()).add(s)
     geometry = {}
     for row in range(n):
         for col in range(n):
@@ -470,6 +473,8 @@ def reference_sense(m: EgocentricMaps, ranges: np.ndarray, reach: float) -> np.n
         for cell, (ox, oy, d, overlapped) in geometry.items():
             if d > reach + 0.75:
                 continue
+            if layer == BRICK and m.maps[CONFIG][cell] > 0.5:
+                overlapped = core.get(cell, set())   # a site's brick lies near its centre
             limits = [ranges[layer, s] - 0.75 if ranges[layer, s] >= 0 else reach - 0.5 for s in overlapped]
             if d < min(limits):
                 out[layer][cell] = 0.0
@@ -613,3 +618,34 @@ def test_clear_age_counts_senses_since_a_cell_was_seen_empty_of_bricks_and_moves
     assert m.clear_age[C, C + 3] == 1 and np.isinf(m.clear_age[:, -1]).all()
     m.seed_blueprint(0.5, 0.5, [], [])
     assert np.isinf(m.clear_age).all()                        # a fresh map has seen nothing
+
+
+def test_a_site_in_a_pocket_is_seen_open_again_beside_a_structure_brick():
+    # The agent stands in a one-cell pocket; the site north of it (distance 1, straight up, on
+    # the border of sectors 3 and 4) holds a ghost mark, the real brick stands on the site to
+    # the north-east (sector 2, 1.41 away) and the next one two cells north. The site cell's
+    # corner reaches into sector 2, so by the rule for other cells the real brick keeps it in
+    # doubt for ever; a brick on a site lies near its centre, so for the site it does not.
+    readings = np.full((NCH, 16), NO_READING)
+    readings[BRICK, 2] = 1.41
+    readings[BRICK, 3] = readings[BRICK, 4] = 2.0
+    for site, expect in ((True, 0.0), (False, 1.0)):
+        m = EgocentricMaps(SIZE)
+        m.maps[BRICK, C - 1, C] = 1.0                    # the ghost
+        m.maps[CONFIG, C - 1, C + 1] = m.maps[CONFIG, C - 2, C] = 1.0
+        m.maps[CONFIG, C - 1, C] = float(site)
+        m.sense(readings, 6.0)
+        assert m.maps[BRICK, C - 1, C] == expect, site
+        # With the ghost gone, the reading goes to the real brick on its site.
+        assert m.maps[BRICK, C - 1, C + 1] == float(site)
+
+
+def test_cells_seen_free_of_walls_are_known_and_the_cells_behind_a_wall_are_not():
+    m = EgocentricMaps(SIZE)
+    readings = np.full((NCH, 16), NO_READING)
+    readings[FOOD, 0] = 3.0                              # a food disc 3 cells east (sector 0)
+    m.sense(readings, 6.0)
+    assert m.known[C, C] and m.known[C, C + 1] and m.known[C - 3, C]   # in front of it, and open ground
+    assert not m.known[C, C + 4]                         # behind the disc: never seen
+    m.move(1.0, 0.0)                                     # known ground moves with the map
+    assert m.known[C, C - 1] and not m.known[C, C + 3]

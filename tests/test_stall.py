@@ -64,6 +64,37 @@ def test_the_clock_stops_a_run_only_after_limit_ticks_without_a_fill():
         StallClock(0)
 
 
+def test_a_team_still_sweeping_the_world_for_bricks_is_not_stalled():
+    c = StallClock(100)
+    assert not c.observe(0, 0, 3, searched=0)
+    assert not c.observe(90, 0, 3, searched=4) and c.since == 90   # new squares seen: progress
+    assert not c.observe(189, 0, 3, searched=4)
+    assert c.observe(190, 0, 3, searched=4)                        # nothing new for 100 ticks
+    assert not c.observe(200, 1, 3, searched=4) and c.since == 200 # a fill still counts
+
+
+FAR_PILE = """
+name = "far pile"
+seed = 3
+agents = 1
+max_ticks = 20000
+layout = \"\"\"
+{rows}
+\"\"\"
+"""
+
+
+def test_a_simrun_does_not_stop_an_agent_that_is_still_searching_the_world():
+    # The pile is 70 cells from the agent, far beyond its sensors: finding it takes longer
+    # than the stall limit, but every square the agent sweeps is new, so the run goes on.
+    rows = ["." * 78 for _ in range(12)]
+    rows[5] = "A.+" + "." * 70 + "bbb.."
+    run = sim.start(parse_scenario(FAR_PILE.format(rows="\n".join(rows))))
+    result = run.run(6000, stall_ticks=600)
+    assert result.completed and run.filled_at.min() > 600, (result, run.filled_at)
+    assert run.brains["a1"].searched > 0
+
+
 def test_the_report_names_every_agent_with_its_position_and_last_state():
     lines = stall_report(STATUS, 600, {"a1": state("a1", "brick_nav")})
     assert lines[0] == "STALLED at tick 900: no site filled for 600 ticks (0/1 sites)"
