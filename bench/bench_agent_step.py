@@ -20,7 +20,7 @@ import statistics
 import time
 from pathlib import Path
 
-from conag import sim
+import sim
 from world_server.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent

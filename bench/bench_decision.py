@@ -3,7 +3,7 @@
     python3 bench/bench_decision.py              # the table of BENCHMARKS.md
     python3 bench/bench_decision.py --quick      # a smoke run, not a measurement
 
-For each map size, scenarios/fig6.toml runs in-process (`conag.sim.start`, one agent,
+For each map size, scenarios/fig6.toml runs in-process (`sim.start`, one agent,
 `AgentConfig(map_size=...)`) for a warm-up of 300 ticks, so the ESMs hold a realistic
 picture (blueprint, the food-and-water wall, bricks). Then the sim keeps running, and on
 every tick until the structure is complete (about 540 ticks; then a new
@@ -34,9 +34,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+import sim  # noqa: E402
 from agent_runtime.config import AgentConfig  # noqa: E402
 from bench.bench_spreading import scipy_field, scipy_graph  # noqa: E402
-from conag import sim  # noqa: E402
 from world_server.scenario import load_scenario  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent

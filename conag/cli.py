@@ -27,9 +27,9 @@ import time
 from contextlib import contextmanager
 from dataclasses import asdict
 
-from conag.bus import MODES, BusOptions, open_session
+from bus import MODES, BusOptions, Declarations, open_session
 from conag.layouts import add_commands as add_layout_commands
-from conag.summary import write_summary
+from world_server.summary import write_summary
 
 EXIT_USAGE = 2
 EXIT_INCOMPLETE = 3  # conag run: the tick limit passed (or it was stopped) before the structure was complete
@@ -80,8 +80,8 @@ def _status_line(st) -> str:
 def cmd_world(args) -> int:
     import numpy as np
 
+    from nodes.world_server import WorldServer
     from world_server.scenario import load_scenario
-    from world_server.server import WorldServer
     from world_server.world import World
 
     scenario = load_scenario(args.scenario)
@@ -147,9 +147,9 @@ def cmd_status(args) -> int:
                     except ProtocolError as exc:
                         print(f"warning: ignored a bad status: {exc}", file=sys.stderr)
 
-                sub = session.declare_subscriber(keys.status(args.world_id), on_status)
-                stop.wait()
-                sub.undeclare()
+                with Declarations() as declared:
+                    declared.add(session.declare_subscriber(keys.status(args.world_id), on_status))
+                    stop.wait()
         return 0
     finally:
         session.close()
@@ -211,7 +211,7 @@ def cmd_render(args) -> int:
     from world_server.scenario import load_scenario
 
     if args.agent_maps:
-        from conag.render_agent import render_agent_maps
+        from sim.render_agent import render_agent_maps
 
         out = render_agent_maps(load_scenario(args.scenario), args.out,
                                 agent=args.agent or "a1", ticks=args.ticks or 0)
@@ -242,11 +242,11 @@ class _Stopped(Exception):
     """Raised by the agent's signal handler, so a blocking frame wait ends at once."""
 
 
-def cmd_agent(args) -> int:
+def _agent_options(args):
+    """The AgentOptions `conag agent` asks for (ValueError for learning flags without --learn)."""
     from agent_runtime.config import AgentConfig
     from agent_runtime.learning import Student
-    from agent_runtime.link import AttachError
-    from agent_runtime.process import AgentReport, Learning, run_agent
+    from nodes.agent import AgentOptions, Learning
 
     if not args.learn and (args.eta is not None or args.weights_out or args.save_every is not None):
         raise ValueError("--eta, --weights-out and --save-every need --learn")
@@ -257,6 +257,15 @@ def cmd_agent(args) -> int:
     elif args.weights_in:
         network = Student.load(args.weights_in)  # a trained student, acting without learning
     cfg = AgentConfig(map_size=args.map_size, goal_sequencing=not args.nearest_first)
+    return AgentOptions(args.world_id, args.id, cfg, args.seed, attach_timeout=args.attach_timeout,
+                        learning=learning, network=network)
+
+
+def cmd_agent(args) -> int:
+    from nodes.agent import AgentReport, run_agent
+    from nodes.world_link import AttachError
+
+    opts = _agent_options(args)
     report = AgentReport()
 
     def raise_stop(signum, _frame):
@@ -266,8 +275,7 @@ def cmd_agent(args) -> int:
     try:
         session = open_session(_bus(args))
         try:
-            run_agent(session, args.world_id, args.id, cfg, args.seed, attach_timeout=args.attach_timeout,
-                      learning=learning, network=network, report=report)
+            run_agent(session, opts, report=report)
         except AttachError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 1
@@ -280,14 +288,14 @@ def cmd_agent(args) -> int:
             signal.signal(s, h)
     if report.link is not None:
         c = report.link.counts
-        saved = f"; weights saved to {learning.weights_out}" if learning.weights_out else ""
+        saved = f"; weights saved to {opts.learning.weights_out}" if opts.learning.weights_out else ""
         print(f"agent {args.id}: {report.ticks} ticks, {c.reinforcements} reinforcements, {c.errors} errors "
               f"({c.teacher_restarts} teacher restarts, {c.gaps} gaps){saved}", flush=True)
     return 0
 
 
 def cmd_teacher(args) -> int:
-    from teacher.process import run_teacher
+    from nodes.teacher import run_teacher
 
     last = [""]
 
@@ -312,12 +320,11 @@ def cmd_teacher(args) -> int:
 
 
 def cmd_run(args) -> int:
-    from conag.bus import DEFAULT_ENDPOINT
+    from agent_runtime.config import AgentConfig
+    from bus import DEFAULT_ENDPOINT
     from conag.layouts import warn_if_unbuildable
     from conag.run import RunOptions, run
     from world_server.scenario import load_scenario
-
-    from agent_runtime.config import AgentConfig
 
     AgentConfig(map_size=args.map_size)  # a bad size is a usage error here, not in every agent
     if not args.learn and (args.eta is not None or args.weights_dir):

@@ -21,12 +21,12 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from conag.bus import BusOptions, open_session
-from conag.stall import DEFAULT_STALL_TICKS, StallClock, stall_report
+from bus import BusOptions, open_session
 from protocol import keys
 from protocol.codec import ProtocolError, decode, encode
 from protocol.messages import AgentState, RunControl, RunControlResult, WorldStatus
 from world_server.scenario import Scenario
+from world_server.stall import DEFAULT_STALL_TICKS, StallClock, stall_report
 
 
 @dataclass

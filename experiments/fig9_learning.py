@@ -12,7 +12,7 @@ students, learning off, are put into novel environments (quick_wall, Fig. 17) an
 teacher counts their errors while they build.
 
 Runs in one process per core (spawn), each run with the real World, Brain, Student /
-QLearner and teacher core (`teacher.trials`, stepping `conag.sim` in lockstep). Writes
+QLearner and teacher core (`sim.trials`, stepping `sim.loop` in lockstep). Writes
 fig9_learning.md (tables), fig9_learning.png (Fig. 9), fig9_learning.json (every run's
 errors per trial) and fig9_student.json (a trained student: `conag agent --weights-in`).
 
@@ -40,8 +40,8 @@ from agent_runtime.config import AgentConfig  # noqa: E402
 from agent_runtime.learning import Student  # noqa: E402
 from agent_runtime.network import engineered  # noqa: E402
 from agent_runtime.qlearning import QLearner  # noqa: E402
+from sim.trials import run_learning, run_trial, trial_seed  # noqa: E402
 from teacher.core import Teacher  # noqa: E402
-from teacher.trials import run_learning, run_trial, trial_seed  # noqa: E402
 
 # Fig. 9 is the learning agent of §5, before goal sequencing (§6): which sites and bricks
 # excite the navigation maps does not change what the network must learn, and the

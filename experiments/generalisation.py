@@ -38,8 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
+import sim
 from agent_runtime.config import AgentConfig
-from conag import sim
 from experiments.report import write_section
 from world_server.scenario import Scenario, load_scenario
 
@@ -132,7 +132,7 @@ def run_job(job: Job, pictures: Path | None) -> Outcome:
 
 def _bound(sc: Scenario, starts: list[tuple[int, int]]) -> float:
     """Lower bound on the total distance (world units), on the initial map."""
-    from agent_runtime.replay import lower_bound
+    from experiments.replay import lower_bound
 
     reach = sc.world.grab_reach / sc.world.cell_size
     return lower_bound(sc.grid("b"), sc.grid("+"), sc.grid("FWB#"), starts, reach,

@@ -37,9 +37,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+import sim  # noqa: E402
 from agent_runtime.config import AgentConfig  # noqa: E402
-from agent_runtime.replay import lower_bound, replay  # noqa: E402
-from conag import sim  # noqa: E402
+from experiments.replay import lower_bound, replay  # noqa: E402
 from experiments.report import write_section  # noqa: E402
 from world_server.scenario import Scenario, load_scenario  # noqa: E402
 

@@ -30,11 +30,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+import sim
+from agent_runtime.config import AgentConfig
 from baselines.lattice import BRICK, simulate
 from baselines.perturb import nested_squares, run_perturbed
 from baselines.rules import square_rules
-from agent_runtime.config import AgentConfig
-from conag import sim
 from experiments.report import write_section
 from protocol.messages import Perturbation
 from world_server.scenario import parse_scenario

@@ -1,12 +1,12 @@
 """Learning trials in one process (paper §5.1, Fig. 9; MISSION L3): world, student, teacher, no bus.
 
 The same World, Brain, Student / QLearner and teacher core as the processes, stepped in
-lockstep by `conag.sim` for the many runs of the Fig. 9 experiment. One trial: the
-scenario's initial layout (every brick where the file puts it), the student's body at its
-start with fresh maps (its configuration ESM seeded from the blueprint), `ticks` steps;
-each step the teacher reinforces the student's decision and the student learns from it
-before acting on the next frame. The learner's weights carry over from trial to trial:
-that is what is learned.
+lockstep by the simulation loop (`sim.loop`) for the many runs of the Fig. 9
+experiment. One trial: the scenario's initial layout (every brick where the file puts
+it), the student's body at its start with fresh maps (its configuration ESM seeded from
+the blueprint), `ticks` steps; each step the teacher reinforces the student's decision
+and the student learns from it before acting on the next frame. The learner's weights
+carry over from trial to trial: that is what is learned.
 
 Between trials the whole environment is reset, not only the agent: the paper's student
 "was repeatedly placed in the same environment" and "moved to its initial position" after
@@ -25,7 +25,7 @@ import numpy as np
 
 from agent_runtime.brain import Step
 from agent_runtime.config import AgentConfig
-from conag import sim
+from sim.loop import start
 from teacher.core import Teacher, is_error
 from world_server.scenario import Scenario
 
@@ -52,7 +52,7 @@ def run_trial(scenario: Scenario, learner, teacher: Teacher, *, ticks: int, eta:
 
     With `until_complete` the trial ends early once every drop site holds a brick.
     """
-    run = sim.start(scenario, agents=1, seed=seed, cfg=cfg, network=learner)
+    run = start(scenario, agents=1, seed=seed, cfg=cfg, network=learner)
     errors = 0
 
     def on_step(_agent: str, step: Step) -> None:

@@ -1,4 +1,4 @@
-"""Run a scenario in one process: the world core and one Brain per agent, no bus.
+"""The simulation loop: the world core and one Brain per agent in one process, no bus.
 
 The same World and Brain code as the processes, in lockstep, for tests and experiments
 that need many runs quickly. `conag run` is the real thing: one process per agent.
@@ -17,9 +17,9 @@ import numpy as np
 
 from agent_runtime.brain import Brain, Step
 from agent_runtime.config import AgentConfig
-from conag.stall import StallClock, stall_report
 from protocol.messages import SITE_OPS, Perturbation, PerturbResult
 from world_server.scenario import Scenario
+from world_server.stall import StallClock, stall_report
 from world_server.world import World
 
 
