@@ -368,7 +368,13 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="conag", description="ConAg: agents that build structures from a blueprint.")
     p.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for add in (_add_world, _add_status, _add_perturb, _add_agent, _add_teacher, _add_run, _add_control,
+                _add_render, add_layout_commands, _add_router):  # add_layout_commands: generate, check
+        add(sub)
+    return p
 
+
+def _add_world(sub) -> None:
     w = sub.add_parser("world", help="serve a world from a scenario file")
     w.add_argument("scenario", help="scenario TOML file, e.g. scenarios/quick_wall.toml")
     w.add_argument("--ticks", type=int, help="stop after this many ticks")
@@ -383,6 +389,8 @@ def build_parser() -> argparse.ArgumentParser:
     _bus_args(w)
     w.set_defaults(func=cmd_world)
 
+
+def _add_status(sub) -> None:
     s = sub.add_parser("status", help="print what a running world reports")
     s.add_argument("--watch", action="store_true", help="keep printing each status update")
     s.add_argument("--json", action="store_true", help="print the status as JSON")
@@ -390,6 +398,8 @@ def build_parser() -> argparse.ArgumentParser:
     _bus_args(s)
     s.set_defaults(func=cmd_status)
 
+
+def _add_perturb(sub) -> None:
     q = sub.add_parser("perturb", help="remove, add or move a disc, add or remove a drop site, in a running world")
     q.add_argument("op", choices=("remove", "add", "move", "add-site", "remove-site"),
                    help="add-site: the cell holding --at becomes a drop site; remove-site: its site leaves "
@@ -401,6 +411,8 @@ def build_parser() -> argparse.ArgumentParser:
     _bus_args(q)
     q.set_defaults(func=cmd_perturb)
 
+
+def _add_agent(sub) -> None:
     a = sub.add_parser("agent", help="run one agent process")
     a.add_argument("--id", required=True, help="agent id; a restarted process with the same id gets its body back")
     a.add_argument("--seed", type=int, default=0, help="seed of the agent's own randomness (exploring)")
@@ -420,12 +432,16 @@ def build_parser() -> argparse.ArgumentParser:
     _bus_args(a)
     a.set_defaults(func=cmd_agent)
 
+
+def _add_teacher(sub) -> None:
     t = sub.add_parser("teacher", help="run the teacher: reinforce learning students (paper §5.1)")
     t.add_argument("--id", default="teacher", help="teacher id for its liveliness token (default teacher)")
     t.add_argument("--quiet", action="store_true", help="no progress lines")
     _bus_args(t)
     t.set_defaults(func=cmd_teacher)
 
+
+def _add_run(sub) -> None:
     u = sub.add_parser("run", help="build a scenario: a world and its agents as processes, until done",
                        epilog=RUN_EPILOG)
     u.add_argument("scenario")
@@ -451,6 +467,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--weights-dir", metavar="DIR", help="each student saves its weights to DIR/<id>.json")
     u.set_defaults(func=cmd_run)
 
+
+def _add_control(sub) -> None:
     for name, text in (("kill", "SIGKILL one agent process of a running `conag run`"),
                        ("restart", "kill and start again one agent process of a running `conag run`")):
         k = sub.add_parser(name, help=text)
@@ -459,6 +477,8 @@ def build_parser() -> argparse.ArgumentParser:
         _bus_args(k)
         k.set_defaults(func=cmd_control)
 
+
+def _add_render(sub) -> None:
     r = sub.add_parser("render", help="draw a scenario as a bird's-eye PNG")
     r.add_argument("scenario")
     r.add_argument("--out", default="world.png", help="output PNG path")
@@ -468,14 +488,13 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--ticks", type=int, metavar="N", help="lockstep ticks to run first (default 0)")
     r.set_defaults(func=cmd_render)
 
-    add_layout_commands(sub)  # generate, check (conag/layouts.py)
 
+def _add_router(sub) -> None:
     z = sub.add_parser("router", help="run a zenoh router for several hosts")
     z.add_argument("--zenoh-config", metavar="FILE")
     z.add_argument("--listen", action="append", default=[], metavar="ENDPOINT")
     z.add_argument("--connect", action="append", default=[], metavar="ENDPOINT")
     z.set_defaults(func=cmd_router)
-    return p
 
 
 def main(argv: list[str] | None = None) -> int:
