@@ -1,7 +1,7 @@
 """World benchmark: ticks per second of the world core, and the bus round trip.
 
-    python3 bench/bench_world.py                 # the full table of BENCHMARKS.md
-    python3 bench/bench_world.py --quick         # a few hundred milliseconds, for CI
+    python3 -m bench.bench_world                 # the full table of BENCHMARKS.md
+    python3 -m bench.bench_world --quick         # a few hundred milliseconds, for CI
 
 Ticks: a 100 x 100 world with 2,000 discs (food, water, bricks at random cells) and N
 agents at random free cells; every tick applies a fresh command to every agent (speed,
@@ -20,14 +20,11 @@ import queue
 import statistics
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
-from world_server.scenario import Scenario  # noqa: E402
-from world_server.world import World  # noqa: E402
+from world_server.scenario import Scenario
+from world_server.world import World
 
 TARGETS = {10: 10_000, 100: 2_000, 1000: 400}
 RTT_TARGET_MS = 0.4
