@@ -30,7 +30,7 @@ class WorldLink:
     def __init__(self, session: zenoh.Session, world_id: str, agent_id: str):
         self.session, self.world_id, self.agent_id = session, world_id, agent_id
         self.bad_frames = 0
-        self._declared = Declarations()  # undeclared last first: the token goes last
+        self._declared = Declarations()  # undeclared in reverse: the token goes last
         self._declared.add(session.liveliness().declare_token(keys.agent_token(world_id, agent_id)))
         self._sub = self._declared.add(session.declare_subscriber(keys.sensors(world_id, agent_id),
                                                                   zenoh.handlers.RingChannel(1)))
