@@ -47,8 +47,7 @@ def render_agent_maps(scenario: Scenario, out_path: str | Path, *, agent: str = 
     if agent not in run.brains:
         raise ValueError(f"unknown agent {agent!r}: scenario {scenario.name} has agents "
                          f"{', '.join(run.brains)}")
-    for _ in range(ticks):
-        run.step()
+    run.run(ticks, until_complete=False)
     brain = run.brains[agent]
     fig = _figure(scenario, run, agent, brain, brain.plan())
     out = Path(out_path)
