@@ -1,12 +1,12 @@
 """Agent decision step on generated layouts: what the far memory, the border seeds, the
 wall layer and the Explore sweep cost (issue 10).
 
-    python3 bench/bench_agent_step.py            # the table of BENCHMARKS.md
-    python3 bench/bench_agent_step.py --quick    # a smoke run, not a measurement
+    python3 -m bench.bench_agent_step            # the table of BENCHMARKS.md
+    python3 -m bench.bench_agent_step --quick    # a smoke run, not a measurement
 
 For each layout (scenarios/fig6.toml and three from the generalisation suite: a 21 x 21,
 a 51 x 50 and a 117 x 116 world, the large ones with the blueprint or the supply beyond
-the 41 x 41 maps), the in-process sim (conag/sim.py, default AgentConfig: 41 x 41 maps,
+the 41 x 41 maps), the in-process sim (sim/loop.py, default AgentConfig: 41 x 41 maps,
 goal sequencing on) warms up for `--warmup` ticks, then every agent's `Brain.step(frame)`
 is timed on every tick for `--ticks` ticks (the world's step is not timed). Reported: the
 median and 90th percentile of one step, the share of steps that planned with goals
@@ -20,7 +20,7 @@ import statistics
 import time
 from pathlib import Path
 
-from conag import sim
+import sim
 from world_server.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent

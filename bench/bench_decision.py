@@ -1,9 +1,9 @@
 """Agent decision step benchmark: one `Brain.step(frame)` against scipy's Dijkstra.
 
-    python3 bench/bench_decision.py              # the table of BENCHMARKS.md
-    python3 bench/bench_decision.py --quick      # a smoke run, not a measurement
+    python3 -m bench.bench_decision              # the table of BENCHMARKS.md
+    python3 -m bench.bench_decision --quick      # a smoke run, not a measurement
 
-For each map size, scenarios/fig6.toml runs in-process (`conag.sim.start`, one agent,
+For each map size, scenarios/fig6.toml runs in-process (`sim.start`, one agent,
 `AgentConfig(map_size=...)`) for a warm-up of 300 ticks, so the ESMs hold a realistic
 picture (blueprint, the food-and-water wall, bricks). Then the sim keeps running, and on
 every tick until the structure is complete (about 540 ticks; then a new
@@ -32,12 +32,10 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
-from agent_runtime.config import AgentConfig  # noqa: E402
-from bench.bench_spreading import scipy_field, scipy_graph  # noqa: E402
-from conag import sim  # noqa: E402
-from world_server.scenario import load_scenario  # noqa: E402
+import sim
+from agent_runtime.config import AgentConfig
+from bench.bench_spreading import scipy_field, scipy_graph
+from world_server.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENARIO = ROOT / "scenarios" / "fig6.toml"
@@ -74,7 +72,7 @@ def measure(n: int, warmup: int, ticks: int) -> dict:
     # Phase 1: the agent alone, so scipy's allocations do not evict its working set
     # between ticks; each tick's masks and fields are kept for phase 2.
     while len(step_ms) < ticks:
-        if run is None or run.world.status().completed:
+        if run is None or run.world.completed():
             # A finished structure leaves the agent idle: time building agents only, so
             # start the next episode (another seed) and warm it up first.
             run = sim.start(scenario, agents=1, seed=scenario.seed + episodes, cfg=cfg)

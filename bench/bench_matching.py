@@ -1,7 +1,7 @@
 """calculateMatching benchmark (paper §6.1, Fig. 16; issue 4 target: <= 10 ms at 101 x 101, 10 sites).
 
-    python3 bench/bench_matching.py            # the table of BENCHMARKS.md
-    python3 bench/bench_matching.py --quick    # a smoke run, not a measurement
+    python3 -m bench.bench_matching            # the table of BENCHMARKS.md
+    python3 -m bench.bench_matching --quick    # a smoke run, not a measurement
 
 Maps like an agent's: a square map with scattered food and water discs (5% of the cells,
 obstacles), a 6 x 6 block of free bricks in the north-west quarter and the unfilled drop
@@ -19,13 +19,10 @@ import argparse
 import statistics
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
-from agent_runtime.matching import calculate_matching, calculate_matching_grid  # noqa: E402
+from agent_runtime.matching import calculate_matching, calculate_matching_grid
 
 CASES = ((101, 10), (101, 50), (41, 10))
 TARGET_MS = {(101, 10): 10.0}

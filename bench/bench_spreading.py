@@ -1,7 +1,7 @@
 """Navigation-map benchmark: the compiled distance field against scipy's Dijkstra.
 
-    python3 bench/bench_spreading.py             # the table of BENCHMARKS.md (~10 s)
-    python3 bench/bench_spreading.py --quick     # a smoke run, well under a second of timing
+    python3 -m bench.bench_spreading             # the table of BENCHMARKS.md (~10 s)
+    python3 -m bench.bench_spreading --quick     # a smoke run, well under a second of timing
 
 Maps (fixed seeds): "open" is 5% random obstacle cells plus two walls with gaps and three
 random goals; "maze" is a perfect maze (recursive backtracker, one-cell corridors) with
@@ -17,17 +17,13 @@ from __future__ import annotations
 import argparse
 import math
 import statistics
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
-from agent_runtime.spreading import MOVES, distance_field  # noqa: E402
+from agent_runtime.spreading import MOVES, distance_field
 
 SIZES = (41, 101)
 

@@ -1,7 +1,7 @@
 """World benchmark: ticks per second of the world core, and the bus round trip.
 
-    python3 bench/bench_world.py                 # the full table of BENCHMARKS.md
-    python3 bench/bench_world.py --quick         # a few hundred milliseconds, for CI
+    python3 -m bench.bench_world                 # the full table of BENCHMARKS.md
+    python3 -m bench.bench_world --quick         # a few hundred milliseconds, for CI
 
 Ticks: a 100 x 100 world with 2,000 discs (food, water, bricks at random cells) and N
 agents at random free cells; every tick applies a fresh command to every agent (speed,
@@ -20,14 +20,11 @@ import queue
 import statistics
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
-from world_server.scenario import Scenario  # noqa: E402
-from world_server.world import World  # noqa: E402
+from world_server.scenario import Scenario
+from world_server.world import World
 
 TARGETS = {10: 10_000, 100: 2_000, 1000: 400}
 RTT_TARGET_MS = 0.4
@@ -81,8 +78,8 @@ def ticks_per_second(n_agents: int, seconds: float, repeats: int = 5) -> list[fl
 
 def _agent_side(endpoint: str, ready, done) -> None:
     """Agent process: the real agent link, answering every frame with a command."""
-    from agent_runtime.link import WorldLink
-    from conag.bus import BusOptions, open_session
+    from nodes.world_link import WorldLink
+    from bus import BusOptions, open_session
 
     session = open_session(BusOptions(connect=(endpoint,)))
     try:
@@ -100,10 +97,10 @@ def round_trip_ms(samples: int, endpoint: str) -> tuple[float, float]:
     """(median, 90th percentile) of frame -> command round trips between two processes.
 
     The world side hands samples from zenoh's callback thread to its loop through a
-    queue, as the world server does; the agent side is `agent_runtime.link.WorldLink`.
+    queue, as the world server does; the agent side is `nodes.world_link.WorldLink`.
     Both ends decode what they receive and encode what they send.
     """
-    from conag.bus import BusOptions, open_session
+    from bus import BusOptions, open_session
     from protocol import keys
     from protocol.codec import decode, encode
     from protocol.messages import AgentCommand

@@ -1,1 +1,5 @@
-"""ConAg process glue: the `conag` command line and how processes open the zenoh bus."""
+"""The `conag` command line (`cli`, `layouts`) and the `conag run` supervisor (`run`).
+
+The top layer: it starts and stops the processes of `nodes`, opens the bus through
+`bus`, and runs `sim` for `conag render --agent-maps`; nothing imports it back.
+"""

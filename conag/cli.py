@@ -27,9 +27,9 @@ import time
 from contextlib import contextmanager
 from dataclasses import asdict
 
-from conag.bus import MODES, BusOptions, open_session
+from bus import MODES, BusOptions, Declarations, open_session
 from conag.layouts import add_commands as add_layout_commands
-from conag.summary import write_summary
+from world_server.summary import write_summary
 
 EXIT_USAGE = 2
 EXIT_INCOMPLETE = 3  # conag run: the tick limit passed (or it was stopped) before the structure was complete
@@ -80,8 +80,8 @@ def _status_line(st) -> str:
 def cmd_world(args) -> int:
     import numpy as np
 
+    from nodes.world_server import WorldServer
     from world_server.scenario import load_scenario
-    from world_server.server import WorldServer
     from world_server.world import World
 
     scenario = load_scenario(args.scenario)
@@ -147,9 +147,9 @@ def cmd_status(args) -> int:
                     except ProtocolError as exc:
                         print(f"warning: ignored a bad status: {exc}", file=sys.stderr)
 
-                sub = session.declare_subscriber(keys.status(args.world_id), on_status)
-                stop.wait()
-                sub.undeclare()
+                with Declarations() as declared:
+                    declared.add(session.declare_subscriber(keys.status(args.world_id), on_status))
+                    stop.wait()
         return 0
     finally:
         session.close()
@@ -211,7 +211,7 @@ def cmd_render(args) -> int:
     from world_server.scenario import load_scenario
 
     if args.agent_maps:
-        from conag.render_agent import render_agent_maps
+        from sim.render_agent import render_agent_maps
 
         out = render_agent_maps(load_scenario(args.scenario), args.out,
                                 agent=args.agent or "a1", ticks=args.ticks or 0)
@@ -242,11 +242,11 @@ class _Stopped(Exception):
     """Raised by the agent's signal handler, so a blocking frame wait ends at once."""
 
 
-def cmd_agent(args) -> int:
+def _agent_options(args):
+    """The AgentOptions `conag agent` asks for (ValueError for learning flags without --learn)."""
     from agent_runtime.config import AgentConfig
     from agent_runtime.learning import Student
-    from agent_runtime.link import AttachError
-    from agent_runtime.process import AgentReport, Learning, run_agent
+    from nodes.agent import AgentOptions, Learning
 
     if not args.learn and (args.eta is not None or args.weights_out or args.save_every is not None):
         raise ValueError("--eta, --weights-out and --save-every need --learn")
@@ -257,6 +257,15 @@ def cmd_agent(args) -> int:
     elif args.weights_in:
         network = Student.load(args.weights_in)  # a trained student, acting without learning
     cfg = AgentConfig(map_size=args.map_size, goal_sequencing=not args.nearest_first)
+    return AgentOptions(args.world_id, args.id, cfg, args.seed, attach_timeout=args.attach_timeout,
+                        learning=learning, network=network)
+
+
+def cmd_agent(args) -> int:
+    from nodes.agent import AgentReport, run_agent
+    from nodes.world_link import AttachError
+
+    opts = _agent_options(args)
     report = AgentReport()
 
     def raise_stop(signum, _frame):
@@ -266,8 +275,7 @@ def cmd_agent(args) -> int:
     try:
         session = open_session(_bus(args))
         try:
-            run_agent(session, args.world_id, args.id, cfg, args.seed, attach_timeout=args.attach_timeout,
-                      learning=learning, network=network, report=report)
+            run_agent(session, opts, report=report)
         except AttachError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 1
@@ -280,14 +288,14 @@ def cmd_agent(args) -> int:
             signal.signal(s, h)
     if report.link is not None:
         c = report.link.counts
-        saved = f"; weights saved to {learning.weights_out}" if learning.weights_out else ""
+        saved = f"; weights saved to {opts.learning.weights_out}" if opts.learning.weights_out else ""
         print(f"agent {args.id}: {report.ticks} ticks, {c.reinforcements} reinforcements, {c.errors} errors "
               f"({c.teacher_restarts} teacher restarts, {c.gaps} gaps){saved}", flush=True)
     return 0
 
 
 def cmd_teacher(args) -> int:
-    from teacher.process import run_teacher
+    from nodes.teacher import run_teacher
 
     last = [""]
 
@@ -312,12 +320,11 @@ def cmd_teacher(args) -> int:
 
 
 def cmd_run(args) -> int:
-    from conag.bus import DEFAULT_ENDPOINT
+    from agent_runtime.config import AgentConfig
+    from bus import DEFAULT_ENDPOINT
     from conag.layouts import warn_if_unbuildable
     from conag.run import RunOptions, run
     from world_server.scenario import load_scenario
-
-    from agent_runtime.config import AgentConfig
 
     AgentConfig(map_size=args.map_size)  # a bad size is a usage error here, not in every agent
     if not args.learn and (args.eta is not None or args.weights_dir):
@@ -361,7 +368,13 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="conag", description="ConAg: agents that build structures from a blueprint.")
     p.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for add in (_add_world, _add_status, _add_perturb, _add_agent, _add_teacher, _add_run, _add_control,
+                _add_render, add_layout_commands, _add_router):  # add_layout_commands: generate, check
+        add(sub)
+    return p
 
+
+def _add_world(sub) -> None:
     w = sub.add_parser("world", help="serve a world from a scenario file")
     w.add_argument("scenario", help="scenario TOML file, e.g. scenarios/quick_wall.toml")
     w.add_argument("--ticks", type=int, help="stop after this many ticks")
@@ -376,6 +389,8 @@ def build_parser() -> argparse.ArgumentParser:
     _bus_args(w)
     w.set_defaults(func=cmd_world)
 
+
+def _add_status(sub) -> None:
     s = sub.add_parser("status", help="print what a running world reports")
     s.add_argument("--watch", action="store_true", help="keep printing each status update")
     s.add_argument("--json", action="store_true", help="print the status as JSON")
@@ -383,6 +398,8 @@ def build_parser() -> argparse.ArgumentParser:
     _bus_args(s)
     s.set_defaults(func=cmd_status)
 
+
+def _add_perturb(sub) -> None:
     q = sub.add_parser("perturb", help="remove, add or move a disc, add or remove a drop site, in a running world")
     q.add_argument("op", choices=("remove", "add", "move", "add-site", "remove-site"),
                    help="add-site: the cell holding --at becomes a drop site; remove-site: its site leaves "
@@ -394,6 +411,8 @@ def build_parser() -> argparse.ArgumentParser:
     _bus_args(q)
     q.set_defaults(func=cmd_perturb)
 
+
+def _add_agent(sub) -> None:
     a = sub.add_parser("agent", help="run one agent process")
     a.add_argument("--id", required=True, help="agent id; a restarted process with the same id gets its body back")
     a.add_argument("--seed", type=int, default=0, help="seed of the agent's own randomness (exploring)")
@@ -413,12 +432,16 @@ def build_parser() -> argparse.ArgumentParser:
     _bus_args(a)
     a.set_defaults(func=cmd_agent)
 
+
+def _add_teacher(sub) -> None:
     t = sub.add_parser("teacher", help="run the teacher: reinforce learning students (paper §5.1)")
     t.add_argument("--id", default="teacher", help="teacher id for its liveliness token (default teacher)")
     t.add_argument("--quiet", action="store_true", help="no progress lines")
     _bus_args(t)
     t.set_defaults(func=cmd_teacher)
 
+
+def _add_run(sub) -> None:
     u = sub.add_parser("run", help="build a scenario: a world and its agents as processes, until done",
                        epilog=RUN_EPILOG)
     u.add_argument("scenario")
@@ -444,6 +467,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--weights-dir", metavar="DIR", help="each student saves its weights to DIR/<id>.json")
     u.set_defaults(func=cmd_run)
 
+
+def _add_control(sub) -> None:
     for name, text in (("kill", "SIGKILL one agent process of a running `conag run`"),
                        ("restart", "kill and start again one agent process of a running `conag run`")):
         k = sub.add_parser(name, help=text)
@@ -452,6 +477,8 @@ def build_parser() -> argparse.ArgumentParser:
         _bus_args(k)
         k.set_defaults(func=cmd_control)
 
+
+def _add_render(sub) -> None:
     r = sub.add_parser("render", help="draw a scenario as a bird's-eye PNG")
     r.add_argument("scenario")
     r.add_argument("--out", default="world.png", help="output PNG path")
@@ -461,14 +488,13 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--ticks", type=int, metavar="N", help="lockstep ticks to run first (default 0)")
     r.set_defaults(func=cmd_render)
 
-    add_layout_commands(sub)  # generate, check (conag/layouts.py)
 
+def _add_router(sub) -> None:
     z = sub.add_parser("router", help="run a zenoh router for several hosts")
     z.add_argument("--zenoh-config", metavar="FILE")
     z.add_argument("--listen", action="append", default=[], metavar="ENDPOINT")
     z.add_argument("--connect", action="append", default=[], metavar="ENDPOINT")
     z.set_defaults(func=cmd_router)
-    return p
 
 
 def main(argv: list[str] | None = None) -> int:

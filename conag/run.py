@@ -5,8 +5,9 @@ interpreters: nothing crosses a fork). This process watches the world's status, 
 progress, answers `conag kill` / `conag restart` (a RunControl query on the bus), and
 once the structure is complete or the tick limit passes, stops everything and writes the
 run summary. A run that fills no site for `stall_ticks` ticks is stalled: it prints why
-(`StallWatch`: each agent's position and last AgentState), stops everything and is
-marked `stalled` in the summary, so a stuck build never just sits there until the limit.
+(`world_server.stall.StallWatch`: each agent's position and last AgentState), stops
+everything and is marked `stalled` in the summary, so a stuck build never just sits
+there until the limit.
 """
 
 from __future__ import annotations
@@ -18,15 +19,16 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from conag.bus import BusOptions, open_session
-from conag.stall import DEFAULT_STALL_TICKS, StallClock, stall_report
+from bus import BusOptions, Declarations, open_session
 from protocol import keys
 from protocol.codec import ProtocolError, decode, encode
 from protocol.messages import AgentState, RunControl, RunControlResult, WorldStatus
 from world_server.scenario import Scenario
+from world_server.stall import DEFAULT_STALL_TICKS, StallWatch
 
 
 @dataclass
@@ -102,23 +104,32 @@ class Fleet:
                 p.wait(5)
 
 
-class StallWatch:
-    """Sees the world's statuses and the agents' AgentStates; once no site has been filled
-    for `limit` ticks (0: never) it keeps the stall report and sets `stalled`."""
+class RunBus:
+    """The supervisor's session: the world's statuses (to the stall watch and the progress
+    line), the agents' AgentStates (to the stall watch) and the RunControl queryable of
+    `conag kill` / `conag restart`. A context manager: leaving it undeclares them all and
+    closes the session."""
 
-    def __init__(self, world_id: str, limit: int):
-        self.world_id = world_id
-        self.clock = StallClock(limit) if limit > 0 else None
-        self.states: dict[str, AgentState] = {}
-        self.stalled = threading.Event()
-        self.report: list[str] = []
+    def __init__(self, opts: RunOptions, fleet: Fleet, watch: StallWatch, tty: bool):
+        self.opts, self.watch, self.tty = opts, watch, tty
+        self._started = time.monotonic()
+        self.session = open_session(BusOptions(connect=(opts.endpoint,)))
+        self._declared = Declarations()
+        w, add = opts.world_id, self._declared.add
+        add(self.session.declare_subscriber(keys.status(w), self.on_status))
+        add(self.session.declare_queryable(keys.run_control(w), _on_control(fleet)))
+        add(self.session.declare_subscriber(keys.all_agents(w, "state"), self.on_state))
 
-    def on_status(self, st: WorldStatus) -> None:
-        if self.clock is None or self.stalled.is_set():
+    def on_status(self, sample) -> None:
+        """The stall watch sees every status; a progress line for each until a stall."""
+        try:
+            st = decode(sample.payload.to_bytes(), WorldStatus)
+        except ProtocolError:
             return
-        if self.clock.observe(st.tick, st.sites_filled, st.sites_total):
-            self.report = stall_report(st, self.clock.idle(st.tick), dict(self.states))
-            self.stalled.set()
+        self.watch.observe(st)
+        if not self.opts.quiet and not self.watch.stalled:
+            line = _progress(st, self._started)
+            print(("\r" + line) if self.tty else line, end="" if self.tty else "\n", flush=True)
 
     def on_state(self, sample) -> None:
         try:
@@ -126,10 +137,17 @@ class StallWatch:
         except ProtocolError:
             return
         if state.agent_id == keys.agent_of(str(sample.key_expr)):
-            self.states[state.agent_id] = state
+            self.watch.states[state.agent_id] = state
 
-    def declare(self, session) -> object:
-        return session.declare_subscriber(keys.all_agents(self.world_id, "state"), self.on_state)
+    def close(self) -> None:
+        self._declared.close()
+        self.session.close()
+
+    def __enter__(self) -> RunBus:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
 
 def _progress(st: WorldStatus, started: float) -> str:
@@ -145,40 +163,42 @@ def run(opts: RunOptions, stop: threading.Event) -> dict:
     world = _start_world(opts, n_agents, final_path)
     if opts.weights_dir:
         Path(opts.weights_dir).mkdir(parents=True, exist_ok=True)
-    teacher = None
-    if opts.teacher:
-        teacher = subprocess.Popen([sys.executable, "-m", "conag", "teacher", "--world-id", opts.world_id,
-                                    "--connect", opts.endpoint, "--quiet"], stdin=subprocess.DEVNULL,
-                                   stdout=subprocess.DEVNULL)
+    teacher = _start_teacher(opts) if opts.teacher else None
     fleet = Fleet(opts)
-    watch = StallWatch(opts.world_id, opts.stall_ticks)
-    session = open_session(BusOptions(connect=(opts.endpoint,)))
+    watch = StallWatch(opts.stall_ticks)
     tty = sys.stdout.isatty() and not opts.headless
-    subs = [session.declare_subscriber(keys.status(opts.world_id), _on_status(opts, watch, tty)),
-            session.declare_queryable(keys.run_control(opts.world_id), _on_control(fleet)),
-            watch.declare(session)]
-    try:
-        for i in range(n_agents):
-            fleet.start(f"a{i + 1}")
-        while world.poll() is None and not stop.is_set() and not watch.stalled.is_set():
-            time.sleep(0.1)
-        if watch.stalled.is_set():
-            print(("\n" if tty else "") + "\n".join(watch.report), flush=True)
-    finally:
-        _stop(world, grace=10.0)
-        fleet.stop_all()
-        if teacher is not None:
-            _stop(teacher)
-        for s in subs:
-            s.undeclare()
-        session.close()
-    if tty and not watch.stalled.is_set():
+    with RunBus(opts, fleet, watch, tty):
+        try:
+            for i in range(n_agents):
+                fleet.start(f"a{i + 1}")
+            _wait_until(lambda: world.poll() is not None, stop.is_set, lambda: watch.stalled)
+            if watch.stalled:
+                print(("\n" if tty else "") + "\n".join(watch.report), flush=True)
+        finally:
+            _stop(world, grace=10.0)
+            fleet.stop_all()
+            if teacher is not None:
+                _stop(teacher)
+    if tty and not watch.stalled:
         print()
     summary = _final_summary(final_path, world)
-    summary["stalled"] = watch.stalled.is_set()
+    summary["stalled"] = watch.stalled
     if opts.summary and opts.summary != "-":
         Path(opts.summary).write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
     return summary
+
+
+def _wait_until(*conditions: Callable[[], bool], poll: float = 0.1) -> None:
+    """Sleep until one of `conditions` holds (the run's stop conditions: the world has
+    exited, complete or out of ticks; a signal; a stall)."""
+    while not any(condition() for condition in conditions):
+        time.sleep(poll)
+
+
+def _start_teacher(opts: RunOptions) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "conag", "teacher", "--world-id", opts.world_id,
+                             "--connect", opts.endpoint, "--quiet"], stdin=subprocess.DEVNULL,
+                            stdout=subprocess.DEVNULL)
 
 
 def _start_world(opts: RunOptions, n_agents: int, final_path: Path) -> subprocess.Popen:
@@ -198,23 +218,6 @@ def _final_summary(final_path: Path, world: subprocess.Popen) -> dict:
     final_path.unlink()
     final_path.parent.rmdir()
     return summary
-
-
-def _on_status(opts: RunOptions, watch: StallWatch, tty: bool):
-    """The status subscriber: the stall watch sees every status; progress lines until a stall."""
-    started = time.monotonic()
-
-    def on_status(sample):
-        try:
-            st = decode(sample.payload.to_bytes(), WorldStatus)
-        except ProtocolError:
-            return
-        watch.on_status(st)
-        if not opts.quiet and not watch.stalled.is_set():
-            line = _progress(st, started)
-            print(("\r" + line) if tty else line, end="" if tty else "\n", flush=True)
-
-    return on_status
 
 
 def _on_control(fleet: Fleet):

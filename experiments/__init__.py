@@ -1,1 +1,5 @@
-"""The experiment scripts behind EXPERIMENTS.md, importable as `experiments.*` (and runnable as files)."""
+"""The experiment scripts behind EXPERIMENTS.md, and the analysis they share (`replay`).
+
+Importable as `experiments.*`; run one from the repository root with `python3 -m
+experiments.NAME` (a script path works too, with the project installed).
+"""

@@ -3,7 +3,7 @@
 Paper §5.1: a student with random weights (excitatory in [0, 0.5], inhibitory in
 [-0.5, 0]) builds in the environment of Fig. 6 while the teacher reinforces its arm and
 motor choices; a trial is 1,000 steps, after which the environment is reset and the
-agent put back at its start (teacher/trials.py says why the bricks are reset too); an
+agent put back at its start (sim/trials.py says why the bricks are reset too); an
 error is a step where the student's (arm, motor) differs from the teacher's. For each
 learning rate of the delta rule (agent_runtime/learning.py), and for Q-learning from the
 same signals (agent_runtime/qlearning.py), 50 runs: mean and one standard deviation of
@@ -12,12 +12,12 @@ students, learning off, are put into novel environments (quick_wall, Fig. 17) an
 teacher counts their errors while they build.
 
 Runs in one process per core (spawn), each run with the real World, Brain, Student /
-QLearner and teacher core (`teacher.trials`, stepping `conag.sim` in lockstep). Writes
+QLearner and teacher core (`sim.trials`, stepping `sim.loop` in lockstep). Writes
 fig9_learning.md (tables), fig9_learning.png (Fig. 9), fig9_learning.json (every run's
 errors per trial) and fig9_student.json (a trained student: `conag agent --weights-in`).
 
-    python3 experiments/fig9_learning.py           # full run (about 25 min on 2 cores)
-    python3 experiments/fig9_learning.py --quick   # seconds-long smoke run (to a temp dir)
+    python3 -m experiments.fig9_learning           # full run (about 25 min on 2 cores)
+    python3 -m experiments.fig9_learning --quick   # seconds-long smoke run (to a temp dir)
 """
 from __future__ import annotations
 
@@ -33,21 +33,20 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
+from agent_runtime.config import AgentConfig
+from agent_runtime.learning import Student
+from agent_runtime.network import engineered
+from agent_runtime.qlearning import QLearner
+from sim.trials import run_learning, run_trial, trial_seed
+from teacher.core import Teacher
+from world_server.scenario import load_scenario
 
-from agent_runtime.config import AgentConfig  # noqa: E402
-from agent_runtime.learning import Student  # noqa: E402
-from agent_runtime.network import engineered  # noqa: E402
-from agent_runtime.qlearning import QLearner  # noqa: E402
-from teacher.core import Teacher  # noqa: E402
-from teacher.trials import run_learning, run_trial, trial_seed  # noqa: E402
+ROOT = Path(__file__).resolve().parent.parent
 
 # Fig. 9 is the learning agent of §5, before goal sequencing (§6): which sites and bricks
 # excite the navigation maps does not change what the network must learn, and the
 # committed results were measured with the plain nearest-first agent.
 AGENT = AgentConfig(goal_sequencing=False)
-from world_server.scenario import load_scenario  # noqa: E402
 
 TRAINING = "scenarios/fig6.toml"
 NOVEL = ("scenarios/quick_wall.toml", "scenarios/fig17.toml")
@@ -173,7 +172,7 @@ def report(curves, baseline, plan: Plan, seconds: float, workers: int, quick: bo
     keys = list(curves)
     names = [label(*k, plan) for k in keys]
     lines = [f"# L3, L4 — learning the construction sequence (Fig. 9){' — QUICK smoke run' if quick else ''}", "",
-             f"Written by `python3 experiments/{STEM}.py{' --quick' if quick else ''}` in {seconds / 60:.1f} min "
+             f"Written by `python3 -m experiments.{STEM}{' --quick' if quick else ''}` in {seconds / 60:.1f} min "
              f"on {workers} worker processes. Training environment `{TRAINING}` with one agent; {plan.runs} runs per "
              f"curve, {plan.trials} trials of {plan.ticks:,} steps; before each trial the environment is reset "
              "and the agent put at its start (fresh maps, weights kept). Error = a step where the student's "

@@ -2,7 +2,7 @@
 
 A suite of generated layouts (`world_server/generator.py`, committed as files under
 experiments/generalisation/layouts/, so a change to the generator cannot silently change
-the benchmark) is built in-process (conag/sim.py: the real World and Brain code, lockstep,
+the benchmark) is built in-process (sim/loop.py: the real World and Brain code, lockstep,
 headless), each layout once with goal sequencing (ConAg-TS, the default agent) and once
 nearest-first (the plain agent of §4), in the same run. Every layout passed the
 buildability check when it was generated. A run stops when the structure is complete, when
@@ -10,14 +10,14 @@ no site has been filled for `--stall` ticks (stalled; on a large world the longe
 its cells per agent), or at the scenario's `max_ticks`.
 
 Reported: completion rate per family and per size band for both agents; ticks to complete;
-the distance walked against a lower bound (agent_runtime/replay.lower_bound, on the initial
+the distance walked against a lower bound (experiments/replay.lower_bound, on the initial
 map); every failure by its layout file, with its stall report and a picture of the state it
 stopped in (experiments/generalisation/failures/).
 
-    python3 experiments/generalisation.py              # the whole suite (about an hour on 2 cores)
-    python3 experiments/generalisation.py --quick      # a smoke run of a few small layouts
-    python3 experiments/generalisation.py --generate   # rewrite the suite's layout files
-    python3 experiments/generalisation.py --report-only   # the tables again from generalisation.json
+    python3 -m experiments.generalisation              # the whole suite (about an hour on 2 cores)
+    python3 -m experiments.generalisation --quick      # a smoke run of a few small layouts
+    python3 -m experiments.generalisation --generate   # rewrite the suite's layout files
+    python3 -m experiments.generalisation --report-only   # the tables again from generalisation.json
 
 Writes experiments/generalisation.json (every run), experiments/generalisation.md and the
 generalisation section of EXPERIMENTS.md (not with --quick, which writes to --out).
@@ -38,8 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
+import sim
 from agent_runtime.config import AgentConfig
-from conag import sim
 from experiments.report import write_section
 from world_server.scenario import Scenario, load_scenario
 
@@ -132,7 +132,7 @@ def run_job(job: Job, pictures: Path | None) -> Outcome:
 
 def _bound(sc: Scenario, starts: list[tuple[int, int]]) -> float:
     """Lower bound on the total distance (world units), on the initial map."""
-    from agent_runtime.replay import lower_bound
+    from experiments.replay import lower_bound
 
     reach = sc.world.grab_reach / sc.world.cell_size
     return lower_bound(sc.grid("b"), sc.grid("+"), sc.grid("FWB#"), starts, reach,
@@ -262,14 +262,14 @@ def markdown(outcomes: list[Outcome], args: argparse.Namespace, seconds: float, 
     layouts = len({o.layout for o in outcomes})
     return f"""## Generalisation: generated layouts (issue 10)
 
-`python3 experiments/generalisation.py` builds {layouts} generated layouts (committed under
-`experiments/generalisation/layouts/`, made by `python3 experiments/generalisation.py --generate`:
+`python3 -m experiments.generalisation` builds {layouts} generated layouts (committed under
+`experiments/generalisation/layouts/`, made by `python3 -m experiments.generalisation --generate`:
 `world_server/generator.py` suite seed {SUITE_SEED}, every layout passing the buildability check), each
-with goal sequencing and nearest-first in the same run, in-process (conag/sim.py, lockstep, the default
+with goal sequencing and nearest-first in the same run, in-process (sim/loop.py, lockstep, the default
 `AgentConfig` but for goal sequencing, hunger and thirst on). A run stops when complete, after
 {args.stall} ticks with no site filled (stalled; on large worlds the world's cells per agent if
 that is more, the time to sweep it for a supply), or at the layout's `max_ticks`. Distance / bound:
-the distance all agents walked over `agent_runtime/replay.lower_bound` on the initial map (completed runs).
+the distance all agents walked over `experiments/replay.lower_bound` on the initial map (completed runs).
 Wall time of this run: {seconds / 60:.0f} min on {args.jobs} worker processes.
 
 ### Goals

@@ -1,22 +1,22 @@
 """G3 (paper §6, Fig. 13): goal sequencing (ConAg-TS) against nearest-first on the paper's layouts.
 
 Every scenario of §6 (Fig. 17, 18, 19, 20, nested squares) is built by the real world core
-and agent brains in one process (conag/sim.py, lockstep, headless), once with the plain
+and agent brains in one process (sim/loop.py, lockstep, headless), once with the plain
 nearest-first agent of §4 and once with goal sequencing, with 1 and with 3 agents and
 several seeds. Hunger and thirst are off, so the distance walked is construction only.
 
 Reported per case: runs completed, ticks to completion, total distance walked by all
-agents, a lower bound on that distance (agent_runtime/replay.lower_bound: the optimal
+agents, a lower bound on that distance (experiments/replay.lower_bound: the optimal
 assignment of bricks to sites by shortest-path distance on the initial map, plus the
 least the walks between trips can cost) and the ratio of the two; and the distance of the
-ideal order (agent_runtime/replay.replay: goal sequencing on the fully known map, one
+ideal order (experiments/replay.replay: goal sequencing on the fully known map, one
 agent). A run that fills no site for `--stall` ticks is stopped as stalled.
 
 Writes experiments/goal_sequencing.md and goal_sequencing.png and the G3 section of
 EXPERIMENTS.md; prints the table.
 
-    python3 experiments/goal_sequencing.py            # full run (a few minutes)
-    python3 experiments/goal_sequencing.py --quick    # smoke run (seconds)
+    python3 -m experiments.goal_sequencing            # full run (a few minutes)
+    python3 -m experiments.goal_sequencing --quick    # smoke run (seconds)
 """
 
 from __future__ import annotations
@@ -27,21 +27,20 @@ import os
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from functools import cache
 from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
+import sim
+from agent_runtime.config import AgentConfig
+from experiments.replay import lower_bound, replay
+from experiments.report import write_section
+from world_server.scenario import Scenario, load_scenario
 
-from agent_runtime.config import AgentConfig  # noqa: E402
-from agent_runtime.replay import lower_bound, replay  # noqa: E402
-from conag import sim  # noqa: E402
-from experiments.report import write_section  # noqa: E402
-from world_server.scenario import Scenario, load_scenario  # noqa: E402
+ROOT = Path(__file__).resolve().parent.parent
 
 SCENARIOS = ("fig17", "fig18", "fig19", "fig20", "nested_squares")
 
@@ -85,31 +84,44 @@ class Job:
     stall: int
 
 
+@dataclass(frozen=True)
+class JobResult:
+    """One build (the fields, in this order, are a row of goal_sequencing_runs.json)."""
+
+    job: Job
+    completed: bool
+    ticks: int
+    filled: int                 # sites filled at the end
+    paper_order: bool | None    # the order of PAPER_ORDER held (None: no order for this scenario)
+    total: int                  # sites
+    distance: float             # walked by all agents, world units
+    starts: list[tuple[int, int]]  # the agents' start cells (row, col)
+    stalled: bool
+    seconds: float
+
+
 @cache
 def scenario(name: str) -> Scenario:
     return load_scenario(ROOT / "scenarios" / f"{name}.toml")
 
 
-def run_job(job: Job) -> dict:
-    """Build one scenario; stop when complete, stalled or out of ticks."""
+def run_job(job: Job) -> JobResult:
+    """Build one scenario; stop when complete, stalled or out of ticks.
+
+    Stalled: no new site filled for more than `job.stall` ticks.
+    """
     sc = scenario(job.scenario)
     cfg = AgentConfig(goal_sequencing=dict(MODES)[job.mode], hunger_rate=0.0, thirst_rate=0.0)
     run = sim.start(sc, agents=job.agents, seed=job.seed, cfg=cfg)
     starts = [tuple(int(v) for v in cell[::-1]) for cell in sc.to_cell(run.world.agent_poses()[:, :2])]
-    started, filled, progress = time.perf_counter(), -1, 0
+    started = time.perf_counter()
+    result = run.run(job.max_ticks, stall_ticks=job.stall + 1)
     status = run.world.status()
-    while not status.completed and status.tick < job.max_ticks and status.tick - progress <= job.stall:
-        run.step()
-        status = run.world.status()
-        if status.sites_filled > filled:
-            filled, progress = status.sites_filled, status.tick
-    fill_ticks = run.fill_ticks()
     order = PAPER_ORDER.get(job.scenario)
-    return dict(job=job, completed=status.completed, ticks=status.tick, filled=status.sites_filled,
-                paper_order=None if order is None else bool(order[1](fill_ticks)),
-                total=status.sites_total, distance=float(sum(status.agent_distance)), starts=starts,
-                stalled=not status.completed and status.tick < job.max_ticks,
-                seconds=time.perf_counter() - started)
+    return JobResult(job=job, completed=result.completed, ticks=result.ticks, filled=status.sites_filled,
+                     paper_order=None if order is None else bool(order[1](run.fill_ticks())),
+                     total=status.sites_total, distance=float(sum(status.agent_distance)), starts=starts,
+                     stalled=result.stalled, seconds=time.perf_counter() - started)
 
 
 def bounds(name: str, starts: list[tuple[int, int]]) -> float:
@@ -128,40 +140,40 @@ def ideal(name: str) -> tuple[float, bool]:
     return r.distance * sc.world.cell_size, r.completed
 
 
-def run_all(jobs: list[Job], workers: int) -> list[dict]:
+def run_all(jobs: list[Job], workers: int) -> list[JobResult]:
     results = []
     with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
         futures = [pool.submit(run_job, j) for j in jobs]
         for k, fut in enumerate(as_completed(futures), 1):
             r = fut.result()
-            j = r["job"]
-            outcome = (f"complete in {r['ticks']} ticks" if r["completed"] else
-                       f"{'stalled' if r['stalled'] else 'out of ticks'} at {r['filled']}/{r['total']}")
+            j = r.job
+            outcome = (f"complete in {r.ticks} ticks" if r.completed else
+                       f"{'stalled' if r.stalled else 'out of ticks'} at {r.filled}/{r.total}")
             print(f"[{k}/{len(jobs)}] {j.scenario} {j.agents} agent(s) {j.mode} seed {j.seed}: {outcome}, "
-                  f"distance {r['distance']:.1f} ({r['seconds']:.1f} s)", file=sys.stderr, flush=True)
+                  f"distance {r.distance:.1f} ({r.seconds:.1f} s)", file=sys.stderr, flush=True)
             results.append(r)
     return results
 
 
-def summarise(results: list[dict]) -> list[dict]:
+def summarise(results: list[JobResult]) -> list[dict]:
     """One row per (scenario, agents, mode)."""
     rows = []
     for name in SCENARIOS:
         ideal_distance, ideal_done = ideal(name)
-        for agents in sorted({r["job"].agents for r in results}):
+        for agents in sorted({r.job.agents for r in results}):
             for mode, _ in MODES:
-                runs = [r for r in results if (r["job"].scenario, r["job"].agents, r["job"].mode) == (name, agents, mode)]
+                runs = [r for r in results if (r.job.scenario, r.job.agents, r.job.mode) == (name, agents, mode)]
                 if not runs:
                     continue
-                done = [r for r in runs if r["completed"]]
-                bound = float(np.median([bounds(name, r["starts"]) for r in runs]))
-                distance = float(np.median([r["distance"] for r in done])) if done else float("nan")
+                done = [r for r in runs if r.completed]
+                bound = float(np.median([bounds(name, r.starts) for r in runs]))
+                distance = float(np.median([r.distance for r in done])) if done else float("nan")
                 rows.append(dict(scenario=name, agents=agents, mode=mode, runs=len(runs), completed=len(done),
-                                 ticks=float(np.median([r["ticks"] for r in done])) if done else float("nan"),
+                                 ticks=float(np.median([r.ticks for r in done])) if done else float("nan"),
                                  distance=distance, bound=bound, ratio=distance / bound if bound else float("nan"),
-                                 filled=f"{min(r['filled'] for r in runs)}/{runs[0]['total']}",
+                                 filled=f"{min(r.filled for r in runs)}/{runs[0].total}",
                                  order=None if name not in PAPER_ORDER else
-                                 f"{sum(r['paper_order'] for r in runs)}/{len(runs)} {PAPER_ORDER[name][0]}",
+                                 f"{sum(r.paper_order for r in runs)}/{len(runs)} {PAPER_ORDER[name][0]}",
                                  ideal=ideal_distance if agents == 1 and mode == "goal sequencing" else None,
                                  ideal_done=ideal_done))
     return rows
@@ -238,7 +250,7 @@ def main(argv: list[str] | None = None) -> str:
     print(tab)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    runs = [dict(r, job=vars(r["job"])) for r in results]
+    runs = [asdict(r) for r in results]
     (out / "goal_sequencing_runs.json").write_text(json.dumps(runs, indent=1) + "\n", encoding="utf-8")
     (out / "goal_sequencing.md").write_text(tab + "\n", encoding="utf-8")
     chart(rows, out / "goal_sequencing.png")
@@ -254,14 +266,14 @@ def report(tab: str, rows: list[dict], seeds, agent_counts, args, seconds: float
 
 Re-run (from the repository root):
 
-    python3 experiments/goal_sequencing.py           # full run, writes this section, the table and the chart
-    python3 experiments/goal_sequencing.py --quick   # smoke run (seconds)
+    python3 -m experiments.goal_sequencing           # full run, writes this section, the table and the chart
+    python3 -m experiments.goal_sequencing --quick   # smoke run (seconds)
 
 This section was written by {'a `--quick`' if args.quick else 'the full'} run ({seconds:.0f} s on {args.jobs}
 worker processes): seeds {seeds}, {' and '.join(map(str, agent_counts))} agent(s), hunger and thirst off,
 lockstep, stopped after {args.stall} ticks without a new fill. Distances are in world units
 (one cell = one disc diameter), summed over the agents. The lower bound
-(agent_runtime/replay.lower_bound), by shortest paths on the initial map, is the larger of
+(experiments/replay.lower_bound), by shortest paths on the initial map, is the larger of
 two relaxations: the cheapest assignment of a predecessor trip to every site (trips may share
 a brick), and the optimal assignment of distinct bricks to carry to the sites plus distinct
 bricks to walk back to after all but each agent's last drop plus the walk to a first brick;

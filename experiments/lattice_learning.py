@@ -6,23 +6,19 @@ record errors per epoch, and check whether the trained network, driving the
 lattice simulation, builds the square.  Writes experiments/lattice_learning.png
 and experiments/lattice_learning.md.
 
-    python3 experiments/lattice_learning.py           # full run (~1-2 min)
-    python3 experiments/lattice_learning.py --quick   # seconds-long smoke run
+    python3 -m experiments.lattice_learning           # full run (~1-2 min)
+    python3 -m experiments.lattice_learning --quick   # seconds-long smoke run
 """
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-
-from baselines.learned import learn, simulate_policy  # noqa: E402
-from baselines.rules import square_rules  # noqa: E402
+from baselines.learned import learn, simulate_policy
+from baselines.rules import square_rules
 
 SEEDINGS = ("corners", "sides")
 

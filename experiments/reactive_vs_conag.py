@@ -9,35 +9,33 @@ The same three tasks for both systems:
 * nested squares (Fig. 14): a small ring inside a larger ring.
 
 Reactive system: baselines/ (Jones & Mataric lattice, transition rule sets).
-ConAg: the real world core and agent brains in one process (conag/sim.py), on
+ConAg: the real world core and agent brains in one process (sim/loop.py), on
 scenarios built here from layout text: the ring is a ring of drop sites, the
 seeds are bricks already on their sites (`B`), free bricks stand around.
 
 Writes experiments/lattice_square.png, lattice_moved_brick.png,
 lattice_nested.png and EXPERIMENTS.md; prints the markdown table.
 
-    python3 experiments/reactive_vs_conag.py           # full run (~1-2 min)
-    python3 experiments/reactive_vs_conag.py --quick   # smoke run (seconds)
+    python3 -m experiments.reactive_vs_conag           # full run (~1-2 min)
+    python3 -m experiments.reactive_vs_conag --quick   # smoke run (seconds)
 """
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-
+import sim
+from agent_runtime.config import AgentConfig
 from baselines.lattice import BRICK, simulate
 from baselines.perturb import nested_squares, run_perturbed
 from baselines.rules import square_rules
-from agent_runtime.config import AgentConfig
-from conag import sim
 from experiments.report import write_section
 from protocol.messages import Perturbation
 from world_server.scenario import parse_scenario
+
+ROOT = Path(__file__).resolve().parent.parent
 
 N = 6
 CONAG_RULES = "no rules: the blueprint + the Fig. 8 network"
@@ -142,34 +140,48 @@ def conag_ring(seeding, agents, seed=0, max_ticks=6000):
     return {"completed": done, "ticks": st.tick, "filled": st.sites_filled, "total": st.sites_total}
 
 
+class MoveOnce:
+    """A loop observer: once `after_placed` bricks were placed by agents (beyond the seeds
+    filled at the start), move the first of them one cell outward (world.perturb "move");
+    `move` then describes it (and, as a stop condition, `moved` ends the loop)."""
+
+    def __init__(self, run: sim.SimRun, after_placed: int):
+        self.after_placed = after_placed
+        self.seeds = run.world.sites_filled().copy()  # the B seeds
+        self.move: dict | None = None
+
+    def moved(self, _run: sim.SimRun) -> bool:
+        return self.move is not None
+
+    def __call__(self, run: sim.SimRun) -> None:
+        world, sc = run.world, run.world.scenario
+        placed = world.sites_filled() & ~self.seeds
+        if self.move is not None or placed.sum() < self.after_placed:
+            return
+        i = int(np.flatnonzero(placed)[0])
+        x, y = world.sites_xy[i]
+        cx, cy = sc.size[0] / 2, sc.size[1] / 2
+        dx, dy = x - cx, y - cy
+        step = (np.sign(dx), 0.0) if abs(dx) >= abs(dy) else (0.0, np.sign(dy))
+        to = (x + step[0] * sc.world.cell_size, y + step[1] * sc.world.cell_size)
+        res = world.perturb(Perturbation("move", float(x), float(y), to_x=to[0], to_y=to[1]))
+        if not res.ok:
+            raise RuntimeError(res.message)
+        self.move = {"tick": world.tick, "site": i, "src": (float(x), float(y)), "dst": to,
+                     "site_unfilled_after": not bool(world.sites_filled()[i]),
+                     "dst_on_site": bool(np.any(np.all(np.isclose(world.sites_xy, to), axis=1)))}
+
+
 def conag_moved(seeding, agents, seed=0, after_placed=3, max_ticks=8000):
     """Build the ring; once `after_placed` bricks were placed by agents, move one
-    of them one cell outward (world.perturb "move"), then keep running."""
-    sc = ring_scenario(seeding, agents)
-    run = sim.start(sc, seed=seed)
-    world = run.world
-    seeds0 = world.sites_filled().copy()  # the B seeds
-    move = None
-    while world.tick < max_ticks and move is None:
-        run.step()
-        placed = world.sites_filled() & ~seeds0
-        if placed.sum() >= after_placed:
-            i = int(np.flatnonzero(placed)[0])
-            x, y = world.sites_xy[i]
-            cx, cy = sc.size[0] / 2, sc.size[1] / 2
-            dx, dy = x - cx, y - cy
-            step = (np.sign(dx), 0.0) if abs(dx) >= abs(dy) else (0.0, np.sign(dy))
-            to = (x + step[0] * sc.world.cell_size, y + step[1] * sc.world.cell_size)
-            res = world.perturb(Perturbation("move", float(x), float(y), to_x=to[0], to_y=to[1]))
-            if not res.ok:
-                raise RuntimeError(res.message)
-            move = {"tick": world.tick, "site": i, "src": (float(x), float(y)), "dst": to,
-                    "site_unfilled_after": not bool(world.sites_filled()[i]),
-                    "dst_on_site": bool(np.any(np.all(np.isclose(world.sites_xy, to), axis=1)))}
-    done = run.run(max_ticks - world.tick).completed
-    st = world.status()
+    of them one cell outward (`MoveOnce`), then keep running until complete."""
+    run = sim.start(ring_scenario(seeding, agents), seed=seed)
+    mover = MoveOnce(run, after_placed)
+    run.run(max_ticks, until_complete=False, stop=[mover.moved], observers=[mover])
+    done = run.run(max_ticks - run.world.tick).completed
+    st = run.world.status()
     return {"completed": done, "ticks": st.tick, "filled": st.sites_filled,
-            "total": st.sites_total, "move": move, "grabs": sum(st.agent_grabs)}
+            "total": st.sites_total, "move": mover.move, "grabs": sum(st.agent_grabs)}
 
 
 def conag_nested(agents, seed=0, max_ticks=20000, sequencing=True):
@@ -375,13 +387,13 @@ def report(tab, paths, rseeds, cseeds, moves, nested, conag, quick):
 
 Re-run (from the repository root):
 
-    python3 experiments/reactive_vs_conag.py           # full run, writes this file and the PNGs
-    python3 experiments/reactive_vs_conag.py --quick   # smoke run (fewer seeds, shorter budgets)
+    python3 -m experiments.reactive_vs_conag           # full run, writes this file and the PNGs
+    python3 -m experiments.reactive_vs_conag --quick   # smoke run (fewer seeds, shorter budgets)
 
 This file was written by {'a `--quick`' if quick else 'the full'} run.
 Reactive system: `baselines/` (Jones & Mataric lattice; one step = every agent senses its 8
 neighbours and applies the first matching transition rule, or moves at random), rng seeds
-{rseeds}, 8 agents that keep entering from the border. ConAg: `conag/sim.py` (the real world
+{rseeds}, 8 agents that keep entering from the border. ConAg: `sim/loop.py` (the real world
 core and agent brains, lockstep, in one process; goal sequencing on, as by default, except in
 the rows marked nearest-first), seeds {cseeds}, 1-3 agents, on scenarios built
 from layout text in the script: a 6x6 ring of 20 drop sites whose 4 corners (resp. 4 side
@@ -440,7 +452,7 @@ empty cells away from the outer ring).
 
 ## R3 — the learned rule set (Fig. 11)
 
-`python3 experiments/lattice_learning.py` trains a feed-forward network to imitate the
+`python3 -m experiments.lattice_learning` trains a feed-forward network to imitate the
 transition rule sets (corners and sides, n=6) and checks that the trained network builds the
 square. Results: [experiments/lattice_learning.md](experiments/lattice_learning.md), curve:
 

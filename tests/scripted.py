@@ -11,8 +11,8 @@ import argparse
 import math
 import sys
 
-from agent_runtime.link import WorldLink
-from conag.bus import BusOptions, open_session
+from bus import BusOptions, open_session
+from nodes.world_link import WorldLink
 
 
 class ScriptedBody:

@@ -1,6 +1,6 @@
 """The agent of paper §4: its network runs the construction sequence, and agents build.
 
-Builds run the real World and Brain code in one process (conag.sim, lockstep); the
+Builds run the real World and Brain code in one process (sim, lockstep); the
 process-level behaviour (separate agent processes, kill and restart) is in
 tests/test_run.py.
 """
@@ -12,10 +12,10 @@ import dataclasses
 import numpy as np
 import pytest
 
+import sim
 from agent_runtime.config import AgentConfig
 from agent_runtime.motivations import Motivations
 from agent_runtime.network import STATE_NODES, engineered
-from conag import sim
 from protocol.messages import Perturbation
 from tests.conftest import SCENARIOS
 from world_server.scenario import load_scenario

@@ -12,12 +12,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+import sim
 from agent_runtime.brain import Brain, _mouth_side
 from agent_runtime.config import AgentConfig
 from agent_runtime.esm import CONFIG, OBSTACLE
 from agent_runtime.far_memory import FarMemory, border_seed
 from agent_runtime.spreading import distance_field, seeded_distance_field
-from conag import sim
 from protocol.messages import BEHAVIOURS, CHANNELS, NO_READING, SensorFrame, Welcome
 from world_server.scenario import load_scenario, parse_scenario
 from world_server.world import World

@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 import zenoh
 
-from agent_runtime.link import WorldLink
-from conag.bus import BusOptions, make_config, open_session
+from bus import BusOptions, make_config, open_session
+from nodes.world_link import WorldLink
 from tests.conftest import ROOT, SCENARIOS, RunningWorld, free_port
 from world_server.scenario import load_scenario
 from world_server.world import World

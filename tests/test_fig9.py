@@ -12,8 +12,8 @@ import pytest
 from agent_runtime.learning import Student
 from agent_runtime.network import engineered
 from agent_runtime.qlearning import QLearner
+from sim.trials import run_learning, run_trial, trial_seed
 from teacher.core import Teacher
-from teacher.trials import run_learning, run_trial, trial_seed
 from tests.conftest import ROOT, SCENARIOS
 from world_server.scenario import load_scenario
 

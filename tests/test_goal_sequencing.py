@@ -1,6 +1,6 @@
 """ConAg-TS agents (paper §6.2; MISSION G2-G3): the Brain's Matching grid shapes its goals,
 and agents build the paper's layouts that nearest-first cannot, in the order that keeps
-every site reachable. Builds run the real World and Brain code in one process (conag.sim).
+every site reachable. Builds run the real World and Brain code in one process (sim).
 """
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import sim
 from agent_runtime.config import AgentConfig
-from conag import sim
 from tests.conftest import SCENARIOS
 from world_server.scenario import load_scenario
 

@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agent_runtime.matching import calculate_matching, calculate_matching_grid, select_goals
-from agent_runtime.replay import OCTILE_SLACK, assignment_bound, lower_bound, replay
+from experiments.replay import OCTILE_SLACK, assignment_bound, lower_bound, replay
 from tests.conftest import ROOT
 from world_server.scenario import load_scenario
 

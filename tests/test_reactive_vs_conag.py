@@ -1,20 +1,13 @@
 """R4: the reactive lattice system against ConAg (experiments/reactive_vs_conag.py)."""
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from baselines.lattice import BRICK
 from baselines.perturb import run_perturbed
 from baselines.rules import square_rules
-
-_PATH = Path(__file__).resolve().parent.parent / "experiments" / "reactive_vs_conag.py"
-_spec = importlib.util.spec_from_file_location("reactive_vs_conag", _PATH)
-rvc = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(rvc)
+from experiments import reactive_vs_conag as rvc
 
 
 @pytest.mark.parametrize("seeding", ["corners", "sides"])

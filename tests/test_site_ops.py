@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from conag import sim
+import sim
 from protocol.codec import decode, encode
 from protocol.messages import Blueprint, Perturbation
 from tests.test_world import make
@@ -90,7 +90,7 @@ def test_status_reports_every_body_position():
     assert s.agent_x == pytest.approx((1.5, 3.5)) and s.agent_y == pytest.approx((0.5, 0.5))
 
 
-# ---------------------------------------------------------------- in-process (conag.sim)
+# ---------------------------------------------------------------- in-process (sim)
 
 OPEN = """
 name = "open"
@@ -110,13 +110,13 @@ def test_simrun_perturb_hands_the_new_blueprint_to_every_brain(monkeypatch):
     from world_server.scenario import parse_scenario
 
     seen = []
-    real = sim.Brain.set_blueprint
+    real = sim.loop.Brain.set_blueprint
 
     def spy(self, version, xs, ys):
         seen.append((self.agent_id, version, xs, ys))
         return real(self, version, xs, ys)
 
-    monkeypatch.setattr(sim.Brain, "set_blueprint", spy)
+    monkeypatch.setattr(sim.loop.Brain, "set_blueprint", spy)
     run = sim.start(parse_scenario(OPEN), agents=2)
     assert run.perturb(Perturbation("remove", 1.5, 3.5)).ok   # a disc op: no blueprint
     assert seen == []

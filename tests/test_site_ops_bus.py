@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from conag.bus import Inbox
+from bus import Inbox
 from protocol import keys
 from protocol.codec import decode
 from protocol.messages import AgentState, Blueprint, WorldStatus

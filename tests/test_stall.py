@@ -8,13 +8,13 @@ import json
 
 import pytest
 
-from conag import sim
-from conag.stall import StallClock, stall_report
-from conag.summary import run_summary
+import sim
 from protocol.messages import BEHAVIOURS, AgentState, Perturbation, WorldStatus
 from tests.conftest import free_port
 from tests.test_run import conag
 from world_server.scenario import parse_scenario
+from world_server.stall import StallClock, stall_report
+from world_server.summary import run_summary
 
 # The only site is walled in by `#`: no agent can ever bring a brick to it.
 WALLED = '''
@@ -110,7 +110,7 @@ def test_the_summary_has_stalled_and_each_agents_behaviour_ticks():
     assert run_summary(STATUS)["stalled"] is False
 
 
-# ---------------------------------------------------------------- in process (conag.sim)
+# ---------------------------------------------------------------- in process (sim)
 
 
 def test_a_simrun_that_cannot_progress_stops_as_stalled_and_reports_why():

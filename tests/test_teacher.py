@@ -19,7 +19,7 @@ import zenoh
 from agent_runtime.config import AgentConfig
 from agent_runtime.learning import Student
 from agent_runtime.network import ARM_OUTPUTS, MOTOR_OUTPUTS, NONE, engineered
-from agent_runtime.process import AgentReport, Learning, run_agent
+from nodes.agent import AgentOptions, AgentReport, Learning, run_agent
 from protocol import keys
 from protocol.codec import decode, encode
 from protocol.messages import Decision, Reinforcement
@@ -189,8 +189,8 @@ def test_a_student_keeps_acting_without_its_teacher_and_learns_again_when_a_new_
     teacher = teacher_process(bus.endpoint)
     stop, report = threading.Event(), AgentReport()
     student = threading.Thread(target=run_agent, daemon=True, kwargs=dict(
-        session=bus.client_session(), world_id="w0", agent_id="a1", cfg=AgentConfig(), seed=3, stop=stop,
-        learning=Learning(eta=0.1), report=report))
+        session=bus.client_session(), opts=AgentOptions("w0", "a1", AgentConfig(), 3, learning=Learning(eta=0.1)),
+        stop=stop, report=report))
     student.start()
     second = None
     try:

@@ -14,14 +14,14 @@ import zenoh
 import numpy as np
 import pytest
 
-from agent_runtime.link import WorldLink
+from nodes.world_link import WorldLink
 from protocol import keys
 from protocol.codec import decode, encode
-from world_server.scenario import load_scenario
-from world_server.world import World
 from protocol.messages import CHANNELS, NO_READING, SCHEMA_VERSION, AgentCommand, Hello, Perturbation, PerturbResult, SensorFrame
 from tests.conftest import ROOT, Bus, RunningWorld, free_port
 from tests.scripted import ScriptedBody
+from world_server.scenario import load_scenario
+from world_server.world import World
 
 SCRIPT_WORLD = '''
 name = "script"

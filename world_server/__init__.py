@@ -1,5 +1,7 @@
-"""The ConAg world (paper §3): a pymunk world of discs and agent bodies, and its server.
+"""The ConAg world (paper §3): a pymunk world of discs and agent bodies.
 
-`world.World` is the pure core (physics, sensors, gripper, perturbation; no bus);
-`server.WorldServer` is the thin zenoh shell around it.
+Pure core (no bus): `world.World` (physics, sensors, gripper, perturbation), the
+scenario files, the layout generator and buildability check, pictures (`render`), and
+what a run reports (`stall`, `summary`). Its process shell, the zenoh server around
+`World`, is `nodes.world_server.WorldServer` (`conag world`).
 """

@@ -16,6 +16,7 @@ import time
 
 import zenoh
 
+from bus import Declarations
 from protocol import keys
 from protocol.codec import ProtocolError, decode, encode
 from protocol.messages import AgentCommand, Hello, SensorFrame, Welcome
@@ -29,9 +30,11 @@ class WorldLink:
     def __init__(self, session: zenoh.Session, world_id: str, agent_id: str):
         self.session, self.world_id, self.agent_id = session, world_id, agent_id
         self.bad_frames = 0
-        self._token = session.liveliness().declare_token(keys.agent_token(world_id, agent_id))
-        self._sub = session.declare_subscriber(keys.sensors(world_id, agent_id), zenoh.handlers.RingChannel(1))
-        self._pub = session.declare_publisher(keys.command(world_id, agent_id), express=True)
+        self._declared = Declarations()  # undeclared in reverse: the token goes last
+        self._declared.add(session.liveliness().declare_token(keys.agent_token(world_id, agent_id)))
+        self._sub = self._declared.add(session.declare_subscriber(keys.sensors(world_id, agent_id),
+                                                                  zenoh.handlers.RingChannel(1)))
+        self._pub = self._declared.add(session.declare_publisher(keys.command(world_id, agent_id), express=True))
 
     def _decode(self, sample: zenoh.Sample | None) -> SensorFrame | None:
         if sample is None:
@@ -89,8 +92,10 @@ class WorldLink:
 
     def close(self) -> None:
         """Undeclare everything; the world sees the token go and stops this body."""
-        for entity in (self._pub, self._sub, self._token):
-            try:
-                entity.undeclare()
-            except Exception:  # the session may be closing already
-                pass
+        self._declared.close()
+
+    def __enter__(self) -> WorldLink:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

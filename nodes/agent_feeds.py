@@ -18,7 +18,7 @@ import logging
 
 import zenoh
 
-from conag.bus import Inbox
+from bus import Declarations, Inbox
 from protocol import keys
 from protocol.codec import ProtocolError, decode, encode
 from protocol.messages import Blueprint
@@ -33,9 +33,10 @@ class AgentFeeds:
         self.world_id, self.agent_id, self.every = world_id, agent_id, every
         self.bad = 0
         self._last_report: int | None = None
-        self._blueprints = Inbox(256).subscribe(session, keys.blueprint(world_id))
-        self._states = session.declare_publisher(keys.agent_state(world_id, agent_id),
-                                                  reliability=zenoh.Reliability.RELIABLE)
+        self._declared = Declarations()
+        self._blueprints = self._declared.add(Inbox(256).subscribe(session, keys.blueprint(world_id)))
+        self._states = self._declared.add(session.declare_publisher(keys.agent_state(world_id, agent_id),
+                                                                    reliability=zenoh.Reliability.RELIABLE))
 
     def newest_blueprint(self) -> Blueprint | None:
         """The highest-version Blueprint among those that arrived since the last call."""
@@ -73,8 +74,4 @@ class AgentFeeds:
                 self.report(brain, tick)
         except Exception as exc:  # on the way out (a signal mid-step, a closing session): never fatal
             log.debug("agent %s: no final state report: %s", self.agent_id, exc)
-        self._blueprints.close()
-        try:
-            self._states.undeclare()
-        except Exception:  # the session may be closing already
-            pass
+        self._declared.close()

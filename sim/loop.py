@@ -1,26 +1,32 @@
-"""Run a scenario in one process: the world core and one Brain per agent, no bus.
+"""The one simulation loop: a world and one Brain per agent, in lockstep, no bus.
 
-The same World and Brain code as the processes, in lockstep, for tests and experiments
-that need many runs quickly. `conag run` is the real thing: one process per agent.
-`SimRun.perturb` changes the world as `conag perturb` does, handing a changed blueprint
-to every brain as the Blueprint message does on the bus; `run(..., stall_ticks=N)` gives
-up as `conag run --stall-ticks N` does, and `stall_report()` says what each agent was at.
+`start` makes the world and its brains; `SimRun.step` is one lockstep tick (every brain
+answers its frame, then the world steps); `SimRun.run` steps until the structure is
+complete, `max_ticks` pass, no site has been filled for `stall_ticks` ticks (as `conag
+run --stall-ticks N` gives up; `stall_report()` then says what each agent was at) or one
+of its `stop` conditions holds, calling its `observers` after every tick, and returns a
+`SimResult`. `on_step` sees every decision (the teacher's view). `SimRun.perturb`
+changes the world as `conag perturb` does, handing a changed blueprint to every brain as
+the Blueprint message does on the bus.
 """
 
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from agent_runtime.brain import Brain, Step
 from agent_runtime.config import AgentConfig
-from conag.stall import StallClock, stall_report
 from protocol.messages import SITE_OPS, Perturbation, PerturbResult
 from world_server.scenario import Scenario
+from world_server.stall import StallClock, stall_report
 from world_server.world import World
+
+StopCondition = Callable[["SimRun"], bool]  # asked before every tick: True ends the run
+Observer = Callable[["SimRun"], None]        # called after every tick
 
 
 @dataclass(frozen=True)
@@ -29,7 +35,8 @@ class SimResult:
 
     completed: bool
     stalled: bool
-    ticks: int  # the world's tick at the end
+    ticks: int             # the world's tick at the end
+    stopped: bool = False  # one of the run's stop conditions ended it
 
     def __bool__(self) -> bool:
         return self.completed
@@ -37,6 +44,8 @@ class SimResult:
 
 @dataclass
 class SimRun:
+    """A world and its brains, stepped in lockstep (`step`, `run`)."""
+
     world: World
     brains: dict[str, Brain] = field(default_factory=dict)
     behaviours: dict[str, str] = field(default_factory=dict)
@@ -82,16 +91,26 @@ class SimRun:
             self.filled_at = np.array([before.get((int(r), int(c)), -1) for c, r in cells], np.int64)
         return result
 
-    def run(self, max_ticks: int, until_complete: bool = True, stall_ticks: int | None = None) -> SimResult:
-        """Step until the structure is complete, `max_ticks` pass, or (with `stall_ticks`)
-        no site has been filled for that many ticks."""
+    def run(self, max_ticks: int, until_complete: bool = True, stall_ticks: int | None = None, *,
+            stop: Sequence[StopCondition] = (), observers: Sequence[Observer] = ()) -> SimResult:
+        """Step at most `max_ticks` times; return how the run ended.
+
+        Before each tick, in this order: the structure is complete (with
+        `until_complete`), no site has been filled for `stall_ticks` ticks (counted from
+        this call), or one of `stop` holds: the run ends there. After each tick every
+        observer is called with the run.
+        """
         self.stall = StallClock(stall_ticks) if stall_ticks else None
         for _ in range(max_ticks):
             if until_complete and self.world.completed():
                 return SimResult(True, False, self.world.tick)
             if self._stalled():
                 return SimResult(False, True, self.world.tick)
+            if any(condition(self) for condition in stop):
+                return SimResult(self.world.completed(), False, self.world.tick, stopped=True)
             self.step()
+            for observe in observers:
+                observe(self)
         return SimResult(self.world.completed(), self._stalled(), self.world.tick)
 
     def _stalled(self) -> bool:
@@ -110,6 +129,21 @@ class SimRun:
         idle = self.stall.idle(status.tick) if self.stall is not None else 0
         states = {a: brain.state_report(status.tick) for a, brain in self.brains.items()}
         return stall_report(status, idle, states)
+
+
+class FirstCompletion:
+    """A loop observer: the tick after which the structure was first complete (None: not yet)."""
+
+    def __init__(self) -> None:
+        self.tick: int | None = None
+
+    def __call__(self, run: SimRun) -> None:
+        if self.tick is None and run.world.completed():
+            self.tick = run.world.tick
+
+    def seen(self, _run: SimRun) -> bool:
+        """A stop condition: the structure has been complete after some tick."""
+        return self.tick is not None
 
 
 def start(scenario: Scenario, agents: int | None = None, seed: int | None = None,

@@ -2,7 +2,7 @@
 
 A `StudentLink` publishes the agent's Decisions reliably (zenoh RELIABLE, congestion
 control BLOCK: a decision is never dropped on the way to the teacher) and takes the
-teacher's Reinforcements from a FIFO inbox (`conag.bus.Inbox`; never "latest wins": a
+teacher's Reinforcements from a FIFO inbox (`bus.Inbox`; never "latest wins": a
 full inbox holds the sender back instead of dropping). Each reinforcement answers the decision of
 the same tick, kept here until answered; `poll` hands back the (decision, reinforcement)
 pairs in the order they came, for the student to learn from before its next step.
@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import zenoh
 
-from conag.bus import Inbox
+from bus import Declarations, Inbox, Presence
 from protocol import keys
 from protocol.codec import ProtocolError, decode, encode
 from protocol.messages import Decision, Reinforcement
@@ -48,14 +48,20 @@ class StudentLink:
     def __init__(self, session: zenoh.Session, world_id: str, agent_id: str, keep: int = 1024):
         self.agent_id, self.keep = agent_id, keep
         self.counts = LinkCounts()
-        self.teachers: set[str] = set()
         self._pending: OrderedDict[int, Decision] = OrderedDict()
         self._next_seq: int | None = None
-        self._pub = session.declare_publisher(keys.decision(world_id, agent_id),
-                                              reliability=zenoh.Reliability.RELIABLE,
-                                              congestion_control=zenoh.CongestionControl.BLOCK)
-        self._inbox = Inbox(FIFO_CAPACITY).subscribe(session, keys.reinforcement(world_id, agent_id))
-        self._watch = Inbox(256).watch(session, keys.all_teacher_tokens(world_id))
+        self._declared = Declarations()
+        self._pub = self._declared.add(session.declare_publisher(keys.decision(world_id, agent_id),
+                                                                 reliability=zenoh.Reliability.RELIABLE,
+                                                                 congestion_control=zenoh.CongestionControl.BLOCK))
+        self._inbox = self._declared.add(Inbox(FIFO_CAPACITY).subscribe(session,
+                                                                        keys.reinforcement(world_id, agent_id)))
+        self._teachers = self._declared.add(Presence(session, keys.all_teacher_tokens(world_id)))
+
+    @property
+    def teachers(self) -> set[str]:
+        """The teachers whose liveliness token is up (as of the last `poll`)."""
+        return self._teachers.present
 
     def publish(self, decision: Decision) -> None:
         """Send a decision to the teacher and keep it until it is answered."""
@@ -122,19 +128,11 @@ class StudentLink:
         self._next_seq = seq + 1
 
     def _teacher_events(self) -> None:
-        while (sample := self._watch.get(0)) is not None:
-            teacher = str(sample.key_expr).rsplit("/", 1)[-1]
-            if sample.kind == zenoh.SampleKind.PUT:
-                self.teachers.add(teacher)
+        for teacher, alive in self._teachers.update():
+            if alive:
                 log.info("agent %s: teacher %s is here", self.agent_id, teacher)
             else:
-                self.teachers.discard(teacher)
                 log.warning("agent %s: teacher %s is gone; acting on the current weights", self.agent_id, teacher)
 
     def close(self) -> None:
-        self._watch.close()
-        self._inbox.close()
-        try:
-            self._pub.undeclare()
-        except Exception:  # the session may be closing already
-            pass
+        self._declared.close()

@@ -1,4 +1,4 @@
-"""The world server: the zenoh shell around `world.World` (MISSION W7, S1, S2).
+"""The world server: the zenoh shell around `world_server.world.World` (MISSION W7, S1, S2).
 
 Everything arriving on the bus (commands, liveliness changes, attach, perturb) is put on
 one queue by zenoh's callback threads and applied by the single loop thread, so the
@@ -31,6 +31,7 @@ from typing import Callable
 
 import zenoh
 
+from bus import Declarations, watch_tokens
 from protocol import keys
 from protocol.codec import ProtocolError, decode, encode
 from protocol.messages import SITE_OPS, AgentCommand, AgentState, Hello, Perturbation, WorldStatus
@@ -56,11 +57,11 @@ class WorldServer:
         self._events: queue.SimpleQueue = queue.SimpleQueue()
         self._tokens: set[str] = set()
         self._answered: set[str] = set()
-        self._publishers: dict[str, zenoh.Publisher] = {}
+        self._publishers: dict[str, zenoh.Publisher] = {}  # sensor frames, per agent
         self._status_bytes = encode(world.status())
         self._blueprint_bytes = encode(world.blueprint())
         self.agent_states: dict[str, AgentState] = {}  # the last report of each agent (for summaries)
-        self._declared: list = []
+        self._declared = Declarations()
         self._last_status = float("-inf")
 
     # zenoh callbacks: decode if cheap, then hand over to the loop thread ------------------
@@ -73,9 +74,8 @@ class WorldServer:
         except ProtocolError as exc:
             self._events.put(("bad", f"command on {sample.key_expr}: {exc}"))
 
-    def _on_token(self, sample: zenoh.Sample) -> None:
-        agent = str(sample.key_expr).rsplit("/", 1)[-1]
-        self._events.put(("live", agent, sample.kind == zenoh.SampleKind.PUT))
+    def _on_token(self, agent: str, alive: bool) -> None:
+        self._events.put(("live", agent, alive))
 
     def _on_status_query(self, query: zenoh.Query) -> None:
         query.reply(query.key_expr, self._status_bytes)  # the latest, swapped atomically
@@ -94,35 +94,25 @@ class WorldServer:
         self.agent_states[state.agent_id] = state  # one dict store: safe from zenoh's thread
 
     def _declare(self) -> None:
-        w, s = self.world.world_id, self.session
-        self._declared = [
-            s.liveliness().declare_token(keys.world_token(w)),
-            s.liveliness().declare_subscriber(keys.all_agent_tokens(w), self._on_token, history=True),
-            s.declare_subscriber(keys.all_agents(w, "command"), self._on_command),
-            s.declare_queryable(keys.all_agents(w, "attach"), lambda q: self._events.put(("attach", q))),
-            s.declare_queryable(keys.perturb(w), lambda q: self._events.put(("perturb", q))),
-            s.declare_queryable(keys.status(w), self._on_status_query),
-            s.declare_queryable(keys.blueprint(w), self._on_blueprint_query),
-            s.declare_subscriber(keys.all_agents(w, "state"), self._on_agent_state),
-        ]
-        self._status_pub = s.declare_publisher(keys.status(w))
-        self._blueprint_pub = s.declare_publisher(keys.blueprint(w), reliability=zenoh.Reliability.RELIABLE,
-                                                  congestion_control=zenoh.CongestionControl.BLOCK)
-
-    def _undeclare(self) -> None:
-        pubs = [getattr(self, "_status_pub", None), getattr(self, "_blueprint_pub", None)]
-        for entity in self._declared + pubs + list(self._publishers.values()):
-            try:
-                if entity is not None:
-                    entity.undeclare()
-            except Exception:  # the session may already be closing; nothing left to free
-                pass
+        """Declare everything the server serves; `self._declared` undeclares it all (`run`)."""
+        w, s, add = self.world.world_id, self.session, self._declared.add
+        add(s.liveliness().declare_token(keys.world_token(w)))
+        add(watch_tokens(s, keys.all_agent_tokens(w), self._on_token))
+        add(s.declare_subscriber(keys.all_agents(w, "command"), self._on_command))
+        add(s.declare_queryable(keys.all_agents(w, "attach"), lambda q: self._events.put(("attach", q))))
+        add(s.declare_queryable(keys.perturb(w), lambda q: self._events.put(("perturb", q))))
+        add(s.declare_queryable(keys.status(w), self._on_status_query))
+        add(s.declare_queryable(keys.blueprint(w), self._on_blueprint_query))
+        add(s.declare_subscriber(keys.all_agents(w, "state"), self._on_agent_state))
+        self._status_pub = add(s.declare_publisher(keys.status(w)))
+        self._blueprint_pub = add(s.declare_publisher(keys.blueprint(w), reliability=zenoh.Reliability.RELIABLE,
+                                                      congestion_control=zenoh.CongestionControl.BLOCK))
 
     # the loop --------------------------------------------------------------------------------
     def run(self, stop: threading.Event) -> WorldStatus:
         """Serve until `stop` is set, `max_ticks` is reached or (optionally) the build completes."""
-        self._declare()
-        try:
+        with self._declared:
+            self._declare()
             self._publish_status()
             last_tick = self.clock()
             while self._wait_for_tick(last_tick, stop):
@@ -130,14 +120,11 @@ class WorldServer:
                 last_tick = self.clock()
                 self._answered.clear()
                 self._publish_frames()
-                status = self.world.status()
                 if (self.max_ticks is not None and self.world.tick >= self.max_ticks) or (
-                        self.stop_when_complete and status.completed):
+                        self.stop_when_complete and self.world.completed()):
                     break
-                self._publish_status_if_due(status)
+                self._publish_status_if_due()
             return self._publish_status()
-        finally:
-            self._undeclare()
 
     def _live(self) -> list[str]:
         return [a for a in self.world.live_agents() if a in self._tokens]
@@ -254,9 +241,9 @@ class WorldServer:
         pub = self._publishers.get(frame.agent_id)
         if pub is None:
             # Sensor frames are "latest wins": drop rather than queue behind a slow agent.
-            pub = self.session.declare_publisher(keys.sensors(self.world.world_id, frame.agent_id),
-                                                 congestion_control=zenoh.CongestionControl.DROP,
-                                                 express=True)
+            pub = self._declared.add(self.session.declare_publisher(
+                keys.sensors(self.world.world_id, frame.agent_id), congestion_control=zenoh.CongestionControl.DROP,
+                express=True))
             self._publishers[frame.agent_id] = pub
         pub.put(encode(frame))
 
@@ -265,12 +252,12 @@ class WorldServer:
             if frame.agent_id in self._tokens:
                 self._publish_frame(frame)
 
-    def _publish_status_if_due(self, status: WorldStatus | None = None) -> None:
+    def _publish_status_if_due(self) -> None:
         if self.clock() - self._last_status >= self.cfg.status_period:
-            self._publish_status(status)
+            self._publish_status()
 
-    def _publish_status(self, status: WorldStatus | None = None) -> WorldStatus:
-        status = status or self.world.status()
+    def _publish_status(self) -> WorldStatus:
+        status = self.world.status()
         self._last_status = self.clock()
         self._status_bytes = encode(status)
         self._status_pub.put(self._status_bytes)

@@ -1,10 +1,10 @@
 """Telling a stalled build from a slow one, and saying why it stalled.
 
-`StallClock` counts the ticks since a drop site was last filled; `conag run` (from the
-world's status) and `conag.sim.SimRun` (every tick) both stop a run once that reaches
-the limit. `stall_report` is the text both print then: one line for the run, one per
-agent from the world's view of its body and the agent's own last `AgentState`.
-No bus and no agent code here, so both sides import it freely.
+`StallClock` counts the ticks since a drop site was last filled; `conag run` (through a
+`StallWatch` on the world's statuses) and `sim.SimRun.run` (every tick) both stop a run
+once that reaches the limit. `stall_report` is the text both print then: one line for
+the run, one per agent from the world's view of its body and the agent's own last
+`AgentState`. No bus and no agent code here, so both sides import it freely.
 """
 
 from __future__ import annotations
@@ -53,6 +53,27 @@ class StallClock:
     def idle(self, tick: int) -> int:
         """Ticks since the last progress (0 before the first observation)."""
         return 0 if self.since is None else tick - self.since
+
+
+class StallWatch:
+    """A run watched from outside: the world's statuses, and the agents' last AgentStates
+    in `states` (kept by the caller). Once no site has been filled for `limit` ticks (0:
+    never), `observe` keeps the stall report in `report` and sets `stalled`."""
+
+    def __init__(self, limit: int):
+        self.clock = StallClock(limit) if limit > 0 else None
+        self.states: dict[str, AgentState] = {}
+        self.stalled = False
+        self.report: list[str] = []
+
+    def observe(self, status: WorldStatus) -> bool:
+        """See one status; True once the run has stalled (and from then on)."""
+        if self.clock is None or self.stalled:
+            return self.stalled
+        if self.clock.observe(status.tick, status.sites_filled, status.sites_total):
+            self.report = stall_report(status, self.clock.idle(status.tick), dict(self.states))
+            self.stalled = True
+        return self.stalled
 
 
 def stall_report(status: WorldStatus, idle_ticks: int, states: Mapping[str, AgentState]) -> list[str]:

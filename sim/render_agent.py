@@ -1,6 +1,6 @@
 """What one agent believes: its ESMs and NMs beside the world (paper Fig. 4 and Fig. 5).
 
-`render_agent_maps` runs a scenario in-process (`conag.sim`, lockstep) for some ticks,
+`render_agent_maps` runs a scenario in-process (`sim.loop`, lockstep) for some ticks,
 asks one agent's Brain to plan, and draws one figure: on the left the bird's-eye world
 as it is now (the chosen agent ringed, its map's extent dashed), on the right the
 agent's egocentric spatial maps (food, water, brick, configuration), its
@@ -27,8 +27,8 @@ from matplotlib.patches import Circle, Rectangle
 from agent_runtime.brain import Brain, Plans
 from agent_runtime.esm import BRICK, CONFIG, FOOD, WATER
 from agent_runtime.spreading import activation
-from conag import sim
 from protocol.messages import DISC_KINDS
+from sim.loop import SimRun, start
 from world_server.render import draw_world
 from world_server.scenario import Scenario
 
@@ -43,12 +43,11 @@ def render_agent_maps(scenario: Scenario, out_path: str | Path, *, agent: str = 
     unknown agent id or negative ticks."""
     if ticks < 0:
         raise ValueError(f"ticks must be >= 0, got {ticks}")
-    run = sim.start(scenario, seed=seed)
+    run = start(scenario, seed=seed)
     if agent not in run.brains:
         raise ValueError(f"unknown agent {agent!r}: scenario {scenario.name} has agents "
                          f"{', '.join(run.brains)}")
-    for _ in range(ticks):
-        run.step()
+    run.run(ticks, until_complete=False)
     brain = run.brains[agent]
     fig = _figure(scenario, run, agent, brain, brain.plan())
     out = Path(out_path)
@@ -57,7 +56,7 @@ def render_agent_maps(scenario: Scenario, out_path: str | Path, *, agent: str = 
     return out
 
 
-def _figure(scenario: Scenario, run: sim.SimRun, agent: str, brain: Brain, plans: Plans) -> Figure:
+def _figure(scenario: Scenario, run: SimRun, agent: str, brain: Brain, plans: Plans) -> Figure:
     fig = Figure(figsize=(20, 9))
     FigureCanvasAgg(fig)
     grid = fig.add_gridspec(2, 5, width_ratios=(1.7, 1, 1, 1, 1), wspace=0.45, hspace=0.3)
@@ -83,7 +82,7 @@ def nm_obstacles(brain: Brain) -> tuple[np.ndarray, np.ndarray]:
     return plans.config_obstacles, plans.brick_obstacles
 
 
-def _world_panel(ax, scenario: Scenario, run: sim.SimRun, agent: str, map_size: int) -> None:
+def _world_panel(ax, scenario: Scenario, run: SimRun, agent: str, map_size: int) -> None:
     world = run.world
     _, xy, kinds = world.discs.present_arrays()
     discs = [(x, y, DISC_KINDS[k]) for (x, y), k in zip(xy.tolist(), kinds.tolist())]

@@ -1,12 +1,12 @@
-"""Learning trials in one process (paper §5.1, Fig. 9; MISSION L3): world, student, teacher, no bus.
+"""Learning trials in one process (paper §5.1, Fig. 9): world, student, teacher, no bus.
 
 The same World, Brain, Student / QLearner and teacher core as the processes, stepped in
-lockstep by `conag.sim` for the many runs of the Fig. 9 experiment. One trial: the
-scenario's initial layout (every brick where the file puts it), the student's body at its
-start with fresh maps (its configuration ESM seeded from the blueprint), `ticks` steps;
-each step the teacher reinforces the student's decision and the student learns from it
-before acting on the next frame. The learner's weights carry over from trial to trial:
-that is what is learned.
+lockstep by the simulation loop (`sim.loop`) for the many runs of the Fig. 9
+experiment. One trial: the scenario's initial layout (every brick where the file puts
+it), the student's body at its start with fresh maps (its configuration ESM seeded from
+the blueprint), `ticks` steps; each step the teacher reinforces the student's decision
+and the student learns from it before acting on the next frame. The learner's weights
+carry over from trial to trial: that is what is learned.
 
 Between trials the whole environment is reset, not only the agent: the paper's student
 "was repeatedly placed in the same environment" and "moved to its initial position" after
@@ -25,11 +25,9 @@ import numpy as np
 
 from agent_runtime.brain import Step
 from agent_runtime.config import AgentConfig
-from conag import sim
+from sim.loop import FirstCompletion, start
 from teacher.core import Teacher, is_error
 from world_server.scenario import Scenario
-
-AGENT = "a1"
 
 
 @dataclass(frozen=True)
@@ -52,7 +50,7 @@ def run_trial(scenario: Scenario, learner, teacher: Teacher, *, ticks: int, eta:
 
     With `until_complete` the trial ends early once every drop site holds a brick.
     """
-    run = sim.start(scenario, agents=1, seed=seed, cfg=cfg, network=learner)
+    run = start(scenario, agents=1, seed=seed, cfg=cfg, network=learner)
     errors = 0
 
     def on_step(_agent: str, step: Step) -> None:
@@ -64,18 +62,12 @@ def run_trial(scenario: Scenario, learner, teacher: Teacher, *, ticks: int, eta:
             learner.learn(d.state, d.arm, d.motor, r.arm, r.motor, eta)
 
     run.on_step = on_step
-    completed_at = None
-    t = 0
-    for t in range(1, ticks + 1):
-        run.step()
-        if completed_at is None and run.world.completed():
-            completed_at = t
-            if until_complete:
-                break
+    completion = FirstCompletion()
+    run.run(ticks, until_complete=False, stop=[completion.seen] if until_complete else [], observers=[completion])
     if learn and hasattr(learner, "end_episode"):
         learner.end_episode()
     st = run.world.status()
-    return TrialResult(errors, t, st.sites_filled, st.sites_total, completed_at)
+    return TrialResult(errors, run.world.tick, st.sites_filled, st.sites_total, completion.tick)
 
 
 def run_learning(scenario: Scenario, learner, *, trials: int, ticks: int, eta: float, seed: int, run: int = 0,

@@ -1,0 +1,22 @@
+"""The bus layer: how ConAg processes open zenoh sessions and declare what they use on them.
+
+It sits on `protocol` and below everything that talks over zenoh (`nodes`, `conag`);
+the pure cores never import it.
+
+* `session`: a process's session (`BusOptions`, `open_session`);
+* `declarations`: what a process declared, undeclared in one place (`Declarations`, a
+  context manager; `undeclare`), and liveliness samples as (id, alive) events
+  (`token_event`, `watch_tokens`);
+* `inbox`: the FIFO subscription with a timed receive (`Inbox`), and the set of ids
+  whose liveliness token is up, read through one (`Presence`).
+
+zenoh itself is imported only when a session is opened or a liveliness sample read, so
+`conag --help` does not load it.
+"""
+
+from bus.declarations import Declarations, token_event, undeclare, watch_tokens
+from bus.inbox import Inbox, Presence
+from bus.session import DEFAULT_ENDPOINT, MODES, BusOptions, make_config, open_session
+
+__all__ = ["DEFAULT_ENDPOINT", "MODES", "BusOptions", "Declarations", "Inbox", "Presence", "make_config",
+           "open_session", "token_event", "undeclare", "watch_tokens"]

@@ -1,0 +1,169 @@
+"""The agent process (`conag agent --id ID`): the zenoh shell around `agent_runtime.brain.Brain`.
+
+It declares its liveliness token, attaches by id (a restarted process gets its old
+body back and rebuilds its maps from its sensors), then for every sensor frame: one
+decision step, the command to the world, the Decision for the teacher. Frames are
+"latest wins"; a slow agent acts on the newest one.
+
+With `learning` (`conag agent --learn`) the construction network is a `Student`
+(random weights from the seed, or loaded from a file) instead of the engineered one:
+before each step the agent applies every reinforcement that has arrived to the decision
+it answers (`nodes.student_link.StudentLink`; with a teacher present it waits up to `wait`
+seconds for the answer to its last step), and saves its weights every `save_every` ticks
+and on the way out. With no teacher on the bus it keeps acting on its current weights.
+
+Blueprint changes and state reports go through `nodes.agent_feeds.AgentFeeds`: the newest
+blueprint is applied before each step, an AgentState is published every 100 ticks and
+on exit.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+from agent_runtime.brain import Brain
+from agent_runtime.config import AgentConfig
+from agent_runtime.learning import Student
+from bus import undeclare
+from nodes.agent_feeds import AgentFeeds
+from nodes.student_link import StudentLink
+from nodes.world_link import WorldLink
+from protocol import keys
+from protocol.codec import encode
+
+log = logging.getLogger("conag.agent")
+
+
+@dataclass(frozen=True)
+class Learning:
+    """How a learning agent learns: rate, where its weights come from and go."""
+
+    eta: float = 0.1
+    weights_in: str | None = None     # start from these weights instead of random ones
+    weights_out: str | None = None    # save here every `save_every` ticks and on exit
+    save_every: int = 500
+    wait: float = 0.02                # seconds to wait for the teacher's answer to the last step (if one is there)
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.eta) and self.eta > 0):
+            raise ValueError("the learning rate eta must be a number > 0")
+        if self.save_every < 1:
+            raise ValueError("save_every must be >= 1 tick")
+        if not self.wait >= 0:
+            raise ValueError("wait must be >= 0 seconds")
+
+    def student(self, seed: int) -> Student:
+        if self.weights_in:
+            return Student.load(self.weights_in)
+        # A stream of its own: not the one the brain explores with.
+        return Student.random(np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0]))
+
+
+@dataclass
+class AgentReport:
+    """What a run of `run_agent` did (for the command line's last line and for tests)."""
+
+    ticks: int = 0
+    student: Student | None = None
+    link: StudentLink | None = None   # a learning agent's link to the teacher (counts, teachers present)
+
+
+@dataclass(frozen=True)
+class AgentOptions:
+    """Which body an agent process serves, and how its brain acts (`conag agent`)."""
+
+    world_id: str
+    agent_id: str
+    cfg: AgentConfig | None = None    # None: AgentConfig()
+    seed: int = 0                     # the agent's own randomness (exploring; a student's random weights)
+    attach_timeout: float = 30.0      # seconds to wait for the world
+    learning: Learning | None = None  # a learning student (paper §5.1)
+    network: object | None = None     # replaces the engineered construction network (e.g. a trained Student)
+
+
+def run_agent(session, opts: AgentOptions, stop=None, report: AgentReport | None = None) -> AgentReport:
+    """Serve one body until `stop` is set (or a signal handler raises).
+
+    `report` (filled in as it goes, so a caller sees it even after a signal) is also
+    returned.
+    """
+    report = report if report is not None else AgentReport()
+    agent = _AgentProcess(session, opts, report)
+    try:
+        agent.attach()
+        agent.serve(stop)
+    finally:
+        agent.close()
+    return report
+
+
+class _AgentProcess:
+    """One agent process's links, brain and last tick, between `attach` and `close`."""
+
+    def __init__(self, session, opts: AgentOptions, report: AgentReport):
+        self.opts, self.report, self.learning = opts, report, opts.learning
+        # A bad weights file fails here, before attaching.
+        self.student = self.learning.student(opts.seed) if self.learning else opts.network
+        w, a = opts.world_id, opts.agent_id
+        self.link = WorldLink(session, w, a)
+        self.feeds = AgentFeeds(session, w, a)  # before attaching: no blueprint change is missed
+        self.brain: Brain | None = None
+        self.tick = 0
+        self.teacher = StudentLink(session, w, a) if self.learning else None
+        self.decisions = None if self.learning else session.declare_publisher(keys.decision(w, a), express=True)
+        report.student, report.link = self.student, self.teacher
+
+    def attach(self) -> None:
+        welcome = self.link.attach(timeout=self.opts.attach_timeout)
+        log.info("agent %s attached to body %d at (%.2f, %.2f)%s", self.opts.agent_id, welcome.body, welcome.x,
+                 welcome.y, f", restart {welcome.restarts}" if welcome.restarts else "")
+        # Each incarnation gets its own stream: a restart must not replay the same choices.
+        self.brain = Brain(welcome, self.opts.cfg, np.random.default_rng([self.opts.seed, welcome.restarts]),
+                           network=self.student)
+        self.tick = welcome.tick - 1
+
+    def serve(self, stop) -> None:
+        while stop is None or not stop.is_set():
+            frame = self.link.next_frame(self.tick, timeout=None if stop is None else 0.5)
+            if frame is not None:
+                self.step(frame)
+
+    def step(self, frame) -> None:
+        """Learn from the reinforcements that came, decide, act, tell the teacher, report."""
+        learning, student, teacher = self.learning, self.student, self.teacher
+        if teacher is not None:
+            for d, r in teacher.poll(wait=learning.wait):
+                student.learn(d.state, d.arm, d.motor, r.arm, r.motor, learning.eta)
+        self.feeds.before_step(self.brain)
+        step = self.brain.step(frame)
+        self.link.send(frame.tick, step.speed, step.turn, step.action)
+        if teacher is not None:
+            teacher.publish(step.decision)
+        else:
+            self.decisions.put(encode(step.decision))
+        self.tick = frame.tick
+        self.report.ticks += 1
+        self.feeds.after_step(self.brain, self.tick)
+        if learning and self.report.ticks % learning.save_every == 0:
+            if learning.weights_out:
+                student.save(learning.weights_out)
+            log.info("agent %s tick %d: %s", self.opts.agent_id, self.tick, _progress(teacher))
+
+    def close(self) -> None:
+        """A last state report, the weights saved, then everything undeclared (the token last)."""
+        self.feeds.close(self.brain, max(self.tick, 0))
+        if self.learning and self.learning.weights_out:
+            self.student.save(self.learning.weights_out)
+        if self.teacher is not None:
+            self.teacher.close()
+        undeclare(self.decisions)
+        self.link.close()
+
+
+def _progress(teacher: StudentLink) -> str:
+    c = teacher.counts
+    return (f"{c.reinforcements} reinforcements, {c.errors} errors, teacher "
+            f"{'present' if teacher.teachers else 'absent'}")

@@ -1,0 +1,67 @@
+"""The one simulation loop: stop conditions, per-tick observers, the first completion, and
+the stall watch `conag run` shares with it."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import sim
+from agent_runtime.network import engineered
+from protocol.messages import WorldStatus
+from sim.trials import run_trial
+from teacher.core import Teacher
+from world_server.scenario import load_scenario
+from world_server.stall import StallWatch
+
+QUICK_WALL = Path(__file__).resolve().parent.parent / "scenarios" / "quick_wall.toml"
+
+
+def test_a_stop_condition_ends_the_run_before_the_tick_it_first_holds_on():
+    run = sim.start(load_scenario(QUICK_WALL))
+    seen: list[int] = []
+    result = run.run(1000, stop=[lambda r: r.world.tick >= 40], observers=[lambda r: seen.append(r.world.tick)])
+    assert result == sim.SimResult(completed=False, stalled=False, ticks=40, stopped=True)
+    assert seen == list(range(1, 41))                     # once after every tick
+
+
+def test_first_completion_sees_the_tick_a_run_until_complete_stops_at():
+    scenario = load_scenario(QUICK_WALL)
+    until_complete = sim.start(scenario).run(scenario.max_ticks)
+    assert until_complete.completed and not until_complete.stopped
+    first = sim.FirstCompletion()
+    run = sim.start(scenario)
+    result = run.run(until_complete.ticks + 50, until_complete=False, observers=[first])
+    assert first.tick == until_complete.ticks and result.ticks == until_complete.ticks + 50
+    run = sim.start(scenario)
+    first = sim.FirstCompletion()
+    stopped = run.run(scenario.max_ticks, until_complete=False, stop=[first.seen], observers=[first])
+    assert stopped.stopped and stopped.completed and stopped.ticks == until_complete.ticks
+
+
+def test_a_trial_until_complete_ends_at_its_completion_tick():
+    r = run_trial(load_scenario(QUICK_WALL), engineered(), Teacher(), ticks=5000, eta=0.0, seed=1, learn=False,
+                  until_complete=True)
+    assert r.completed_at is not None and r.ticks == r.completed_at and r.sites_filled == r.sites_total
+
+
+def _status(tick: int, filled: int, total: int = 2) -> WorldStatus:
+    return WorldStatus(world_id="w0", scenario="s", seed=1, mode="lockstep", tick=tick, sites_filled=filled,
+                       sites_total=total, bricks_total=3, agents_alive=1, bad_messages=0, completed=filled == total,
+                       agent_ids=("a1",), agent_alive=(True,), agent_distance=(0.0,), agent_grabs=(0,),
+                       agent_drops=(0,), agent_restarts=(0,), agent_x=(1.0,), agent_y=(2.0,))
+
+
+def test_the_stall_watch_keeps_the_report_once_no_site_was_filled_for_its_limit():
+    watch = StallWatch(100)
+    assert not watch.observe(_status(0, 0)) and not watch.observe(_status(60, 1))
+    assert not watch.observe(_status(159, 1)) and watch.report == []
+    assert watch.observe(_status(160, 1)) and watch.stalled
+    assert watch.report[0] == "STALLED at tick 160: no site filled for 100 ticks (1/2 sites)"
+    assert watch.report[1].startswith("  a1: alive at (1.00, 2.00): no AgentState received")
+    assert watch.observe(_status(170, 2))                 # stalled stays stalled, the report stays
+    assert watch.report[0].startswith("STALLED at tick 160")
+
+
+def test_a_stall_watch_with_limit_zero_never_stalls():
+    watch = StallWatch(0)
+    assert not any(watch.observe(_status(t, 0)) for t in range(0, 100000, 5000))
