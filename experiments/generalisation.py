@@ -150,7 +150,7 @@ def _picture(run: sim.SimRun, sc: Scenario, job: Job, folder: Path) -> Path:
     slug = "nearest" if job.mode == "nearest-first" else "ts"
     return render_scenario(sc, folder / f"{Path(job.layout).stem}-{slug}.png", agents=run.world.agent_poses().tolist(),
                            discs=discs, title=f"{sc.name} ({job.mode}): {st.sites_filled}/{st.sites_total} "
-                                              f"at tick {st.tick}")
+                                              f"at tick {st.tick}", max_pixels=1200)
 
 
 def run_all(jobs: list[Job], workers: int, pictures: Path | None) -> list[Outcome]:

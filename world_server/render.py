@@ -42,21 +42,24 @@ _DISC_SCALE = 0.9  # discs drawn a little smaller than a cell so touching ones s
 def render_scenario(scenario: Scenario, out_path: str | Path, *,
                     agents: Iterable[tuple[float, float, float]] | None = None,
                     discs: Iterable[tuple[float, float, str]] | None = None,
-                    title: str | None = None) -> Path:
+                    title: str | None = None, max_pixels: int | None = None) -> Path:
     """Draw `scenario` to `out_path` (format from the suffix, e.g. .png) and return the path.
 
     agents: (x, y, heading) poses in world units, heading in radians counter-clockwise
     from east; default: every `A` cell facing east. discs: (x, y, kind) with kind
-    "food", "water" or "brick"; default: the layout's F, W, b and B cells.
+    "food", "water" or "brick"; default: the layout's F, W, b and B cells. max_pixels:
+    the longest side at most about this (a lower resolution for large worlds).
     """
-    fig = Figure(figsize=(2.5 + 0.3 * scenario.cols, 1.0 + 0.3 * scenario.rows))
+    size = (2.5 + 0.3 * scenario.cols, 1.0 + 0.3 * scenario.rows)
+    dpi = 100 if max_pixels is None else min(100, max(20, int(max_pixels / max(size))))
+    fig = Figure(figsize=size)
     FigureCanvasAgg(fig)
     ax = fig.add_subplot()
     draw_world(ax, scenario, agents=agents, discs=discs)
     ax.set_title(title if title is not None else scenario.name)
     out = Path(out_path)
     out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=100, bbox_inches="tight")
+    fig.savefig(out, dpi=dpi, bbox_inches="tight")
     return out
 
 
