@@ -12,8 +12,7 @@ from conag import sim
 from conag.stall import StallClock, stall_report
 from conag.summary import run_summary
 from protocol.messages import BEHAVIOURS, AgentState, Perturbation, WorldStatus
-from tests.conftest import free_port
-from tests.test_run import conag
+from tests.conftest import conag, free_port
 from world_server.scenario import parse_scenario
 
 # The only site is walled in by `#`: no agent can ever bring a brick to it.
