@@ -76,6 +76,7 @@ def test_agents_complete_the_structure_in_lockstep(name, agents, max_ticks):
     assert sum(status.agent_drops) >= status.sites_total - len(load_scenario(SCENARIOS / f"{name}.toml").cells("B"))
 
 
+@pytest.mark.slow
 def test_the_same_seed_gives_the_same_build():
     a, _ = _run("fig6", 3, 400, seed=5)
     b, _ = _run("fig6", 3, 400, seed=5)

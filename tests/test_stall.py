@@ -93,6 +93,7 @@ def test_a_simrun_that_cannot_progress_stops_as_stalled_and_reports_why():
     assert all("alive at (" in line and "blocker:" in line for line in lines[1:]), lines
 
 
+@pytest.mark.slow
 def test_a_simrun_counts_from_each_run_and_a_fill_restarts_the_count():
     run = sim.start(parse_scenario(WALLED))
     assert run.run(120) == sim.SimResult(False, False, 120)        # no limit: runs to max_ticks
