@@ -34,6 +34,7 @@ def test_ring_scenario_matches_the_lattice_task():
     assert len(sc.cells("b")) >= 16
 
 
+@pytest.mark.slow
 def test_conag_completes_ring_from_corner_seeds():
     r = rvc.conag_ring("corners", 2, seed=0, max_ticks=3000)
     assert r["completed"] and r["filled"] == r["total"] == 20
@@ -48,6 +49,7 @@ def test_conag_moved_brick_leaves_its_site_and_the_structure():
     assert not move["dst_on_site"]
 
 
+@pytest.mark.slow
 def test_conag_completes_ring_after_moved_brick():
     r = rvc.conag_moved("corners", 2, seed=0, max_ticks=3000)
     assert not r["move"]["dst_on_site"]
