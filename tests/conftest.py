@@ -1,10 +1,17 @@
-"""Shared fixtures: real zenoh sessions in-process on loopback, and a world server thread."""
+"""Shared fixtures and helpers: real zenoh sessions in-process on loopback, a world server
+thread, `wait_until` (poll a predicate with a deadline, never a bare sleep), `conag`
+subprocesses, and small worlds built from inline layouts."""
 
 from __future__ import annotations
 
+import signal
 import socket
+import subprocess
+import sys
 import threading
+import time
 from pathlib import Path
+from typing import Callable, TypeVar
 
 import numpy as np
 import pytest
@@ -100,3 +107,132 @@ def start_world(bus):
     for rw in running:
         if rw.thread.is_alive():
             rw.close()
+
+
+# --- waiting --------------------------------------------------------------------------------
+
+T = TypeVar("T")
+
+
+def wait_until(predicate: Callable[[], T], timeout: float = 10.0, interval: float = 0.02,
+               what: str = "the condition") -> T:
+    """Call `predicate` every `interval` seconds until it returns something truthy, and return
+    that; raise AssertionError naming `what` once `timeout` seconds have passed without.
+
+    Tests wait on what they need to see (a count reached, a process gone, a tick passed),
+    never on a fixed sleep: a busy machine makes them slower, not wrong.
+    """
+    deadline = time.monotonic() + timeout
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() >= deadline:
+            raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
+        time.sleep(interval)
+
+
+# --- `conag` as a subprocess ----------------------------------------------------------------
+
+def conag(*args, timeout: float = 60.0) -> subprocess.CompletedProcess:
+    """Run `python -m conag ARGS...` to the end; stdout and stderr captured as text."""
+    return subprocess.run([sys.executable, "-m", "conag", *map(str, args)], cwd=ROOT, capture_output=True,
+                          text=True, timeout=timeout)
+
+
+class Process:
+    """A `conag` subprocess whose stdout and stderr are read by threads, so that a test can
+    wait for a line (the router prints its "listening" line once its signal handlers are in)."""
+
+    def __init__(self, *args: str):
+        self.proc = subprocess.Popen([sys.executable, "-m", "conag", *args], cwd=ROOT, text=True,
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        self._lines = {"out": [], "err": []}
+        self._cond = threading.Condition()
+        self._readers = [threading.Thread(target=self._read, args=(s, k), daemon=True)
+                         for s, k in ((self.proc.stdout, "out"), (self.proc.stderr, "err"))]
+        for t in self._readers:
+            t.start()
+
+    def _read(self, stream, kind: str) -> None:
+        for line in stream:
+            with self._cond:
+                self._lines[kind].append(line)
+                self._cond.notify_all()
+
+    @property
+    def out(self) -> str:
+        with self._cond:
+            return "".join(self._lines["out"])
+
+    @property
+    def err(self) -> str:
+        with self._cond:
+            return "".join(self._lines["err"])
+
+    def wait_for(self, text: str, timeout: float = 15.0) -> None:
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while not any(text in line for line in self._lines["out"]):
+                remaining = deadline - time.monotonic()
+                finished = self.proc.poll() is not None and not any(t.is_alive() for t in self._readers)
+                if remaining <= 0 or finished:
+                    raise AssertionError(f"no {text!r} from conag within {timeout} s (exit "
+                                         f"{self.proc.poll()}): {''.join(self._lines['err'])}")
+                self._cond.wait(min(remaining, 0.2))
+
+    def stop(self, sig=signal.SIGTERM, timeout: float = 5.0) -> int:
+        """Send `sig` and wait for the exit; returns the exit code."""
+        self.proc.send_signal(sig)
+        rc = self.proc.wait(timeout)
+        for t in self._readers:
+            t.join(5)
+        return rc
+
+    def kill(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+        self.proc.wait(10)
+        for t in self._readers:
+            t.join(5)
+
+
+# --- small worlds -----------------------------------------------------------------------------
+
+def scenario(layout: str, agents: int = 1, seed: int = 1, **world):
+    """A scenario from an inline layout, with [world] settings as keyword arguments."""
+    lines = [f"{k} = {str(v).lower() if isinstance(v, bool) else repr(v)}" for k, v in world.items()]
+    text = (f'name = "t"\nseed = {seed}\nagents = {agents}\nlayout = """\n{layout.strip()}\n"""\n'
+            "[world]\n" + "\n".join(lines) + "\n")
+    return parse_scenario(text)
+
+
+def make(layout: str, seed: int = 0, agents: int = 1, **world) -> World:
+    """A World on an inline layout; `seed` seeds its noise."""
+    return World(scenario(layout, agents, **world), np.random.default_rng(seed))
+
+
+# Long enough (thirty sites, bricks spread out) that a restarted process is back before the
+# two others could finish alone (tests/test_run.py), and that a learning student meets every
+# state of the construction sequence many times (tests/test_teacher.py).
+LONG_WALL = '''
+name = "long_walls"
+seed = 11
+agents = 3
+max_ticks = 40000
+layout = """
+b.b.b.b.b.b.b.b.b.b.
+.b.b.b.b.b.b.b.b.b.b
+....................
+.....++++++++++.....
+....................
+.....++++++++++.....
+....................
+..b....A.A.A....b...
+....................
+.....++++++++++.....
+....................
+....................
+b.b.b.b.b.b.b.b.b.b.
+"""
+'''

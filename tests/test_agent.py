@@ -66,7 +66,8 @@ def _run(name, agents, max_ticks, cfg=None, seed=None):
 
 
 @pytest.mark.parametrize("name, agents, max_ticks", [
-    ("quick_wall", 1, 2000), ("fig6", 1, 5000), ("fig6", 3, 3000), ("fig17", 1, 3000),
+    ("quick_wall", 1, 2000), ("fig17", 1, 3000),
+    pytest.param("fig6", 1, 5000, marks=pytest.mark.slow), pytest.param("fig6", 3, 3000, marks=pytest.mark.slow),
 ])
 def test_agents_complete_the_structure_in_lockstep(name, agents, max_ticks):
     run, completed = _run(name, agents, max_ticks)
@@ -76,6 +77,7 @@ def test_agents_complete_the_structure_in_lockstep(name, agents, max_ticks):
     assert sum(status.agent_drops) >= status.sites_total - len(load_scenario(SCENARIOS / f"{name}.toml").cells("B"))
 
 
+@pytest.mark.slow
 def test_the_same_seed_gives_the_same_build():
     a, _ = _run("fig6", 3, 400, seed=5)
     b, _ = _run("fig6", 3, 400, seed=5)
@@ -83,6 +85,7 @@ def test_the_same_seed_gives_the_same_build():
     np.testing.assert_array_equal(a.world.agent_poses(), b.world.agent_poses())
 
 
+@pytest.mark.slow
 def test_repair_a_brick_removed_from_the_finished_part_is_replaced():
     """Paper Fig. 6b: remove a brick of the structure; an agent puts another one there."""
     run = sim.start(load_scenario(SCENARIOS / "fig6.toml"), agents=1)
@@ -99,6 +102,7 @@ def test_repair_a_brick_removed_from_the_finished_part_is_replaced():
     assert world.sites_filled()[filled[0]]
 
 
+@pytest.mark.slow
 def test_hunger_and_thirst_interrupt_construction_which_then_resumes():
     cfg = AgentConfig(hunger_rate=0.005, thirst_rate=0.006)   # a need every ~130-160 ticks
     run = sim.start(load_scenario(SCENARIOS / "fig6.toml"), agents=1, cfg=cfg)
@@ -115,6 +119,7 @@ def test_hunger_and_thirst_interrupt_construction_which_then_resumes():
     assert run.world.status().agent_drops[0] >= 4
 
 
+@pytest.mark.slow
 def test_a_restarted_agent_rebuilds_its_maps_and_the_structure_completes():
     """Paper S2: the process dies (maps lost) and comes back with the same id."""
     scenario = load_scenario(SCENARIOS / "fig6.toml")

@@ -43,7 +43,8 @@ def test_corner_rule_set_has_four_states_and_eight_rules():
 
 
 @pytest.mark.parametrize("n", SIDES)
-@pytest.mark.parametrize("seed", [0, 1, 2])
+# The other seeds add little but time: the slow tier runs them.
+@pytest.mark.parametrize("seed", [0, pytest.param(1, marks=pytest.mark.slow), pytest.param(2, marks=pytest.mark.slow)])
 @pytest.mark.parametrize("seeding", ["corners", "sides"])
 def test_rule_set_builds_exact_square(n, seed, seeding):
     rule_set, result = build(n, seeding, seed)
@@ -127,7 +128,7 @@ def test_rules_only_read_the_neighbourhood():
 
 @pytest.mark.parametrize("seeding", ["corners", "sides"])
 @pytest.mark.parametrize("direction", ["out", "in"])
-@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("seed", [0, pytest.param(1, marks=pytest.mark.slow), pytest.param(2, marks=pytest.mark.slow)])
 def test_moved_brick_gives_wrong_structure(seeding, direction, seed):
     n = 8
     rule_set, seeds, shape = square_rules(n, seeding)
@@ -147,7 +148,7 @@ def test_moved_brick_outward_grows_a_spurious_wall():
     assert stray.sum() > 1  # more than the moved brick: the rules extended it
 
 
-@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("seed", [0] + [pytest.param(s, marks=pytest.mark.slow) for s in (1, 2, 3)])
 def test_nested_inner_square_is_never_finished(seed):
     out = nested_squares(12, 4, 8, 4000, np.random.default_rng(seed))
     assert out["outer"] is not None

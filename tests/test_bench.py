@@ -1,17 +1,26 @@
-"""The benchmark script keeps working (a smoke run; the figures are in BENCHMARKS.md)."""
+"""The benchmark scripts keep working (smoke runs; the figures are in BENCHMARKS.md)."""
 
 from __future__ import annotations
 
 import subprocess
 import sys
 
+import pytest
+
 from tests.conftest import ROOT, free_port
+
+pytestmark = pytest.mark.slow  # every test runs a benchmark script as a subprocess
+
+
+def bench(script: str, *args: str, timeout: float = 120) -> subprocess.CompletedProcess:
+    r = subprocess.run([sys.executable, f"bench/{script}", "--quick", *args], cwd=ROOT, capture_output=True,
+                       text=True, timeout=timeout)
+    assert r.returncode == 0, r.stderr
+    return r
 
 
 def test_world_benchmark_quick_run_prints_both_tables():
-    r = subprocess.run([sys.executable, "bench/bench_world.py", "--quick", "--endpoint",
-                        f"tcp/127.0.0.1:{free_port()}"], cwd=ROOT, capture_output=True, text=True, timeout=120)
-    assert r.returncode == 0, r.stderr
+    r = bench("bench_world.py", "--endpoint", f"tcp/127.0.0.1:{free_port()}")
     rows = [line for line in r.stdout.splitlines() if line.startswith("| 10 |") or line.startswith("| 100 |")]
     assert len(rows) == 2
     assert all(float(row.split("|")[3].replace(",", "")) > 0 for row in rows)
@@ -20,9 +29,22 @@ def test_world_benchmark_quick_run_prints_both_tables():
 
 
 def test_agent_step_benchmark_quick_run_prints_a_row_per_layout():
-    r = subprocess.run([sys.executable, "bench/bench_agent_step.py", "--quick"], cwd=ROOT, capture_output=True,
-                       text=True, timeout=300)
-    assert r.returncode == 0, r.stderr
+    r = bench("bench_agent_step.py", timeout=300)
     rows = [line for line in r.stdout.splitlines() if line.startswith("| ") and "---" not in line][1:]
     assert len(rows) == 4
     assert all(float(row.split("|")[4].split()[0]) > 0 for row in rows)
+
+
+def test_spreading_benchmark_quick_run_prints_the_table():
+    r = bench("bench_spreading.py")
+    rows = [line.split("|") for line in r.stdout.splitlines() if line.startswith(("| open", "| maze"))]
+    assert len(rows) == 4
+    assert all(float(row[3]) > 0 and float(row[4]) > 0 for row in rows)
+
+
+def test_budgets_quick_run_measures_every_budget():
+    r = bench("bench_budgets.py")
+    rows = [line.split("|") for line in r.stdout.splitlines() if line.startswith("| ") and "---" not in line][1:]
+    assert [row[1].split("(")[0].strip() for row in rows] == [
+        "map update", "realtime world, no agent", "buildability, 120 x 120, 400 sites", "buildability, refused"]
+    assert all(row[4].strip() in ("yes", "NO") for row in rows)

@@ -3,7 +3,6 @@ order that an independent replay (scipy's labelling, not the module's kernels) a
 
 from __future__ import annotations
 
-import time
 from collections import deque
 from functools import lru_cache
 from pathlib import Path
@@ -257,9 +256,7 @@ def test_an_impossible_order_is_refused_with_where_it_got_stuck():
         "..+.....+.......................",
         "..+++++++.......................",
     ]
-    started = time.perf_counter()
-    result = check_layout(layout)
-    assert time.perf_counter() - started < 5.0
+    result = check_layout(layout)  # how long it takes: bench/bench_budgets.py
     assert not result.ok and result.reason.startswith("no fill order found")
     assert "stuck after" in result.reason
 
@@ -293,7 +290,7 @@ def test_agrees_with_exhaustive_search_on_small_layouts(layout):
         assert result.reason and not result.order
 
 
-# ---------------------------------------------------------------- speed and helpers
+# ---------------------------------------------------------------- a big layout and helpers
 
 
 def _big_layout() -> list[str]:
@@ -316,17 +313,10 @@ def _big_layout() -> list[str]:
     return ["".join(row) for row in g]
 
 
-def test_a_120_by_120_layout_with_400_sites_takes_well_under_a_second():
+def test_a_120_by_120_layout_with_400_sites_is_proven_buildable():
     layout = _big_layout()
     assert sum(row.count("+") for row in layout) == 400
-    check_layout(layout)  # load the compiled kernels
-    best = float("inf")
-    for _ in range(2):  # the better of two: a busy machine should not fail the test
-        started = time.perf_counter()
-        result = check_layout(layout)
-        best = min(best, time.perf_counter() - started)
-    assert_proven(layout, result)
-    assert best < 1.0, f"{best:.2f} s"
+    assert_proven(layout, check_layout(layout))  # how long it takes: bench/bench_budgets.py
 
 
 def test_reachable_walks_over_empty_start_and_open_site_cells():

@@ -7,10 +7,6 @@ import json
 import math
 import signal
 import socket
-import subprocess
-import sys
-import threading
-import time
 from dataclasses import replace
 
 import numpy as np
@@ -19,7 +15,7 @@ import zenoh
 
 from bus import BusOptions, make_config, open_session
 from nodes.world_link import WorldLink
-from tests.conftest import ROOT, SCENARIOS, RunningWorld, free_port
+from tests.conftest import ROOT, SCENARIOS, Process, RunningWorld, free_port
 from world_server.scenario import load_scenario
 from world_server.world import World
 
@@ -80,63 +76,6 @@ def test_single_host_configs_match_the_built_in_defaults():
 
 # --- a router process between a world and an agent ------------------------------------------
 
-class Process:
-    """A `conag` subprocess whose stdout and stderr are read by threads, so that a test can
-    wait for a line (the router prints its "listening" line once its signal handlers are in)."""
-
-    def __init__(self, *args: str):
-        self.proc = subprocess.Popen([sys.executable, "-m", "conag", *args], cwd=ROOT, text=True,
-                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-        self._lines = {"out": [], "err": []}
-        self._cond = threading.Condition()
-        self._readers = [threading.Thread(target=self._read, args=(s, k), daemon=True)
-                         for s, k in ((self.proc.stdout, "out"), (self.proc.stderr, "err"))]
-        for t in self._readers:
-            t.start()
-
-    def _read(self, stream, kind: str) -> None:
-        for line in stream:
-            with self._cond:
-                self._lines[kind].append(line)
-                self._cond.notify_all()
-
-    @property
-    def out(self) -> str:
-        with self._cond:
-            return "".join(self._lines["out"])
-
-    @property
-    def err(self) -> str:
-        with self._cond:
-            return "".join(self._lines["err"])
-
-    def wait_for(self, text: str, timeout: float = 15.0) -> None:
-        deadline = time.monotonic() + timeout
-        with self._cond:
-            while not any(text in line for line in self._lines["out"]):
-                remaining = deadline - time.monotonic()
-                finished = self.proc.poll() is not None and not any(t.is_alive() for t in self._readers)
-                if remaining <= 0 or finished:
-                    raise AssertionError(f"no {text!r} from conag within {timeout} s (exit "
-                                         f"{self.proc.poll()}): {''.join(self._lines['err'])}")
-                self._cond.wait(min(remaining, 0.2))
-
-    def stop(self, sig=signal.SIGTERM, timeout: float = 5.0) -> int:
-        """Send `sig` and wait for the exit; returns the exit code."""
-        self.proc.send_signal(sig)
-        rc = self.proc.wait(timeout)
-        for t in self._readers:
-            t.join(5)
-        return rc
-
-    def kill(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.kill()
-        self.proc.wait(10)
-        for t in self._readers:
-            t.join(5)
-
-
 @pytest.fixture
 def router():
     ep = f"tcp/127.0.0.1:{free_port()}"
@@ -194,6 +133,7 @@ def test_world_and_agent_talk_through_a_router_process(router):
     assert f"zenoh router listening on {ep}" in proc.out
 
 
+@pytest.mark.slow
 def test_router_listens_where_its_config_file_says(tmp_path):
     """`conag router --zenoh-config FILE` must keep the file's listen endpoints (no loopback default)."""
     port = free_port()

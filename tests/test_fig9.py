@@ -17,6 +17,8 @@ from teacher.core import Teacher
 from tests.conftest import ROOT, SCENARIOS
 from world_server.scenario import load_scenario
 
+pytestmark = pytest.mark.slow  # builds of thousands of ticks, and the experiment script
+
 FIG6 = load_scenario(SCENARIOS / "fig6.toml")
 
 
@@ -32,7 +34,6 @@ def test_every_trial_starts_from_the_initial_layout_and_the_engineered_network_m
     assert quick.completed_at == quick.ticks < 1000
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("kind, eta", [("delta", 0.2), ("q", 0.5)])
 def test_errors_per_trial_fall_to_zero_on_fig6(kind, eta):
     rng = np.random.default_rng([9, 0])
@@ -44,7 +45,6 @@ def test_errors_per_trial_fall_to_zero_on_fig6(kind, eta):
     assert results[-1].completed_at is not None              # and it builds the diamond
 
 
-@pytest.mark.slow
 def test_the_quick_experiment_writes_table_plot_data_and_a_reusable_student(tmp_path):
     r = subprocess.run([sys.executable, "experiments/fig9_learning.py", "--quick", "--out", str(tmp_path)], cwd=ROOT,
                        capture_output=True, text=True, timeout=180)

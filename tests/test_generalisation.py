@@ -18,6 +18,7 @@ from world_server.scenario import load_scenario
 ROOT = Path(__file__).resolve().parent.parent
 
 
+@pytest.mark.slow
 def test_the_committed_suite_is_the_generators_and_every_layout_is_buildable():
     files = gen.suite_files()
     assert len(files) == gen.SUITE_SIZE
@@ -50,6 +51,7 @@ def test_the_quick_run_builds_small_layouts_with_both_agents_and_writes_its_tabl
     assert "### Goals" in table and "### Per family" in table
 
 
+@pytest.mark.slow
 def test_the_quick_run_refuses_to_overwrite_the_committed_results():
     r = subprocess.run([sys.executable, "experiments/generalisation.py", "--quick"], cwd=ROOT,
                        capture_output=True, text=True, timeout=60)

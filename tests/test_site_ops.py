@@ -13,7 +13,7 @@ import pytest
 import sim
 from protocol.codec import decode, encode
 from protocol.messages import Blueprint, Perturbation
-from tests.test_world import make
+from tests.conftest import make
 
 
 def site(op: str, x: float, y: float) -> Perturbation:

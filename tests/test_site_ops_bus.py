@@ -15,8 +15,7 @@ from bus import Inbox
 from protocol import keys
 from protocol.codec import decode
 from protocol.messages import AgentState, Blueprint, WorldStatus
-from tests.test_deploy import Process
-from tests.test_run import conag
+from tests.conftest import Process, conag, wait_until
 
 pytestmark = pytest.mark.slow
 
@@ -62,13 +61,12 @@ class Watch:
         return decode(sample.payload.to_bytes(), Blueprint)
 
     def query_blueprint(self, timeout: float = 10.0) -> Blueprint:
-        deadline = time.monotonic() + timeout  # the world declares it a moment after saying it is up
-        while time.monotonic() < deadline:
-            for r in self.session.get(keys.blueprint(self.world), timeout=1.0):
-                if r.ok is not None:
-                    return decode(r.ok.payload.to_bytes(), Blueprint)
-            time.sleep(0.05)
-        raise AssertionError("the blueprint queryable did not answer")
+        def answer():  # the world declares the queryable a moment after saying it is up
+            return next((r.ok for r in self.session.get(keys.blueprint(self.world), timeout=1.0)
+                         if r.ok is not None), None)
+
+        ok = wait_until(answer, timeout, interval=0.05, what="the blueprint queryable to answer")
+        return decode(ok.payload.to_bytes(), Blueprint)
 
 
 def perturb(ep: str, op: str, at: tuple[float, float]) -> str:

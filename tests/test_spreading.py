@@ -4,8 +4,6 @@
 from __future__ import annotations
 
 import math
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -15,7 +13,6 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from agent_runtime.spreading import activation, distance_field, gradient_step, spread_iterative
-from tests.conftest import ROOT
 
 SQRT2 = math.sqrt(2.0)
 
@@ -341,15 +338,3 @@ def test_an_obstacle_on_a_goal_cell_is_not_a_goal():
     act = activation(dist, obstacles=obstacles)
     assert act[2, 2] == -1 and act[0, 0] == 1
     np.testing.assert_allclose(spread_iterative(goals, obstacles, 0.1), activation(dist, 0.1, obstacles=obstacles))
-
-
-# --- the benchmark script --------------------------------------------------------------
-
-
-def test_spreading_benchmark_quick_run_prints_the_table():
-    r = subprocess.run([sys.executable, "bench/bench_spreading.py", "--quick"], cwd=ROOT,
-                       capture_output=True, text=True, timeout=120)
-    assert r.returncode == 0, r.stderr
-    rows = [line.split("|") for line in r.stdout.splitlines() if line.startswith(("| open", "| maze"))]
-    assert len(rows) == 4
-    assert all(float(row[3]) > 0 and float(row[4]) > 0 for row in rows)

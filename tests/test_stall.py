@@ -10,8 +10,7 @@ import pytest
 
 import sim
 from protocol.messages import BEHAVIOURS, AgentState, Perturbation, WorldStatus
-from tests.conftest import free_port
-from tests.test_run import conag
+from tests.conftest import conag, free_port
 from world_server.scenario import parse_scenario
 from world_server.stall import StallClock, stall_report
 from world_server.summary import run_summary
@@ -125,6 +124,7 @@ def test_a_simrun_that_cannot_progress_stops_as_stalled_and_reports_why():
     assert all("alive at (" in line and "blocker:" in line for line in lines[1:]), lines
 
 
+@pytest.mark.slow
 def test_a_simrun_counts_from_each_run_and_a_fill_restarts_the_count():
     run = sim.start(parse_scenario(WALLED))
     assert run.run(120) == sim.SimResult(False, False, 120)        # no limit: runs to max_ticks

@@ -7,9 +7,9 @@ The bus tests run a real `conag teacher` process; students are a real `conag age
 from __future__ import annotations
 
 import itertools
+import json
 import signal
 import threading
-import time
 from collections import Counter
 
 import numpy as np
@@ -24,9 +24,7 @@ from protocol import keys
 from protocol.codec import decode, encode
 from protocol.messages import Decision, Reinforcement
 from teacher.core import Teacher, is_error, signals
-from tests.conftest import SCENARIOS
-from tests.test_deploy import Process
-from tests.test_run import LONG_WALL
+from tests.conftest import LONG_WALL, SCENARIOS, Process, conag, free_port, wait_until
 from world_server.scenario import load_scenario, parse_scenario
 
 ENG = engineered()
@@ -74,12 +72,9 @@ def teacher_process(endpoint, *extra):
 
 
 def wait_for_teacher(session, world="w0", timeout=15.0):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if any(r.ok is not None for r in session.liveliness().get(keys.all_teacher_tokens(world), timeout=1.0)):
-            return
-        time.sleep(0.05)
-    raise AssertionError("no teacher token")
+    wait_until(lambda: any(r.ok is not None for r in session.liveliness().get(keys.all_teacher_tokens(world),
+                                                                               timeout=1.0)),
+               timeout, interval=0.05, what="a teacher's liveliness token")
 
 
 class Collector:
@@ -95,9 +90,8 @@ class Collector:
         return self.items
 
     def wait(self, n, timeout=20.0) -> list:
-        deadline = time.monotonic() + timeout
-        while len(self.drain()) < n and time.monotonic() < deadline:
-            time.sleep(0.01)
+        """All items so far, once there are at least `n` (AssertionError after `timeout` s)."""
+        wait_until(lambda: len(self.drain()) >= n, timeout, interval=0.01, what=f"{n} {self.kind.__name__}s")
         return self.items
 
 
@@ -124,9 +118,10 @@ def test_a_burst_of_2000_decisions_gets_2000_reinforcements_in_order(bus):
         assert [r.tick for r in items] == list(range(2000))
         assert [(r.arm, r.motor) for r in items] == [signals(d, ENG) for d in sent]
         assert any(is_error(r) for r in items) and not all(is_error(r) for r in items)
-        time.sleep(0.2)
-        assert len(got.drain()) == 2000               # nothing for the garbage
+        # Nothing for the garbage: it went first on the same ordered publisher, so an answer
+        # to it would have come before the answer to tick 0.
         assert teacher.stop(signal.SIGTERM) == 0, teacher.err
+        assert len(got.drain()) == 2000
         assert "final: s1: tick 1999 decisions 2000" in teacher.out and "bad 1" in teacher.out
         assert "Traceback" not in teacher.err
     finally:
@@ -147,13 +142,15 @@ def test_a_learning_agent_process_learns_from_a_teacher_process_until_it_makes_n
     agent = Process("agent", "--id", "a1", "--learn", "--eta", "0.1", "--seed", "0", "--weights-out", str(weights),
                     "--connect", bus.endpoint)
     try:
-        completed_at = None
-        deadline = time.monotonic() + 90
-        while world.thread.is_alive():
-            assert time.monotonic() < deadline, "the world did not reach its last tick in time"
-            if completed_at is None and world.world.status().completed:
-                completed_at = world.world.tick
-            time.sleep(0.01)
+        completed = []
+
+        def world_done() -> bool:  # and note the tick at which the structure is first complete
+            if not completed and world.world.status().completed:
+                completed.append(world.world.tick)
+            return not world.thread.is_alive()
+
+        wait_until(world_done, 90, interval=0.01, what="the world to reach its last tick")
+        completed_at = completed[0] if completed else None
         assert world.result.completed and world.result.sites_filled == 30 and completed_at is not None
         items = got.wait(world.result.tick - 5, timeout=10)
         assert [r.seq for r in items] == list(range(len(items)))          # none lost, none reordered
@@ -197,19 +194,25 @@ def test_a_student_keeps_acting_without_its_teacher_and_learns_again_when_a_new_
         assert len(got.wait(100)) >= 100
         assert report.link.teachers == {"teacher"}
         teacher.kill()                                                    # SIGKILL: no goodbye
-        _until(lambda: not report.link.teachers, "the student did not see its teacher go")
-        time.sleep(0.3)
-        before, tick0 = len(got.drain()), world.world.tick
-        _until(lambda: world.world.tick >= tick0 + 300, "the student stopped acting")  # lockstep: needs it
-        assert student.is_alive() and len(got.drain()) == before         # nobody reinforced meanwhile
+        # Every decision the dead teacher answered is from this tick or before; answers to
+        # them may still be on their way, so later ones are told apart by their tick.
+        killed_at = world.world.tick
+        wait_until(lambda: not report.link.teachers, 15, what="the student to see its teacher go")
+        tick0 = world.world.tick
+        wait_until(lambda: world.world.tick >= tick0 + 300, 15, what="the student to keep acting")  # lockstep
+        assert student.is_alive()
+        assert [r for r in got.drain() if r.tick > killed_at] == []       # nobody reinforced meanwhile
         learned = report.link.counts.reinforcements
 
+        def resumed() -> list:
+            return [r for r in got.drain() if r.tick > killed_at]
+
         second = teacher_process(bus.endpoint)
-        items = got.wait(before + 100)
-        resumed = items[before:]
-        assert len(resumed) >= 100 and resumed[0].seq == 0 and resumed[0].tick > tick0 + 300
-        assert [r.seq for r in resumed] == list(range(len(resumed)))
-        _until(lambda: report.link.counts.teacher_restarts == 1, "the student did not see a new teacher")
+        wait_until(lambda: len(resumed()) >= 100, 20, interval=0.01, what="100 reinforcements from the new teacher")
+        new = resumed()
+        assert new[0].seq == 0 and new[0].tick > tick0 + 300
+        assert [r.seq for r in new] == list(range(len(new)))
+        wait_until(lambda: report.link.counts.teacher_restarts == 1, 15, what="the student to see a new teacher")
         assert report.link.counts.reinforcements > learned and report.link.counts.gaps == 0
         assert second.stop(signal.SIGTERM) == 0, second.err
         assert "final:" in second.out and "Traceback" not in second.err
@@ -222,23 +225,8 @@ def test_a_student_keeps_acting_without_its_teacher_and_learns_again_when_a_new_
     assert not student.is_alive()
 
 
-def _until(condition, message, timeout=15.0):
-    deadline = time.monotonic() + timeout
-    while not condition():
-        assert time.monotonic() < deadline, message
-        time.sleep(0.02)
-
-
+@pytest.mark.slow
 def test_weights_options_are_checked_before_anything_starts(tmp_path):
-    import subprocess
-    import sys
-
-    from tests.conftest import ROOT, free_port
-
-    def conag(*args):
-        return subprocess.run([sys.executable, "-m", "conag", *args], cwd=ROOT, capture_output=True, text=True,
-                              timeout=30)
-
     bad = tmp_path / "bad.json"
     bad.write_text('{"format": "something"}')
     ep = f"tcp/127.0.0.1:{free_port()}"
@@ -250,17 +238,10 @@ def test_weights_options_are_checked_before_anything_starts(tmp_path):
 
 @pytest.mark.slow
 def test_conag_run_with_a_teacher_and_learning_agents_saves_their_weights(tmp_path):
-    import json
-    import subprocess
-    import sys
-
-    from tests.conftest import ROOT, free_port
-
     out, weights = tmp_path / "summary.json", tmp_path / "weights"
-    r = subprocess.run([sys.executable, "-m", "conag", "run", "scenarios/quick_wall.toml", "--headless", "--teacher",
-                        "--learn", "--eta", "0.2", "--weights-dir", str(weights), "--max-ticks", "2000",
-                        "--summary", str(out), "--listen", f"tcp/127.0.0.1:{free_port()}"],
-                       cwd=ROOT, capture_output=True, text=True, timeout=120)
+    r = conag("run", "scenarios/quick_wall.toml", "--headless", "--teacher", "--learn", "--eta", "0.2",
+              "--weights-dir", weights, "--max-ticks", 2000, "--summary", out,
+              "--listen", f"tcp/127.0.0.1:{free_port()}", timeout=120)
     assert r.returncode in (0, 3), r.stdout + r.stderr                 # 3: not complete within the ticks
     assert "quick_wall:" in r.stdout and "Traceback" not in r.stderr
     summary = json.loads(out.read_text())

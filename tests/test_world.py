@@ -13,8 +13,9 @@ import pytest
 
 from protocol.codec import encode
 from protocol.messages import CHANNELS, NO_READING, Perturbation
+from tests.conftest import make, scenario
 from world_server.config import WorldConfig
-from world_server.scenario import ScenarioError, parse_scenario
+from world_server.scenario import ScenarioError
 from world_server.sensors import sense
 from world_server.world import World
 
@@ -27,17 +28,6 @@ STEP = 0.3
 
 
 # ---------------------------------------------------------------- helpers
-
-
-def scenario(layout: str, agents: int = 1, seed: int = 1, **world):
-    lines = [f"{k} = {str(v).lower() if isinstance(v, bool) else repr(v)}" for k, v in world.items()]
-    text = (f'name = "t"\nseed = {seed}\nagents = {agents}\nlayout = """\n{layout.strip()}\n"""\n'
-            "[world]\n" + "\n".join(lines) + "\n")
-    return parse_scenario(text)
-
-
-def make(layout: str, seed: int = 0, agents: int = 1, **world) -> World:
-    return World(scenario(layout, agents, **world), np.random.default_rng(seed))
 
 
 def ranges(w: World, agent_id: str) -> np.ndarray:
