@@ -263,7 +263,7 @@ class Brain:
         corridor of food whose far walls no sensor has seen past the nearest disc, every
         deep site seems to have a way out sideways, so the mouth is filled and the rest
         sealed (generated pockets stalled this way). Here only cells seen free (`known`)
-        and open sites are passable, from the supply and the seen edge of the map; a site
+        and open sites are passable, from the supply and the open ground seen around the agent; a site
         whose filling disconnects another open site waits, and the agent goes deeper,
         seeing the walls as it goes. A few distance fields, only for sites in reach.
         """
@@ -274,9 +274,11 @@ class Brain:
         if not near.any():
             return unsafe
         passable = (self.maps.known | open_sites) & ~blocked
-        edge = np.zeros_like(passable)
-        edge[[0, -1], :] = edge[:, [0, -1]] = True
-        reference = (supply | (edge & self.maps.known)) & passable
+        # The outside: the supply, and open ground seen a few cells beyond the sites that
+        # are checked (the supply itself is often beyond the map, where nothing is seen).
+        outside = np.ones_like(passable)
+        outside[c - r - 3:c + r + 4, c - r - 3:c + r + 4] = False
+        reference = (supply | (outside & self.maps.known & ~open_sites)) & passable
         if not reference.any():
             return unsafe
         before = np.isfinite(distance_field(reference, ~passable))
