@@ -127,10 +127,13 @@ class Brain:
             self._odo += (frame.odom_dx / self.cell, frame.odom_dy / self.cell)
             layers = self.maps.maps
             free = (layers[BRICK] > 0.5) & (layers[CONFIG] <= 0.5)
+            walls = layers[OBSTACLE] > 0.5
             kx, ky = self.maps.move(frame.odom_dx, frame.odom_dy, self.cell)
             if kx or ky:
+                self.far.save_walls(walls)
                 back = self.far.move(kx, ky, free)
                 layers[BRICK][back] = 1.0
+                layers[OBSTACLE][self.far.load_walls()] = 1.0
                 self.far.config_layer(layers[CONFIG])
         self._track_source(frame)
         self.maps.sense(ranges, self.sensor_range)
@@ -282,6 +285,14 @@ class Brain:
         if not reference.any():
             return unsafe
         before = np.isfinite(distance_field(reference, ~passable))
+        # An open site walled in by structure bricks near the agent is a contradiction:
+        # one of them is likely a ghost (or the site a stale belief). Count those bricks
+        # as passable, so the way the site would have is not filled over before it is seen.
+        structure = (self.maps.maps[BRICK] > 0.5) & (self.maps.maps[CONFIG] > 0.5)
+        doubtful = self._walling_in(open_sites & ~before, structure)
+        if doubtful.any():
+            passable |= doubtful
+            before = np.isfinite(distance_field(reference, ~passable))
         for row, col in zip(*np.nonzero(near & before)):
             wall = ~passable
             wall[row, col] = True
@@ -290,6 +301,19 @@ class Brain:
             cut[row, col] = False
             unsafe[row, col] = cut.any()
         return unsafe
+
+    def _walling_in(self, enclosed: np.ndarray, structure: np.ndarray) -> np.ndarray:
+        """Structure bricks beside an `enclosed` open site, within SEAL_RADIUS + 1 cells of
+        the agent (where it is about to decide)."""
+        c, r = self.centre, SEAL_RADIUS + 1
+        local = np.zeros_like(enclosed)
+        local[c - r:c + r + 1, c - r:c + r + 1] = True
+        beside = np.zeros_like(enclosed)
+        beside[1:, :] |= enclosed[:-1, :]
+        beside[:-1, :] |= enclosed[1:, :]
+        beside[:, 1:] |= enclosed[:, :-1]
+        beside[:, :-1] |= enclosed[:, 1:]
+        return beside & structure & local
 
     def matching(self, bricks: np.ndarray, sites: np.ndarray, obstacles: np.ndarray,
                  closed: np.ndarray | None = None) -> Matching:

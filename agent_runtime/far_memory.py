@@ -52,9 +52,14 @@ class FarMemory:
         self.ever_seen: np.ndarray | None = None  # the same, never reset by a new sweep
         self._target: tuple[int, int] | None = None  # the square Explore is heading for
         self._target_age = 0                          # explore steps spent on it
+        # Fixed obstacles per world cell [x - x0, y - y0], as the map last showed them: a
+        # wall longer than the map scrolls off it while the agent follows it, and an agent
+        # that forgets the far end turns back to look for a way round there, for ever.
+        self.walls: np.ndarray | None = None
         if bounds is not None:
             x0, y0, x1, y1 = bounds
             self.seen = np.zeros((-(-(x1 - x0) // BLOCK), -(-(y1 - y0) // BLOCK)), bool)
+            self.walls = np.zeros((x1 - x0, y1 - y0), bool)
             self.ever_seen = self.seen.copy()
 
     # ------------------------------------------------------------------ frames
@@ -121,6 +126,31 @@ class FarMemory:
             back[r[on], c[on]] = True
             self.bricks = self.bricks[~on]
         return back
+
+    def _wall_window(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(map rows, map cols, grid x, grid y) of the map cells that lie in the world."""
+        x0, y0, x1, y1 = self.bounds
+        idx = np.arange(self.size)
+        gx = self.pos[0] + idx - self.centre - x0       # per map column
+        gy = self.pos[1] + self.centre - idx - y0       # per map row
+        cols, rows = np.flatnonzero((gx >= 0) & (gx < x1 - x0)), np.flatnonzero((gy >= 0) & (gy < y1 - y0))
+        return rows, cols, gx[cols], gy[rows]
+
+    def save_walls(self, obstacles: np.ndarray) -> None:
+        """Remember the fixed obstacles of the map (a bool layer) as it is now; call it
+        before the map shifts. Cells on the map overwrite what was remembered of them."""
+        if self.walls is None:
+            return
+        rows, cols, gx, gy = self._wall_window()
+        self.walls[np.ix_(gx, gy)] = obstacles[np.ix_(rows, cols)].T
+
+    def load_walls(self) -> np.ndarray:
+        """The remembered fixed obstacles that lie on the map now, as a map mask."""
+        out = np.zeros((self.size, self.size), bool)
+        if self.walls is not None:
+            rows, cols, gx, gy = self._wall_window()
+            out[np.ix_(rows, cols)] = self.walls[np.ix_(gx, gy)].T
+        return out
 
     def _remember(self, cells: np.ndarray) -> None:
         merged = np.unique(np.vstack([self.bricks, cells]), axis=0) if len(self.bricks) else np.unique(cells, axis=0)

@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 import sim
 from agent_runtime.brain import Brain, _mouth_side
 from agent_runtime.config import AgentConfig
-from agent_runtime.esm import CONFIG, OBSTACLE
+from agent_runtime.esm import BRICK, CONFIG, OBSTACLE
 from agent_runtime.far_memory import FarMemory, border_seed
 from agent_runtime.spreading import distance_field, seeded_distance_field
 from protocol.messages import BEHAVIOURS, CHANNELS, NO_READING, SensorFrame, Welcome
@@ -110,6 +110,34 @@ def test_a_mouth_site_waits_while_the_site_behind_it_is_open_on_seen_ground():
     assert unsafe[c, c] and not unsafe[c, c + 3]        # the far end is not near: not checked
     brain.maps.known[:] = True                          # seen open all round: no seal
     assert not brain.sealing(goals, open_sites, blocked, supply).any()
+
+
+def test_a_site_walled_in_by_a_ghost_keeps_the_way_it_would_have():
+    # A ring of sites in the world's corner; the agent stands on its last gap (south middle).
+    # Its map shows the north-west corner open but walled in by structure bricks, one of them
+    # a ghost: the site is a contradiction, so the gap waits until the agent has seen which.
+    brain = Brain(_welcome(), AgentConfig(), np.random.default_rng(0))
+    n, c = brain.cfg.map_size, brain.centre
+    m = brain.maps.maps
+    ring = [(r, k) for r in range(c - 2, c + 1) for k in range(c - 1, c + 2) if (r, k) != (c - 1, c)]
+    for r, k in ring:
+        m[CONFIG, r, k] = 1.0
+        m[BRICK, r, k] = float((r, k) not in ((c - 2, c - 1), (c, c)))
+    m[OBSTACLE, c - 3, c - 2:c + 3] = m[OBSTACLE, c - 3:c + 2, c - 2] = 1.0   # the world's corner
+    brain.maps.known[:] = True
+    goals = np.zeros((n, n), bool)
+    goals[c, c] = True
+    supply = np.zeros((n, n), bool)
+    supply[c + 8, c] = True
+
+    def unsafe():
+        layers = m > 0.5
+        blocked = layers[OBSTACLE] | (layers[BRICK] & layers[CONFIG])
+        return brain.sealing(goals, layers[CONFIG] & ~layers[BRICK], blocked, supply)[c, c]
+
+    assert unsafe()
+    m[BRICK, c - 2, c - 1] = 1.0        # seen filled after all: the gap may close
+    assert not unsafe()
 
 
 def test_a_site_no_path_reaches_is_not_beside_a_mouth():
