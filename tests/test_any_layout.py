@@ -359,9 +359,11 @@ def test_a_one_cell_gap_in_a_wall_is_never_sealed_by_the_map(path, seed):
         maps.sense(ranges, reach)
         gap = maps.cell_of(10.5 - here[0], 10.5 - here[1])
         assert maps.maps[OBSTACLE][gap] == 0.0
-    # And the wall beside it is mapped once the agent has been near it.
+    # And the wall beside it is mapped once the agent has been near it. (Two cells off, the
+    # sector that sees it may also cover a wall cell mapped from an earlier place, and the
+    # reading goes to that one, by the rule against ghosts: hypothesis found such a path.)
     near = maps.cell_of(10.5 - here[0], 11.5 - here[1])
-    if np.hypot(10.5 - here[0], 11.5 - here[1]) < 2.0:
+    if np.hypot(10.5 - here[0], 11.5 - here[1]) < 1.5:
         assert maps.maps[OBSTACLE][near] == 1.0
 
 
