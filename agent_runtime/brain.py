@@ -512,7 +512,7 @@ class Brain:
         if motor == "avoid_red":
             if _nearest(ranges[_CH["brick"]]) < self.sensor_range:
                 return steering.away_from(*self._reading_offset(ranges[_CH["brick"]]), frame.heading, cruise)
-            return steering.explore(frame.heading, self.rng, self.cfg.explore_turn, cruise)
+            return steering.explore(self.rng, self.cfg.explore_turn, cruise)
         # Explore is always excited (§4.1): the default when no construction output fires.
         return self._explore(frame.heading)
 

@@ -46,7 +46,7 @@ class AgentConfig:
             raise ValueError("agent.goal_sequencing must be true or false")
 
     @classmethod
-    def from_mapping(cls, table: dict) -> "AgentConfig":
+    def from_mapping(cls, table: dict) -> AgentConfig:
         known = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(table) - known)
         if unknown:

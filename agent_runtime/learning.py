@@ -54,8 +54,17 @@ from pathlib import Path
 
 import numpy as np
 
-from agent_runtime.network import (ARM_OUTPUTS, MOTOR_OUTPUTS, NONE, OUTPUTS, STATE_NODES, THRESHOLD, ActionNetwork,
-                                   Choice, select)
+from agent_runtime.network import (
+    ARM_OUTPUTS,
+    MOTOR_OUTPUTS,
+    NONE,
+    OUTPUTS,
+    STATE_NODES,
+    THRESHOLD,
+    ActionNetwork,
+    Choice,
+    select,
+)
 
 FORMAT = "conag-student-weights"
 VERSION = 1
@@ -86,7 +95,7 @@ class Student:
         self.excite, self.inhibit, self.threshold = excite, inhibit, float(threshold)
 
     @classmethod
-    def random(cls, rng: np.random.Generator) -> "Student":
+    def random(cls, rng: np.random.Generator) -> Student:
         """Weights uniform in [0, 0.5] (excitatory) and [-0.5, 0] (inhibitory), as in §5.1."""
         return cls(rng.uniform(*INIT_EXCITE, SHAPE), rng.uniform(*INIT_INHIBIT, SHAPE))
 
@@ -131,7 +140,7 @@ class Student:
         os.replace(tmp, path)
 
     @classmethod
-    def load(cls, path: str | os.PathLike) -> "Student":
+    def load(cls, path: str | os.PathLike) -> Student:
         """Read weights written by `save`; a WeightsFileError names the file and what is wrong."""
         try:
             doc = json.loads(Path(path).read_text(encoding="utf-8"))

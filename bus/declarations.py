@@ -25,7 +25,7 @@ def undeclare(*entities) -> None:
             continue
         try:
             entity.undeclare()
-        except Exception:  # the session may be closing already; nothing is left to free
+        except Exception:  # noqa: BLE001 -- the session may be closing already; nothing is left to free
             pass
 
 

@@ -286,7 +286,7 @@ def fmt_steps(values):
     return f"{a.mean():.0f} ± {a.std():.0f} (min {a.min():.0f}, max {a.max():.0f})"
 
 
-def table(rseeds, square, moved, nested, conag):
+def table(square, moved, nested, conag):
     rows = ["| task | system | completed | steps / ticks (completed runs) | rules / states | agents |",
             "|---|---|---|---|---|---|"]
     for seeding in ("corners", "sides"):
@@ -366,7 +366,7 @@ def main(argv=None):
     outdir = Path(args.out)
     outdir.mkdir(parents=True, exist_ok=True)
     paths = pictures(square, moved, nested, outdir)
-    tab = table(rseeds, square, moved, nested, conag)
+    tab = table(square, moved, nested, conag)
     print(tab)
     write_section(args.doc, "R4", report(tab, paths, rseeds, cseeds, moves, nested, conag, q))
     return tab

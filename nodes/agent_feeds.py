@@ -72,6 +72,6 @@ class AgentFeeds:
         try:
             if brain is not None:
                 self.report(brain, tick)
-        except Exception as exc:  # on the way out (a signal mid-step, a closing session): never fatal
+        except Exception as exc:  # noqa: BLE001 -- on the way out (a signal mid-step, a closing session): never fatal
             log.debug("agent %s: no final state report: %s", self.agent_id, exc)
         self._declared.close()

@@ -3,9 +3,10 @@
 Wire format: a msgpack map {"v": SCHEMA_VERSION, "t": type name, "f": [field values in
 declaration order]}. Tuples of floats (sensor readings, site coordinates, ...) travel as
 one msgpack bin of little-endian float64s: exact, and decoded by a single C call, which
-keeps the per-tick frame cheap on both ends of the bus. Decoding anything malformed (random bytes, wrong types, missing or
-extra fields, NaN/inf, unknown type, wrong version, oversize) raises ProtocolError and
-nothing else, so a receiver can count and drop bad input without ever crashing.
+keeps the per-tick frame cheap on both ends of the bus. Decoding anything malformed
+(random bytes, wrong types, missing or extra fields, NaN/inf, unknown type, wrong
+version, oversize) raises ProtocolError and nothing else, so a receiver can count and
+drop bad input without ever crashing.
 """
 
 from __future__ import annotations
@@ -68,7 +69,7 @@ def _check_scalar(value: object, kind: type, where: str) -> object:
     elif kind is float:
         if isinstance(value, (int, float)) and not isinstance(value, bool):
             return float(value)
-    elif kind is str:
+    elif kind is str:  # noqa: SIM102 -- one branch per kind, like those above
         if isinstance(value, str) and len(value) <= MAX_STRING:
             return value
     raise ProtocolError(f"{where}: expected {kind.__name__}, got {type(value).__name__}")
@@ -102,7 +103,7 @@ def decode(data: bytes, expected: type | tuple[type, ...] | None = None) -> obje
         raise ProtocolError(f"message of {size} bytes exceeds {MAX_MESSAGE_BYTES}")
     try:
         raw = msgpack.unpackb(bytes(data), raw=False, strict_map_key=True, use_list=True)
-    except Exception as exc:  # msgpack raises many types; all mean "not a message"
+    except Exception as exc:  # noqa: BLE001 -- msgpack raises many types; all mean "not a message"
         raise ProtocolError(f"not msgpack: {exc}") from None
     if not isinstance(raw, dict) or set(raw) != {"v", "t", "f"}:
         raise ProtocolError("not a ConAg envelope")

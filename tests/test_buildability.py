@@ -4,7 +4,7 @@ order that an independent replay (scipy's labelling, not the module's kernels) a
 from __future__ import annotations
 
 from collections import deque
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 
 import numpy as np
@@ -64,7 +64,7 @@ def brute_force(layout) -> bool:
                     todo.append(n)
         return seen
 
-    @lru_cache(maxsize=None)
+    @cache
     def solve(state: tuple[str, ...]) -> bool:
         grid = [list(row) for row in state]
         sites = [(c, r) for r, row in enumerate(grid) for c, ch in enumerate(row) if ch == "+"]

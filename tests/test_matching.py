@@ -26,7 +26,7 @@ def layout(name: str):
 
 
 def grid_of(rows: str) -> dict[str, np.ndarray]:
-    lines = [line for line in rows.strip().splitlines()]
+    lines = rows.strip().splitlines()
     arr = np.array([list(line) for line in lines])
     return {ch: arr == ch for ch in "b+#"}
 

@@ -363,7 +363,7 @@ def _usable_brick(grid, width, s, rank, walk, walk_start, dig, part, agent_part,
 
 @njit(cache=True)
 def _touches_agents(v, width, walk, walk_start):
-    for w in (v - 1, v + 1, v - width, v + width):
+    for w in (v - 1, v + 1, v - width, v + width):  # noqa: SIM110 -- numba compiles this loop, not any() of a generator
         if walk[w] >= 0 and walk_start[walk[w]]:
             return True
     return False

@@ -55,7 +55,7 @@ class WorldConfig:
             raise ValueError("world.sensor_sectors must be an integer from 1 to 64")
 
     @classmethod
-    def from_mapping(cls, table: dict) -> "WorldConfig":
+    def from_mapping(cls, table: dict) -> WorldConfig:
         """Build from a TOML table, rejecting unknown keys (a typo must not pass silently)."""
         known = {f.name: f.type for f in dataclasses.fields(cls)}
         unknown = sorted(set(table) - set(known))

@@ -402,7 +402,7 @@ class _World:
     def _pile(self, rng, n: int, centre: tuple[int, int]) -> bool:
         """A compact block of n bricks near `centre`, on free cells only."""
         rows, cols = self.shape
-        w = max(1, int(round(math.sqrt(n) * rng.uniform(0.7, 1.4))))
+        w = max(1, round(math.sqrt(n) * rng.uniform(0.7, 1.4)))
         h = -(-n // w)
         free = self.free()
         for _ in range(60):
@@ -437,10 +437,7 @@ class _World:
             return False
         struct = np.argwhere(self.reserved)
         dist = np.min(np.abs(cells[:, None, :] - struct[None, ::max(1, len(struct) // 64), :]).sum(axis=2), axis=1)
-        if near:
-            pool = cells[dist <= np.quantile(dist, 0.1)]
-        else:
-            pool = cells[dist >= np.quantile(dist, 0.9)]
+        pool = cells[dist <= np.quantile(dist, 0.1)] if near else cells[dist >= np.quantile(dist, 0.9)]
         first = tuple(pool[rng.integers(len(pool))])
         blob = _bfs_cells(free, first, k)
         if len(blob) < k:
@@ -583,7 +580,7 @@ def _letter_stamp(rng, budget: int, span: int) -> np.ndarray:
     while len(word) < 3 and rng.random() < 0.6:
         nxt = str(rng.choice(sorted(cells)))
         width = (len(word) + 1) * 6 * scale
-        if sum(cells[ch] for ch in word + [nxt]) * scale * scale > budget or width > span:
+        if sum(cells[ch] for ch in [*word, nxt]) * scale * scale > budget or width > span:
             break
         word.append(nxt)
     glyphs = [np.array([list(r) for r in _FONT[ch].split("|")]) for ch in word]

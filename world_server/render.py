@@ -149,7 +149,7 @@ def _draw_agents(ax, scenario: Scenario, agents, legend: dict) -> None:
 class _CircleHandler(HandlerPatch):
     """Legend entries for circles are small circles in the artist's own style."""
 
-    def create_artists(self, legend, orig_handle, xdescent, ydescent, width, height, fontsize, trans):
+    def create_artists(self, legend, orig_handle, xdescent, ydescent, width, height, fontsize, trans):  # noqa: ARG002
         centre = (width / 2 - xdescent, height / 2 - ydescent)
         circle = Circle(centre, min(width, height) / 2)
         self.update_prop(circle, orig_handle, legend)

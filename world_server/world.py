@@ -13,8 +13,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from protocol.messages import (ACTIONS, CHANNELS, DISC_KINDS, SITE_OPS, Blueprint, Perturbation, PerturbResult,
-                               SensorFrame, Welcome, WorldStatus)
+from protocol.messages import (
+    ACTIONS,
+    CHANNELS,
+    DISC_KINDS,
+    SITE_OPS,
+    Blueprint,
+    Perturbation,
+    PerturbResult,
+    SensorFrame,
+    Welcome,
+    WorldStatus,
+)
 from world_server.discs import BRICK, FOOD, WATER, DiscStore
 from world_server.physics import Physics, motor_update
 from world_server.scenario import Scenario
@@ -138,7 +148,7 @@ class World:
             setattr(self, name, np.append(arr, np.zeros(1, arr.dtype)))
         self.odometry = np.vstack([self.odometry, np.zeros((1, 2))])
         self.flags = np.vstack([self.flags, np.zeros((1, len(FLAGS)), bool)])
-        self._ranges = np.vstack([self._ranges, np.zeros((1,) + self._ranges.shape[1:])])
+        self._ranges = np.vstack([self._ranges, np.zeros((1, *self._ranges.shape[1:]))])
 
     def _free_start(self) -> np.ndarray:
         """First `A` start not taken by a body, else the first clear empty cell (reading order)."""
