@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import Any
 
 
 @dataclass(frozen=True)
@@ -51,5 +52,6 @@ class AgentConfig:
         unknown = sorted(set(table) - known)
         if unknown:
             raise ValueError(f"unknown agent setting(s): {', '.join(unknown)}; known: {', '.join(sorted(known))}")
-        return cls(**{k: (float(v) if isinstance(getattr(cls, k), float) and isinstance(v, int) else v)
-                      for k, v in table.items()})
+        values: dict[str, Any] = {k: (float(v) if isinstance(getattr(cls, k), float) and isinstance(v, int) else v)
+                                  for k, v in table.items()}
+        return cls(**values)

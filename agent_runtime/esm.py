@@ -34,6 +34,7 @@ computed for a window of cell offsets fixed per sensor range, and cached per `fr
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -82,7 +83,7 @@ class EgocentricMaps:
         self._windows: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._sector_dirs: dict[int, np.ndarray] = {}
         self._geometry_key: tuple | None = None
-        self._geometry: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._geometry: tuple[np.ndarray, ...] | None = None
 
     # ------------------------------------------------------------------ coordinates
 
@@ -94,8 +95,9 @@ class EgocentricMaps:
         return (self.centre - math.floor(self.frac[1] + oy + 0.5),
                 self.centre + math.floor(self.frac[0] + ox + 0.5))
 
-    def offset_of(self, row: int, col: int) -> tuple[float, float]:
-        """World offset (x, y), in cells, from the agent to the centre of cell (row, col)."""
+    def offset_of(self, row: Any, col: Any) -> tuple[Any, Any]:
+        """World offset (x, y), in cells, from the agent to the centre of cell (row, col)
+        (ints give floats, arrays of rows and columns give arrays)."""
         return (col - self.centre - float(self.frac[0]), self.centre - row - float(self.frac[1]))
 
     def contains(self, row: int, col: int) -> bool:
@@ -269,6 +271,7 @@ class EgocentricMaps:
             core = _sector_pairs(angle, dist, SITE_BRICK_OFFSET, sectors)
             self._geometry = (cells, dist, pairs, vx, vy, core)
             self._geometry_key = key
+        assert self._geometry is not None
         return self._geometry
 
 

@@ -161,7 +161,7 @@ class FarMemory:
     def mark_seen(self, radius: float) -> int:
         """The squares whose centre lies within `radius` cells of the agent have been seen;
         returns how many had never been seen before."""
-        if self.seen is None:
+        if self.seen is None or self.ever_seen is None:
             return 0
         centres = self._block_centres()
         near = np.hypot(centres[..., 0] - self.pos[0], centres[..., 1] - self.pos[1]) <= radius
@@ -171,6 +171,7 @@ class FarMemory:
         return new
 
     def _block_centres(self) -> np.ndarray:
+        assert self.seen is not None and self.bounds is not None  # asked only when the world's extent is known
         x0, y0, x1, y1 = self.bounds
         bx = x0 + np.minimum(np.arange(self.seen.shape[0]) * BLOCK + BLOCK // 2, x1 - x0 - 1)
         by = y0 + np.minimum(np.arange(self.seen.shape[1]) * BLOCK + BLOCK // 2, y1 - y0 - 1)

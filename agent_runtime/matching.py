@@ -182,8 +182,8 @@ def _matching_kernel(bricks, sites, obstacles):
 
 def _compiled(bricks, sites, obstacles, closed) -> Matching:
     bricks, sites, walls = _grids(bricks, sites, obstacles, closed)
-    match, done, *cells = _matching_kernel(bricks, sites, walls)
-    return _result(match, done, *cells, sites)
+    match, done, site_r, site_c, brick_r, brick_c = _matching_kernel(bricks, sites, walls)
+    return _result(match, done, site_r, site_c, brick_r, brick_c, sites)
 
 
 def _around_closed(matcher, bricks, sites, obstacles, closed) -> Matching:
@@ -286,8 +286,8 @@ def _whole_grid(bricks, sites, obstacles, closed) -> Matching:
         todo &= ~chosen
         for r, c_ in zip(*np.nonzero(chosen)):  # the pairs, for the report only
             pairs.append((r, c_, *_trace_end(int(succ_r[r, c_]), int(succ_c[r, c_]), da, succ_r, succ_c)))
-    rows = np.array(pairs, np.int64).reshape(-1, 4).T
-    return _result(match, len(pairs), *rows, sites)
+    site_r, site_c, brick_r, brick_c = np.array(pairs, np.int64).reshape(-1, 4).T
+    return _result(match, len(pairs), site_r, site_c, brick_r, brick_c, sites)
 
 
 def _trace_end(r: int, c: int, da: np.ndarray, succ_r: np.ndarray, succ_c: np.ndarray) -> tuple[int, int]:

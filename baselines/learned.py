@@ -205,15 +205,15 @@ def learn(rule_set: RuleSet, seeds, shape, rng: np.random.Generator, epochs: int
     n_states = n_states_of(rule_set, seeds)
     x, y = collect(rule_set, seeds, shape, rng, episodes, n_agents)
     net = ImitationNet(input_size(n_states), n_hidden, n_classes(n_states), rng, lr)
-    errors = []
+    per_epoch = []
     for _ in range(epochs):
         order = rng.permutation(len(y))
         total = 0
         for start in range(0, len(y), batch):
             idx = order[start:start + batch]
             total += net.train_step(x[idx], y[idx])
-        errors.append(total)
-    errors = np.array(errors)
+        per_epoch.append(total)
+    errors = np.array(per_epoch)
     if return_net:
         return errors, net, NetPolicy(net, n_states), len(y)
     return errors

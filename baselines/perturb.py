@@ -10,6 +10,8 @@ closes no new agent can reach the inner one, which stays unfinished.
 """
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from .lattice import BRICK, EMPTY, World, make_world, rule_policy, simulate, step
@@ -44,32 +46,33 @@ def move_brick(world: World, src, dst) -> bool:
     return True
 
 
-def brick_mover(at_step: int, seeds: dict, origin, n: int, direction: str = "out"):
+class BrickMover:
     """An `on_step` hook: from `at_step` on, move the first placed brick once.
 
     The brick moves one cell away from ("out") or towards ("in") the centre.
     `moved` records (src, dst) once done.
     """
-    sign = STEPS[direction]
 
-    def hook(world: World, t: int) -> None:
-        if hook.moved or t < at_step:
+    def __init__(self, at_step: int, seeds: dict, origin, n: int, direction: str = "out"):
+        self.at_step, self.seeds, self.origin, self.n = at_step, seeds, origin, n
+        self.sign = STEPS[direction]
+        self.moved: tuple[tuple[int, int], tuple[int, int]] | None = None
+
+    def __call__(self, world: World, t: int) -> None:
+        if self.moved or t < self.at_step:
             return
-        for src in placed_bricks(world, seeds):
-            dr, dc = outward(src, origin, n)
-            dst = (src[0] + sign * dr, src[1] + sign * dc)
+        for src in placed_bricks(world, self.seeds):
+            dr, dc = outward(src, self.origin, self.n)
+            dst = (src[0] + self.sign * dr, src[1] + self.sign * dc)
             if move_brick(world, src, dst):
-                hook.moved = (src, dst)
+                self.moved = (src, dst)
                 return
-
-    hook.moved = None
-    return hook
 
 
 def run_perturbed(rule_set, seeds, shape, n, origin, at_step, direction, n_agents,
                   max_steps, rng):
     """Simulate with one brick moved at `at_step`; returns (result, move)."""
-    hook = brick_mover(at_step, seeds, origin, n, direction)
+    hook = BrickMover(at_step, seeds, origin, n, direction)
     result = simulate(rule_set, seeds, shape, n_agents, max_steps, rng, on_step=hook)
     return result, hook.moved
 
@@ -97,7 +100,7 @@ def nested_squares(outer_n: int, inner_n: int, n_agents: int, max_steps: int,
     world = make_world(shape, {**corner_seeds(outer_n, outer_o),
                                **corner_seeds(inner_n, inner_o)})
     rules = corner_rules(outer | inner)
-    done = {"outer": None, "inner": None, "enclosed": None}
+    done: dict[str, Any] = {"outer": None, "inner": None, "enclosed": None}
     for t in range(1, max_steps + 1):
         step(world, rule_policy(rules), n_agents, rng)
         if done["inner"] is None and ring_done(world, inner):

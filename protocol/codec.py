@@ -15,6 +15,7 @@ import dataclasses
 import functools
 import struct
 import typing
+from typing import Any
 
 import msgpack
 
@@ -32,7 +33,7 @@ _BY_NAME = {cls.__name__: cls for cls in MESSAGE_TYPES}
 
 
 @functools.cache
-def _field_types(cls: type) -> tuple[tuple[str, object], ...]:
+def _field_types(cls: type) -> tuple[tuple[str, Any], ...]:
     hints = typing.get_type_hints(cls)
     return tuple((f.name, hints[f.name]) for f in dataclasses.fields(cls))
 
@@ -40,7 +41,7 @@ def _field_types(cls: type) -> tuple[tuple[str, object], ...]:
 @functools.cache
 def _wire_spec(cls: type) -> tuple[tuple[str, type, bool], ...]:
     """(name, scalar type, is a tuple of them) per field, worked out once per class."""
-    spec = []
+    spec: list[tuple[str, type, bool]] = []
     for name, hint in _field_types(cls):
         is_tuple = typing.get_origin(hint) is tuple
         spec.append((name, typing.get_args(hint)[0] if is_tuple else hint, is_tuple))
@@ -49,12 +50,12 @@ def _wire_spec(cls: type) -> tuple[tuple[str, type, bool], ...]:
 
 def encode(msg: object) -> bytes:
     """Encode a protocol message to bytes."""
-    name = type(msg).__name__
-    if _BY_NAME.get(name) is not type(msg):
-        raise TypeError(f"not a protocol message: {type(msg)!r}")
+    cls: type = type(msg)  # (a `type` for mypy, which does not take type[object] as hashable)
+    name = cls.__name__
+    if _BY_NAME.get(name) is not cls:
+        raise TypeError(f"not a protocol message: {cls!r}")
     values = [_pack_floats(v) if is_tuple and kind is float else list(v) if is_tuple else v
-              for v, (_, kind, is_tuple) in zip((getattr(msg, n) for n, _ in _field_types(type(msg))),
-                                                 _wire_spec(type(msg)))]
+              for v, (_, kind, is_tuple) in zip((getattr(msg, n) for n, _ in _field_types(cls)), _wire_spec(cls))]
     return msgpack.packb({"v": SCHEMA_VERSION, "t": name, "f": values}, use_bin_type=True)
 
 

@@ -424,7 +424,7 @@ class _World:
             cand = cells[rng.integers(len(cells), size=16)]
             dist = np.min([np.abs(cand - p).sum(axis=1) for p in chosen], axis=0)
             chosen.append(cand[int(np.argmax(dist))])
-        return [tuple(map(int, p)) for p in chosen]
+        return [(int(p[0]), int(p[1])) for p in chosen]
 
     # -- agents
 
@@ -575,7 +575,7 @@ def _letter_stamp(rng, budget: int, span: int) -> np.ndarray:
     scale = int(rng.integers(1, 4))
     while scale > 1 and (7 * scale > span or min(cells.values()) * scale * scale > budget):
         scale -= 1
-    fits = sorted(ch for ch in cells if cells[ch] * scale * scale <= budget) or [min(cells, key=cells.get)]
+    fits = sorted(ch for ch in cells if cells[ch] * scale * scale <= budget) or [min(cells, key=cells.__getitem__)]
     word = [str(rng.choice(fits))]
     while len(word) < 3 and rng.random() < 0.6:
         nxt = str(rng.choice(sorted(cells)))

@@ -45,7 +45,7 @@ class Physics:
             self.space.add(pymunk.Segment(self.space.static_body, a, b, 0.05))
 
     # discs -------------------------------------------------------------------------
-    def add_disc(self, index: int, xy: tuple[float, float], group: int = 0) -> None:
+    def add_disc(self, index: int, xy: tuple[float, float] | np.ndarray, group: int = 0) -> None:
         shape = pymunk.Circle(self.space.static_body, self.cfg.disc_radius, (float(xy[0]), float(xy[1])))
         shape.filter = pymunk.ShapeFilter(group=group)
         self.space.add(shape)
@@ -59,7 +59,7 @@ class Physics:
         self._discs[index].filter = pymunk.ShapeFilter(group=0)
 
     # agents ------------------------------------------------------------------------
-    def add_agent(self, xy: tuple[float, float]) -> int:
+    def add_agent(self, xy: tuple[float, float] | np.ndarray) -> int:
         """Add a round agent body; returns its index. Its collision group is index + 1,
         which a brick it drops shares until the agent has moved off it."""
         body = pymunk.Body(self.cfg.agent_mass, math.inf)

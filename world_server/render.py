@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import LineCollection
@@ -70,7 +71,7 @@ def draw_world(ax, scenario: Scenario, *,
     """Draw the bird's-eye world on an existing matplotlib axes (see `render_scenario`
     for `agents` and `discs`); `legend` puts the key "right" of or "below" the axes, or
     nowhere (None)."""
-    agents = _layout_agents(scenario) if agents is None else [tuple(map(float, a)) for a in agents]
+    agents = _layout_agents(scenario) if agents is None else [(float(x), float(y), float(h)) for x, y, h in agents]
     discs = _layout_discs(scenario) if discs is None else [_checked_disc(d) for d in discs]
     _setup_axes(ax, scenario)
     handles: dict[str, object] = {}
@@ -80,8 +81,10 @@ def draw_world(ax, scenario: Scenario, *,
     _draw_sites(ax, scenario, handles)
     _draw_agents(ax, scenario, agents, handles)
     if legend and handles:
-        where = {"right": {"loc": "upper left", "bbox_to_anchor": (1.02, 1.0)},
-                 "below": {"loc": "upper center", "bbox_to_anchor": (0.5, -0.13), "ncol": len(handles)}}[legend]
+        places: dict[str, dict[str, Any]] = {
+            "right": {"loc": "upper left", "bbox_to_anchor": (1.02, 1.0)},
+            "below": {"loc": "upper center", "bbox_to_anchor": (0.5, -0.13), "ncol": len(handles)}}
+        where = places[legend]
         ax.legend(list(handles.values()), list(handles), handler_map={Circle: _CircleHandler()},
                   fontsize="small", frameon=False, **where)
 

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from world_server.config import WorldConfig
 
@@ -76,13 +77,13 @@ class Scenario:
         """bool [row, col]: where the layout holds one of `chars` (row 0 is the north)."""
         return np.isin(np.array([list(line) for line in self.layout]), list(chars))
 
-    def to_world(self, cells: np.ndarray) -> np.ndarray:
+    def to_world(self, cells: ArrayLike) -> np.ndarray:
         """Cell (col, row) -> world (x, y) of the cell centre; y grows northwards."""
         cells = np.asarray(cells, dtype=np.float64).reshape(-1, 2)
         size = self.world.cell_size
         return np.column_stack([(cells[:, 0] + 0.5) * size, (self.rows - 1 - cells[:, 1] + 0.5) * size])
 
-    def to_cell(self, xy: np.ndarray) -> np.ndarray:
+    def to_cell(self, xy: ArrayLike) -> np.ndarray:
         """World (x, y) -> the (col, row) of the cell holding it."""
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
         size = self.world.cell_size

@@ -31,7 +31,7 @@ def run_summary(status: WorldStatus, states: Mapping[str, AgentState] | None = N
           "behaviour_ticks": behaviour_ticks(states.get(a))}
          for a, d, g, dr, r in zip(status.agent_ids, status.agent_distance, status.agent_grabs,
                                    status.agent_drops, status.agent_restarts)),
-        key=lambda agent: agent["id"])  # by id, not by who happened to attach first
+        key=lambda agent: str(agent["id"]))  # by id, not by who happened to attach first
     return {
         "scenario": status.scenario,
         "seed": status.seed,
