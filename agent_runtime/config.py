@@ -15,6 +15,8 @@ from typing import Any
 
 @dataclass(frozen=True)
 class AgentConfig:
+    """The agent's settings (motivations, speeds, distances, map size, goal sequencing); frozen."""
+
     map_size: int = 41              # cells per side of every ESM and NM (odd)
     hunger_rate: float = 0.002      # hunger and thirst grow by this much per tick ...
     thirst_rate: float = 0.0025
@@ -48,6 +50,7 @@ class AgentConfig:
 
     @classmethod
     def from_mapping(cls, table: dict) -> AgentConfig:
+        """An AgentConfig from a TOML table; unknown keys are a ValueError naming the known ones."""
         known = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(table) - known)
         if unknown:

@@ -101,6 +101,7 @@ class EgocentricMaps:
         return (col - self.centre - float(self.frac[0]), self.centre - row - float(self.frac[1]))
 
     def contains(self, row: int, col: int) -> bool:
+        """Whether (row, col) is a cell of the map."""
         return 0 <= row < self.size and 0 <= col < self.size
 
     # ------------------------------------------------------------------ blueprint

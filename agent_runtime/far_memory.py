@@ -104,6 +104,7 @@ class FarMemory:
         self.site_open[on[(clear_age[r, c] == 0) & (brick_layer[r, c] <= 0.5)]] = True
 
     def open_sites(self) -> int:
+        """How many sites of the blueprint are believed open (no brick seen on them)."""
         return int(self.site_open.sum())
 
     # ------------------------------------------------------------------ moving
@@ -225,6 +226,7 @@ class FarMemory:
         return np.column_stack([rows[off], cols[off]])
 
     def far_bricks(self) -> np.ndarray:
+        """(rows, cols) as a (k, 2) array of the remembered free bricks, on the map or beyond it."""
         rows, cols = self.to_map(self.bricks)
         return np.column_stack([rows, cols])
 

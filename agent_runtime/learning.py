@@ -104,6 +104,7 @@ class Student:
         return ActionNetwork(self.excite.copy(), self.inhibit.copy(), self.threshold)
 
     def choose(self, state: np.ndarray) -> Choice:
+        """The (arm, motor) outputs the current weights fire for the state node activations `state`."""
         net = np.asarray(state, dtype=np.float64) @ (self.excite + self.inhibit)
         return select(net, self.threshold)
 

@@ -73,6 +73,8 @@ class World:
 
 @dataclass(eq=False)
 class Result:
+    """How a lattice run ended: the final grid and brick states, the steps taken, built or not."""
+
     grid: np.ndarray
     brick_state: np.ndarray
     steps: int
@@ -89,6 +91,7 @@ def make_world(shape: tuple[int, int], seeds: dict[tuple[int, int], int]) -> Wor
 
 
 def neighbour(pos: tuple[int, int], index: int) -> tuple[int, int]:
+    """The cell next to `pos` in direction `index` (N, NE, ... NW)."""
     dr, dc = OFFSETS[index]
     return pos[0] + dr, pos[1] + dc
 
@@ -111,6 +114,7 @@ def sense(world: World, pos: tuple[int, int]) -> tuple[tuple[int, int], ...]:
 
 
 def holds(condition: int, seen: tuple[int, int]) -> bool:
+    """Whether a sensed neighbour (kind, state) meets a rule condition (a brick state or NO_BRICK)."""
     kind, state = seen
     if condition == NO_BRICK:
         return kind != WALL
@@ -118,6 +122,7 @@ def holds(condition: int, seen: tuple[int, int]) -> bool:
 
 
 def matches(rule: Rule, state: int, pattern) -> bool:
+    """Whether `rule` fires for an agent in `state` sensing `pattern` (8 neighbours)."""
     return rule.state == state and all(holds(c, pattern[i]) for i, c in rule.require)
 
 
@@ -156,6 +161,7 @@ def act(world: World, policy: Policy, pos, rng: np.random.Generator) -> None:
 
 
 def border_cells(shape: tuple[int, int]) -> list[tuple[int, int]]:
+    """The cells on the edge of the grid, where agents enter."""
     rows, cols = shape
     return [(r, c) for r in range(rows) for c in range(cols)
             if r in (0, rows - 1) or c in (0, cols - 1)]
@@ -182,6 +188,7 @@ def step(world: World, policy: Policy, n_agents: int, rng: np.random.Generator) 
 
 
 def is_built(world: World, target: np.ndarray | None) -> bool:
+    """Whether the grid is exactly the target (never, without a target)."""
     return target is not None and np.array_equal(world.grid, target)
 
 

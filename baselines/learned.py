@@ -50,6 +50,7 @@ def n_classes(n_states: int) -> int:
 
 
 def to_class(action: str, new_state: int, n_states: int) -> int:
+    """The network's class of a rule's (action, new state): 0 explore, then brick, then wait."""
     if action == "brick":
         return 1 + new_state
     if action == "wait":
@@ -84,6 +85,7 @@ def explore(state: int, pattern, rng: np.random.Generator):
 # --------------------------------------------------------------------------- encoding
 
 def input_size(n_states: int) -> int:
+    """Length of an encoded input: own state one-hot, then per neighbour kind + state one-hots."""
     return n_states + 8 * (N_KINDS + n_states)
 
 
@@ -118,6 +120,7 @@ class ImitationNet:
         self.lr = lr
 
     def forward(self, x: np.ndarray):
+        """(hidden activations, class probabilities) for the inputs `x`."""
         h = np.tanh(x @ self.w1 + self.b1)
         z = h @ self.w2 + self.b2
         z = z - z.max(axis=-1, keepdims=True)
@@ -157,6 +160,7 @@ class NetPolicy:
     n_states: int
 
     def __call__(self, state: int, pattern, rng: np.random.Generator):
+        """The trained network's decision for an agent in `state` sensing `pattern`; explore if none."""
         cls = int(self.net.predict(encode(state, pattern, self.n_states)))
         decision = from_class(cls, self.n_states)
         return explore(state, pattern, rng) if decision is None else decision
@@ -174,6 +178,7 @@ class RecordingTeacher:
         self.targets: list[int] = []
 
     def __call__(self, state: int, pattern, rng: np.random.Generator):
+        """The rule set's decision, recording the encoded input and its class for training."""
         cls = teacher_class(self.rule_set, state, pattern, self.n_states)
         self.inputs.append(encode(state, pattern, self.n_states))
         self.targets.append(cls)

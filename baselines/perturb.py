@@ -59,6 +59,7 @@ class BrickMover:
         self.moved: tuple[tuple[int, int], tuple[int, int]] | None = None
 
     def __call__(self, world: World, t: int) -> None:
+        """Once `at_step` is reached, move the first placed brick that can move (once only)."""
         if self.moved or t < self.at_step:
             return
         for src in placed_bricks(world, self.seeds):
@@ -78,10 +79,12 @@ def run_perturbed(rule_set, seeds, shape, n, origin, at_step, direction, n_agent
 
 
 def ring_done(world: World, ring: np.ndarray) -> bool:
+    """Whether every cell of the ring mask holds a brick."""
     return bool(np.all(world.grid[ring == BRICK] == BRICK))
 
 
 def inside(pos, origin, n) -> bool:
+    """Whether `pos` lies strictly inside the n x n square at `origin`."""
     return all(o < p < o + n - 1 for p, o in zip(pos, origin))
 
 

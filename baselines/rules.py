@@ -56,6 +56,7 @@ def square_target(n: int, origin: tuple[int, int], shape) -> np.ndarray:
 
 
 def corner_seeds(n: int, origin) -> dict:
+    """The four corner seeds of an n x n square at `origin`: {cell: corner state}."""
     r, c = origin
     return {(r, c): TL, (r, c + n - 1): TR, (r + n - 1, c + n - 1): BR, (r + n - 1, c): BL}
 

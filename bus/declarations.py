@@ -46,6 +46,7 @@ class Declarations:
         return entity
 
     def close(self) -> None:
+        """Undeclare every entity, last declared first."""
         entities, self._entities = self._entities[::-1], []
         undeclare(*entities)
 

@@ -32,6 +32,8 @@ from world_server.scenario import Scenario
 
 @dataclass(frozen=True)
 class TrialResult:
+    """One learning trial: the student's errors against the teacher, and how far the build got."""
+
     errors: int            # steps where the student's (arm, motor) differs from the teacher's
     ticks: int             # steps taken
     sites_filled: int

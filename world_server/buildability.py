@@ -63,6 +63,8 @@ MAX_BRICK_CHOICES = 4
 
 @dataclass(frozen=True)
 class Buildability:
+    """The verdict of `check_buildable`: ok or why not, and a fill order with its bricks that works."""
+
     ok: bool
     reason: str = ""                   # empty when ok; otherwise a sentence naming (col,row) cells
     order: tuple[Cell, ...] = ()       # the open sites in a fill order that works

@@ -13,6 +13,8 @@ from dataclasses import dataclass
 
 @dataclass(frozen=True)
 class WorldConfig:
+    """The world's physical settings (sizes, speeds, sensors, gripper, noise); frozen."""
+
     cell_size: float = 1.0          # one disc diameter; layout cells are this wide
     disc_radius: float = 0.5
     agent_radius: float = 0.3       # < disc_radius so an agent fits through a one-cell gap

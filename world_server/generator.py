@@ -50,6 +50,8 @@ class GenerationError(RuntimeError):
 
 @dataclass(frozen=True)
 class GeneratedScenario:
+    """A generated layout: what was drawn (family, size, agents, supply) and the scenario file text."""
+
     name: str
     seed: int
     family: str
@@ -65,10 +67,12 @@ class GeneratedScenario:
     text: str = field(repr=False)     # the scenario file
 
     def scenario(self) -> Scenario:
+        """The scenario file parsed."""
         return parse_scenario(self.text, f"<{self.name}>")
 
     @property
     def size(self) -> tuple[int, int]:
+        """(cols, rows)."""
         return self.cols, self.rows
 
 

@@ -50,6 +50,8 @@ class ScenarioError(ValueError):
 
 @dataclass(frozen=True)
 class Scenario:
+    """A parsed scenario file: name, seed, agents, tick mode and limit, the layout rows, the world."""
+
     name: str
     seed: int
     agents: int
@@ -62,10 +64,12 @@ class Scenario:
 
     @property
     def rows(self) -> int:
+        """Rows of the layout (north first)."""
         return len(self.layout)
 
     @property
     def cols(self) -> int:
+        """Columns of the layout (west first)."""
         return len(self.layout[0])
 
     def cells(self, chars: str) -> np.ndarray:
@@ -102,6 +106,7 @@ def load_scenario(path: str | Path) -> Scenario:
 
 
 def parse_scenario(text: str, path: str = "<string>") -> Scenario:
+    """Parse and validate scenario TOML `text` (`path` names it in errors); raise ScenarioError."""
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

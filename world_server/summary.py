@@ -25,6 +25,7 @@ def behaviour_ticks(state: AgentState | None) -> dict[str, int]:
 
 def run_summary(status: WorldStatus, states: Mapping[str, AgentState] | None = None,
                 stalled: bool = False) -> dict:
+    """The run summary (see the module) of a final status, with the agents' last AgentStates."""
     states = states or {}
     agents = sorted(
         ({"id": a, "distance": round(d, 6), "grabs": g, "drops": dr, "restarts": r,
@@ -48,6 +49,7 @@ def run_summary(status: WorldStatus, states: Mapping[str, AgentState] | None = N
 
 def write_summary(status: WorldStatus, path: str | Path, states: Mapping[str, AgentState] | None = None,
                   stalled: bool = False) -> dict:
+    """Write the run summary as JSON to `path`; returns it."""
     summary = run_summary(status, states, stalled)
     Path(path).write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
     return summary

@@ -38,6 +38,8 @@ _LAYOUT_KINDS = {"F": FOOD, "W": WATER, "b": BRICK, "B": BRICK}
 
 @dataclass
 class AgentRecord:
+    """One agent body's bookkeeping: its index in the arrays, alive, carried brick, counters."""
+
     agent_id: str
     index: int
     alive: bool = True
@@ -49,6 +51,15 @@ class AgentRecord:
 
 
 class World:
+    """The world of paper §3 as arrays and a pymunk space, stepped one tick at a time.
+
+    Built from a scenario (discs, walls, drop sites, agent starts) and a random generator
+    (the noise). Agents `attach` by id (getting a body and the Welcome) and `detach`; each
+    tick the caller gives every live agent's command (`set_command`), calls `step`, and
+    hands out the `frames`. `status`, `sites_filled`, `completed` and `blueprint` report
+    the build; `perturb` removes, adds or moves a disc or changes the blueprint.
+    """
+
     def __init__(self, scenario: Scenario, rng: np.random.Generator | None = None, world_id: str = "w0"):
         self.scenario = scenario
         self.cfg = scenario.world
@@ -140,6 +151,7 @@ class World:
         rec.alive = False
 
     def live_agents(self) -> list[str]:
+        """Ids of the attached, live agents, in attach order."""
         return [r.agent_id for r in self._order if r.alive]
 
     def _grow_arrays(self) -> None:
@@ -263,6 +275,7 @@ class World:
 
     # what the world reports ------------------------------------------------------------------
     def frame(self, agent_id: str) -> SensorFrame:
+        """What the agent senses after the last tick: heading, odometry, range sectors, action results."""
         rec = self.agents[agent_id]
         i = rec.index
         flags = dict(zip(FLAGS, self.flags[i].tolist()))
@@ -276,6 +289,7 @@ class World:
         return [self.frame(r.agent_id) for r in self._order if r.alive]
 
     def sites_filled(self) -> np.ndarray:
+        """Per drop site (world order), whether a brick lies on it."""
         return self.discs.filled_sites(self._site_codes, self._cell_code)
 
     def completed(self) -> bool:
@@ -288,6 +302,7 @@ class World:
                          site_xs=tuple(self.sites_xy[:, 0].tolist()), site_ys=tuple(self.sites_xy[:, 1].tolist()))
 
     def status(self) -> WorldStatus:
+        """The build's progress and per-agent counters, as the server publishes them."""
         filled = int(self.sites_filled().sum())
         total = len(self.sites_xy)
         pos = self._positions
@@ -310,6 +325,7 @@ class World:
 
     # perturbation (paper §4.5, Fig. 6b/6c, Fig. 12) -------------------------------------------
     def perturb(self, p: Perturbation) -> PerturbResult:
+        """Apply a perturbation (remove, add or move a disc; add or remove a site); says if it worked."""
         def inside(x: float, y: float) -> bool:
             return 0 <= x <= self.size[0] and 0 <= y <= self.size[1]
 
