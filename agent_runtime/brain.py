@@ -474,9 +474,9 @@ class Brain:
         """Fixed priority by lateral inhibition: eat/drink > avoid > approach food/water > build."""
         mot, cruise = self.motivations, self.cfg.cruise_speed
         for seeking, channel, act in ((mot.seeking_water, "water", "drink"), (mot.seeking_food, "food", "eat")):
-            if seeking and _nearest(ranges[_CH[channel]]) <= self.cfg.touch:
+            if seeking and _nearest_reading(ranges[_CH[channel]]) <= self.cfg.touch:
                 return 0.0, 0.0, act, act
-        agent_near = _nearest(ranges[_CH["agent"]])
+        agent_near = _nearest_reading(ranges[_CH["agent"]])
         if agent_near < self.cfg.avoid_distance:
             dx, dy = self._reading_offset(ranges[_CH["agent"]])
             return (*steering.away_from(dx, dy, frame.heading, cruise), NONE, "avoid")
@@ -510,7 +510,7 @@ class Brain:
             target = self._brick_within(plans, self.cfg.near_brick)
             return steering.steer_to(*target, frame.heading, cruise) if target else (0.0, 0.0)
         if motor == "avoid_red":
-            if _nearest(ranges[_CH["brick"]]) < self.sensor_range:
+            if _nearest_reading(ranges[_CH["brick"]]) < self.sensor_range:
                 return steering.away_from(*self._reading_offset(ranges[_CH["brick"]]), frame.heading, cruise)
             return steering.explore(self.rng, self.cfg.explore_turn, cruise)
         # Explore is always excited (§4.1): the default when no construction output fires.
@@ -606,6 +606,7 @@ def _mouth_side(held: np.ndarray, sites: np.ndarray, depth: np.ndarray) -> np.nd
     return out & sites
 
 
-def _nearest(readings: np.ndarray) -> float:
+def _nearest_reading(readings: np.ndarray) -> float:
+    """The nearest of one channel's sector readings (inf when no sector senses anything)."""
     hits = readings[readings != NO_READING]
     return float(hits.min()) if hits.size else math.inf

@@ -20,8 +20,8 @@ class AgentConfig:
     map_size: int = 41              # cells per side of every ESM and NM (odd)
     hunger_rate: float = 0.002      # hunger and thirst grow by this much per tick ...
     thirst_rate: float = 0.0025
-    need_threshold: float = 0.8     # ... and a need above this interrupts construction
-    sated_threshold: float = 0.05   # eat / drink until the need is back below this
+    need_threshold: float = 0.8     # ... and a need above this interrupts construction until one
+                                    # eat / drink succeeds, which resets it to 0 (`Motivations`)
     cruise_speed: float = 2.0       # world units per second when following a plan
     near_brick: float = 2.5         # Near-Brick: an available brick within this many cells
     reach: float = 1.3              # a brick closer than this (cells) is within the gripper's reach

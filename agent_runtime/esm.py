@@ -41,7 +41,7 @@ from numba import njit
 
 from protocol.messages import CHANNELS, NO_READING
 
-FOOD, WATER, BRICK, OBSTACLE, CONFIG, AGENT = range(6)   # layer indices
+FOOD, WATER, BRICK, OBSTACLE, CONFIG, AGENT = range(6)   # layer indices (world_server.discs has the disc kinds)
 LAYERS = 6
 # Map layer fed by each sensor channel, in CHANNELS order (food, water, brick, obstacle, agent).
 _CHANNEL_LAYER = np.array([{"food": FOOD, "water": WATER, "brick": BRICK, "obstacle": OBSTACLE,

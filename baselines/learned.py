@@ -26,14 +26,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from .lattice import (
-    FREE,
     MOVES,
+    SEEN_FREE,
+    SEEN_WALL,
     RuleSet,
     matches,
     simulate_policy,
 )
 
-N_KINDS = 4  # FREE, WALL, AGENT, EDGE
+N_KINDS = 4  # SEEN_FREE, SEEN_WALL, SEEN_AGENT, SEEN_EDGE
 EXPLORE = 0  # class of "no rule fires": move to a random free 4-neighbour (or wait)
 
 
@@ -76,7 +77,7 @@ def teacher_class(rule_set: RuleSet, state: int, pattern, n_states: int) -> int:
 
 def explore(state: int, pattern, rng: np.random.Generator):
     """The implicit default of `lattice.decide` (same random draws)."""
-    free = [d for d in MOVES if pattern[d][0] == FREE]
+    free = [d for d in MOVES if pattern[d][0] == SEEN_FREE]
     if not free:
         return "wait", state
     return "move", free[int(rng.integers(len(free)))]
@@ -101,7 +102,7 @@ def encode(state: int, pattern, n_states: int) -> np.ndarray:
     for i, (kind, seen_state) in enumerate(pattern):
         base = n_states + i * width
         x[base + kind] = 1.0
-        if kind == 1:  # WALL: a brick, whose visible state the agent reads
+        if kind == SEEN_WALL:  # a brick, whose visible state the agent reads
             x[base + N_KINDS + seen_state] = 1.0
     return x
 

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from .lattice import BRICK, EMPTY, World, make_world, rule_policy, simulate, step
+from .lattice import LATTICE_BRICK, LATTICE_EMPTY, World, make_world, rule_policy, simulate, step
 from .rules import corner_rules, corner_seeds, square_target
 
 STEPS = {"out": 1, "in": -1}
@@ -33,16 +33,16 @@ def outward(pos, target_origin, n) -> tuple[int, int]:
 
 def placed_bricks(world: World, seeds: dict) -> list[tuple[int, int]]:
     """Bricks laid by agents (not seeds), in a deterministic order."""
-    rows, cols = np.nonzero(world.grid == BRICK)
+    rows, cols = np.nonzero(world.grid == LATTICE_BRICK)
     return sorted(p for p in zip(rows.tolist(), cols.tolist()) if p not in seeds)
 
 
 def move_brick(world: World, src, dst) -> bool:
     """Move one brick (with its state) to a free cell; False if not possible."""
-    if world.grid[dst] != EMPTY or dst in world.agents:
+    if world.grid[dst] != LATTICE_EMPTY or dst in world.agents:
         return False
-    world.grid[dst], world.brick_state[dst] = BRICK, world.brick_state[src]
-    world.grid[src], world.brick_state[src] = EMPTY, 0
+    world.grid[dst], world.brick_state[dst] = LATTICE_BRICK, world.brick_state[src]
+    world.grid[src], world.brick_state[src] = LATTICE_EMPTY, 0
     return True
 
 
@@ -80,7 +80,7 @@ def run_perturbed(rule_set, seeds, shape, n, origin, at_step, direction, n_agent
 
 def ring_done(world: World, ring: np.ndarray) -> bool:
     """Whether every cell of the ring mask holds a brick."""
-    return bool(np.all(world.grid[ring == BRICK] == BRICK))
+    return bool(np.all(world.grid[ring == LATTICE_BRICK] == LATTICE_BRICK))
 
 
 def inside(pos, origin, n) -> bool:

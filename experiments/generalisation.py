@@ -310,7 +310,7 @@ def generate_layouts(count: int, seed: int) -> None:
         sc = g.scenario()
         path = LAYOUTS / f"{k:03d}-{sc.name}.toml"
         path.write_text(g.text, encoding="utf-8")
-        print(f"{path.name}: {sc.cols}x{sc.rows}, {len(sc.cells('+'))} open sites, {sc.agents} agents",
+        print(f"{path.name}: {sc.cols}x{sc.rows}, {len(sc.cells_col_row('+'))} open sites, {sc.agents} agents",
               file=sys.stderr)
 
 
@@ -322,7 +322,7 @@ def quick_files(n: int) -> list[str]:
     """The `n` smallest layouts of the suite (by cells x agents): a smoke run in seconds."""
     def work(name: str) -> tuple[int, str]:
         sc = load_scenario(LAYOUTS / name)
-        return sc.cols * sc.rows * max(sc.agents, 1) + 50 * len(sc.cells("+")), name
+        return sc.cols * sc.rows * max(sc.agents, 1) + 50 * len(sc.cells_col_row("+")), name
     return [name for _, name in sorted(map(work, suite_files()))[:n]]
 
 

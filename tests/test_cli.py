@@ -67,7 +67,7 @@ def test_status_perturb_and_sigterm_on_a_running_world(running_world):
     assert data["scenario"] == "quick_wall" and data["sites_total"] == 3 and data["bricks_total"] == 4
 
     s = load_scenario(QUICK_WALL)
-    x, y = s.to_world(s.cells("b"))[0]
+    x, y = s.to_world(s.cells_col_row("b"))[0]
     r = conag("perturb", "remove", "--at", f"{x},{y}", "--connect", ep)
     assert r.returncode == 0, r.stderr
     assert "removed brick" in r.stdout

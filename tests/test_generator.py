@@ -25,13 +25,13 @@ sizes = st.tuples(st.integers(15, 120), st.integers(15, 120))
 def _assert_good(gen, family, size, agents):
     s = gen.scenario()
     assert (s.cols, s.rows) == size == gen.size
-    assert s.agents == agents == gen.agents == len(s.cells("A"))
+    assert s.agents == agents == gen.agents == len(s.cells_col_row("A"))
     assert s.name == gen.name == f"gen-{family}-{gen.seed}" and gen.family == family
     assert s.tick_mode == "lockstep" and s.max_ticks == gen.max_ticks >= 20000
     for word in (family, f"{size[0]}x{size[1]}", f"{agents} agent", gen.source):
         assert word in s.description
-    open_sites, bricks = len(s.cells("+")), len(s.cells("b"))
-    assert (open_sites, bricks, len(s.cells("B"))) == (gen.sites, gen.bricks, gen.prefilled)
+    open_sites, bricks = len(s.cells_col_row("+")), len(s.cells_col_row("b"))
+    assert (open_sites, bricks, len(s.cells_col_row("B"))) == (gen.sites, gen.bricks, gen.prefilled)
     assert open_sites >= 1 and bricks >= open_sites + 2
     verdict = check_buildable(s)
     assert verdict.ok, verdict.reason
@@ -85,7 +85,7 @@ def test_pockets_are_dead_ends_and_the_order_fills_them_from_the_end():
     for gen in (g for g in (generate(seed, "pocket", 40, 2) for seed in range(8)) if not g.prefilled):
         s = gen.scenario()
         order = check_buildable(s).order
-        starts = [tuple(c) for c in s.cells("A").tolist()]
+        starts = [tuple(c) for c in s.cells_col_row("A").tolist()]
         for i, (c, r) in enumerate(order):
             layout = [list(row) for row in s.layout]
             layout[r][c] = "B"  # fill this site alone: which open sites does it wall off?

@@ -11,7 +11,7 @@ import numpy as np
 
 from protocol.messages import DISC_KINDS
 
-FOOD, WATER, BRICK = (DISC_KINDS.index(k) for k in ("food", "water", "brick"))
+FOOD_DISC, WATER_DISC, BRICK_DISC = (DISC_KINDS.index(k) for k in ("food", "water", "brick"))  # `kind` values
 IN_WORLD, CARRIED, GONE = 0, 1, 2
 
 
@@ -96,12 +96,12 @@ class DiscStore:
 
     def bricks_total(self) -> int:
         """Bricks that exist: in the world or carried. Only a perturbation changes this."""
-        return int(np.count_nonzero((self.kind == BRICK) & (self.state != GONE)))
+        return int(np.count_nonzero((self.kind == BRICK_DISC) & (self.state != GONE)))
 
     def filled_sites(self, site_codes: np.ndarray, cell_code) -> np.ndarray:
         """Boolean per site: a present brick lies in the site's cell.
 
         `cell_code` maps (n, 2) world positions to the same integer codes as `site_codes`.
         """
-        bricks = np.flatnonzero((self.kind == BRICK) & (self.state == IN_WORLD))
+        bricks = np.flatnonzero((self.kind == BRICK_DISC) & (self.state == IN_WORLD))
         return np.isin(site_codes, cell_code(self.xy[bricks]))

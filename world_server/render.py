@@ -90,11 +90,11 @@ def draw_world(ax, scenario: Scenario, *,
 
 
 def _layout_agents(scenario: Scenario) -> list[tuple[float, float, float]]:
-    return [(x, y, 0.0) for x, y in scenario.to_world(scenario.cells("A")).tolist()]
+    return [(x, y, 0.0) for x, y in scenario.to_world(scenario.cells_col_row("A")).tolist()]
 
 
 def _layout_discs(scenario: Scenario) -> list[tuple[float, float, str]]:
-    cells = scenario.cells("".join(_LAYOUT_DISCS))
+    cells = scenario.cells_col_row("".join(_LAYOUT_DISCS))
     kinds = [_LAYOUT_DISCS[scenario.layout[r][c]] for c, r in cells.tolist()]
     return [(x, y, k) for (x, y), k in zip(scenario.to_world(cells).tolist(), kinds)]
 
@@ -124,7 +124,7 @@ def _draw_grid(ax, scenario: Scenario) -> None:
 
 def _draw_obstacles(ax, scenario: Scenario, legend: dict) -> None:
     size = scenario.world.cell_size
-    for x, y in scenario.to_world(scenario.cells("#")).tolist():
+    for x, y in scenario.to_world(scenario.cells_col_row("#")).tolist():
         square = Rectangle((x - size / 2, y - size / 2), size, size, color=OBSTACLE_COLOUR, zorder=1)
         legend["obstacle"] = ax.add_patch(square)
 
@@ -136,7 +136,7 @@ def _draw_discs(ax, scenario: Scenario, discs, legend: dict) -> None:
 
 
 def _draw_sites(ax, scenario: Scenario, legend: dict) -> None:
-    for x, y in scenario.to_world(scenario.cells("+B")).tolist():
+    for x, y in scenario.to_world(scenario.cells_col_row("+B")).tolist():
         site = ax.add_patch(Circle((x, y), scenario.world.disc_radius, zorder=3, **SITE_STYLE))
         legend.setdefault("drop site", site)
 

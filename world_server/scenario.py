@@ -16,6 +16,10 @@ Layout: one character a cell, north row first: `.` empty, `F` food, `W` water, `
 brick, `+` drop site (empty), `B` brick already on a drop site, `#` fixed obstacle,
 `A` an agent's start. Common indentation is removed; rows must have equal length.
 Every error names the file, line and column and what was expected.
+
+Two conventions for a cell: bool grids (`Scenario.grid`, like the agents' maps) are
+indexed [row, col]; cell coordinates (`Scenario.cells_col_row`, `to_world`, `to_cell`,
+and the scenario files' comments) are (col, row), column first like (x, y).
 """
 
 from __future__ import annotations
@@ -72,8 +76,11 @@ class Scenario:
         """Columns of the layout (west first)."""
         return len(self.layout[0])
 
-    def cells(self, chars: str) -> np.ndarray:
-        """(k, 2) int array of (col, row) of every cell holding one of `chars`, reading order."""
+    def cells_col_row(self, chars: str) -> np.ndarray:
+        """(k, 2) int array of (col, row) of every cell holding one of `chars`, reading order.
+
+        Column first, as `to_world` and `to_cell` take and give cells (x before y); the
+        grids (`grid`, the agents' maps) are indexed [row, col] instead."""
         found = [(c, r) for r, line in enumerate(self.layout) for c, ch in enumerate(line) if ch in chars]
         return np.array(found, dtype=np.int64).reshape(-1, 2)
 
@@ -149,7 +156,7 @@ def parse_scenario(text: str, path: str = "<string>") -> Scenario:
         raise ScenarioError(path, *_key_pos(lines, bad), "valid [world] settings", str(exc)) from None
     scenario = Scenario(name=name, seed=seed, agents=agents, tick_mode=tick_mode, max_ticks=max_ticks,
                         layout=layout, world=world, description=description, path=path)
-    free = len(scenario.cells(".A"))
+    free = len(scenario.cells_col_row(".A"))
     if agents > free:
         raise ScenarioError(path, *_key_pos(lines, "agents"),
                             f"at most {free} agents (empty cells and A starts in the layout)", str(agents))

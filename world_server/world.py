@@ -25,7 +25,7 @@ from protocol.messages import (
     Welcome,
     WorldStatus,
 )
-from world_server.discs import BRICK, FOOD, WATER, DiscStore
+from world_server.discs import BRICK_DISC, FOOD_DISC, WATER_DISC, DiscStore
 from world_server.physics import Physics, motor_update
 from world_server.scenario import Scenario
 from world_server.sensors import sense
@@ -33,7 +33,7 @@ from world_server.sensors import sense
 GRAB, DROP, EAT, DRINK = (ACTIONS.index(a) for a in ("grab", "drop", "eat", "drink"))
 OBSTACLE_CHANNEL = CHANNELS.index("obstacle")
 FLAGS = ("grabbed", "dropped", "ate", "drank")
-_LAYOUT_KINDS = {"F": FOOD, "W": WATER, "b": BRICK, "B": BRICK}
+_LAYOUT_KINDS = {"F": FOOD_DISC, "W": WATER_DISC, "b": BRICK_DISC, "B": BRICK_DISC}
 
 
 @dataclass
@@ -67,7 +67,7 @@ class World:
         self.rng = rng if rng is not None else np.random.default_rng(scenario.seed)
         self.tick = 0
         self.size = scenario.size
-        cells = {ch: scenario.cells(ch) for ch in "FWbB#A+"}
+        cells = {ch: scenario.cells_col_row(ch) for ch in "FWbB#A+"}
         disc_cells = np.vstack([cells[ch] for ch in "FWbB"])
         kinds = np.concatenate([np.full(len(cells[ch]), _LAYOUT_KINDS[ch]) for ch in "FWbB"])
         self.discs = DiscStore(scenario.to_world(disc_cells), kinds)
@@ -166,7 +166,7 @@ class World:
         """First `A` start not taken by a body, else the first clear empty cell (reading order)."""
         taken, _ = self.physics.state()
         clear = self.cfg.agent_radius * 2 + 0.1
-        candidates = [self._starts, self.scenario.to_world(self.scenario.cells("."))]
+        candidates = [self._starts, self.scenario.to_world(self.scenario.cells_col_row("."))]
         present = self.discs.xy[self.discs.present()]
         for xy in np.vstack(candidates):
             if taken.size and np.min(np.hypot(*(taken - xy).T)) < clear:
@@ -242,7 +242,7 @@ class World:
             # The gripper is in front: it takes the nearest brick within reach there, so an
             # agent facing a free brick does not pick up the structure brick beside it.
             brick = self.discs.nearest_in_front(xy, self.heading[rec.index], self.cfg.grab_reach,
-                                                self.cfg.grab_cone, BRICK)
+                                                self.cfg.grab_cone, BRICK_DISC)
             if brick >= 0:
                 self.discs.carry(brick)
                 self.physics.remove_disc(brick)
@@ -253,9 +253,9 @@ class World:
             self._drop(rec, xy)
             self.flags[rec.index, 1] = True
         elif action == EAT:
-            self.flags[rec.index, 2] = self.discs.nearest(xy, touch, FOOD) >= 0
+            self.flags[rec.index, 2] = self.discs.nearest(xy, touch, FOOD_DISC) >= 0
         elif action == DRINK:
-            self.flags[rec.index, 3] = self.discs.nearest(xy, touch, WATER) >= 0
+            self.flags[rec.index, 3] = self.discs.nearest(xy, touch, WATER_DISC) >= 0
 
     def _drop(self, rec: AgentRecord, xy: np.ndarray) -> None:
         # The brick lands under the agent (paper §3); it ignores that agent until the agent
