@@ -522,10 +522,9 @@ class Brain:
         there on the map, wander in straight legs.
 
         Searching at random for a supply out of sensor range took thousands of ticks on
-        large worlds (a lone pile in 87 x 84 cells was not found in 3,000 ticks by six
-        agents); squares of BLOCK cells marked seen when the agent passes near them turn
-        that into a sweep. The choice among near squares is a little random so agents
-        spread out."""
+        large worlds (docs/design.md, Measurements); squares of BLOCK cells marked seen
+        when the agent passes near them turn that into a sweep. The choice among near
+        squares is a little random so agents spread out."""
         # Sweep only while searching for the supply: an agent that holds a brick, or knows
         # of one, is waiting for a way to open (a site held open by the Matching grid), and
         # a sweep would walk it away from where it is needed.
@@ -592,7 +591,7 @@ def _mouth_side(held: np.ndarray, sites: np.ndarray, depth: np.ndarray) -> np.nd
 
     In a corridor two or more cells wide the matched path runs down one side; two agents,
     each with its own view, would otherwise fill the two cells of its mouth together and
-    seal the far end (a pocket two cells wide stalled at 9 of 30 sites this way). Sites
+    seal the far end (docs/design.md, Measurements). Sites
     deeper than the held one (Fig. 18's D2 beside D1) stay goals: they are what the path
     is kept open for."""
     out = np.zeros_like(sites)

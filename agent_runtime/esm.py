@@ -1,9 +1,9 @@
-"""Egocentric spatial maps (paper §4.2.1, Fig. 4; MISSION A2).
+"""Egocentric spatial maps (paper §4.2.1, Fig. 4; A2 in docs/design.md).
 
 One square grid per kind of thing the agent keeps track of, stacked in one float32
 array `maps[layer, row, col]`: FOOD, WATER, BRICK, OBSTACLE (fixed walls and the world's
 edge; all four written from the sector sensors), CONFIG (the blueprint: the sites of
-`blueprint.SiteMemory` that fall on the map, rewritten by the Brain) and AGENT (other
+`far_memory.FarMemory` that fall on the map, rewritten by the Brain) and AGENT (other
 agents, rewritten from scratch each step because they move). One map cell is one world cell (one disc
 diameter); row 0 is the northmost row, columns grow eastwards, and the agent is always
 in the centre cell (size // 2, size // 2).

@@ -1,4 +1,4 @@
-"""Q-learning of the construction sequence from the teacher's signals (paper §5.1, MISSION L4).
+"""Q-learning of the construction sequence from the teacher's signals (paper §5.1; L4).
 
 The paper's last paragraph of §5.1: Q-learning "with a suitable set of parameters showed
 comparable error rates". Here: tabular Q-learning over the 64 patterns of the six binary

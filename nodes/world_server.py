@@ -1,4 +1,4 @@
-"""The world server: the zenoh shell around `world_server.world.World` (MISSION W7, S1, S2).
+"""The world server: the zenoh shell around `world_server.world.World` (W7, S1, S2 in docs/design.md).
 
 Everything arriving on the bus (commands, liveliness changes, attach, perturb) is put on
 one queue by zenoh's callback threads and applied by the single loop thread, so the

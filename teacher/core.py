@@ -1,4 +1,4 @@
-"""The teacher's rule (paper §5.1, MISSION L1), with no bus: compare, then reinforce.
+"""The teacher's rule (paper §5.1; L1), with no bus: compare, then reinforce.
 
 The teacher is not in the world: it sees what the student sees (the six internal state
 nodes the student reports in its Decision), works out what the engineered network of

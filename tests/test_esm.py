@@ -1,4 +1,4 @@
-"""Egocentric spatial maps (paper §4.2.1, Fig. 4; MISSION A2).
+"""Egocentric spatial maps (paper §4.2.1, Fig. 4; A2).
 
 Offsets are in cells, x east and y north; map rows grow southwards. A "disc" in the
 shifting tests is one marked cell whose world position the test tracks independently of

@@ -1,4 +1,4 @@
-"""The world core (paper §3, MISSION W1-W7) driven directly, without a bus.
+"""The world core (paper §3; W1-W7 in docs/design.md) driven directly, without a bus.
 
 Small worlds come from inline scenario strings. World coordinates: x east, y north,
 one unit = one cell; cell (col, row) has its centre at (col + 0.5, rows - 1 - row + 0.5).

@@ -1,6 +1,6 @@
 """World configuration: a frozen dataclass, loaded from a TOML table.
 
-Units: one world unit is one map cell, which is one disc diameter (MISSION W1). Time
+Units: one world unit is one map cell, which is one disc diameter (paper §3; W1). Time
 advances in ticks of `dt` simulated seconds.
 """
 

@@ -1,4 +1,4 @@
-"""Scenario files (MISSION.md contract): TOML with a bird's-eye ASCII layout.
+"""Scenario files (a contract, docs/design.md): TOML with a bird's-eye ASCII layout.
 
     name = "quick_wall"          # required
     seed = 7                     # required, integer

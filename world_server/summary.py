@@ -1,4 +1,4 @@
-"""The run summary of MISSION.md, built from the world's final status (`conag world --summary`, `conag run`).
+"""The run summary (a contract, docs/design.md), from the world's final status (`conag world --summary`, `conag run`).
 
 {scenario, seed, completed, stalled, ticks, sites_total, sites_filled, bricks_total,
  total_distance, agents: [{id, distance, grabs, drops, restarts, behaviour_ticks}]}
