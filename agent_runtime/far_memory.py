@@ -130,6 +130,7 @@ class FarMemory:
 
     def _wall_window(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(map rows, map cols, grid x, grid y) of the map cells that lie in the world."""
+        assert self.bounds is not None  # asked only when there are walls, i.e. a known extent
         x0, y0, x1, y1 = self.bounds
         idx = np.arange(self.size)
         gx = self.pos[0] + idx - self.centre - x0       # per map column
