@@ -474,9 +474,9 @@ class Brain:
         """Fixed priority by lateral inhibition: eat/drink > avoid > approach food/water > build."""
         mot, cruise = self.motivations, self.cfg.cruise_speed
         for seeking, channel, act in ((mot.seeking_water, "water", "drink"), (mot.seeking_food, "food", "eat")):
-            if seeking and _nearest(ranges[_CH[channel]]) <= self.cfg.touch:
+            if seeking and _nearest_reading(ranges[_CH[channel]]) <= self.cfg.touch:
                 return 0.0, 0.0, act, act
-        agent_near = _nearest(ranges[_CH["agent"]])
+        agent_near = _nearest_reading(ranges[_CH["agent"]])
         if agent_near < self.cfg.avoid_distance:
             dx, dy = self._reading_offset(ranges[_CH["agent"]])
             return (*steering.away_from(dx, dy, frame.heading, cruise), NONE, "avoid")
@@ -510,9 +510,9 @@ class Brain:
             target = self._brick_within(plans, self.cfg.near_brick)
             return steering.steer_to(*target, frame.heading, cruise) if target else (0.0, 0.0)
         if motor == "avoid_red":
-            if _nearest(ranges[_CH["brick"]]) < self.sensor_range:
+            if _nearest_reading(ranges[_CH["brick"]]) < self.sensor_range:
                 return steering.away_from(*self._reading_offset(ranges[_CH["brick"]]), frame.heading, cruise)
-            return steering.explore(frame.heading, self.rng, self.cfg.explore_turn, cruise)
+            return steering.explore(self.rng, self.cfg.explore_turn, cruise)
         # Explore is always excited (§4.1): the default when no construction output fires.
         return self._explore(frame.heading)
 
@@ -522,10 +522,9 @@ class Brain:
         there on the map, wander in straight legs.
 
         Searching at random for a supply out of sensor range took thousands of ticks on
-        large worlds (a lone pile in 87 x 84 cells was not found in 3,000 ticks by six
-        agents); squares of BLOCK cells marked seen when the agent passes near them turn
-        that into a sweep. The choice among near squares is a little random so agents
-        spread out."""
+        large worlds (docs/design.md, Measurements); squares of BLOCK cells marked seen
+        when the agent passes near them turn that into a sweep. The choice among near
+        squares is a little random so agents spread out."""
         # Sweep only while searching for the supply: an agent that holds a brick, or knows
         # of one, is waiting for a way to open (a site held open by the Matching grid), and
         # a sweep would walk it away from where it is needed.
@@ -592,7 +591,7 @@ def _mouth_side(held: np.ndarray, sites: np.ndarray, depth: np.ndarray) -> np.nd
 
     In a corridor two or more cells wide the matched path runs down one side; two agents,
     each with its own view, would otherwise fill the two cells of its mouth together and
-    seal the far end (a pocket two cells wide stalled at 9 of 30 sites this way). Sites
+    seal the far end (docs/design.md, Measurements). Sites
     deeper than the held one (Fig. 18's D2 beside D1) stay goals: they are what the path
     is kept open for."""
     out = np.zeros_like(sites)
@@ -606,6 +605,7 @@ def _mouth_side(held: np.ndarray, sites: np.ndarray, depth: np.ndarray) -> np.nd
     return out & sites
 
 
-def _nearest(readings: np.ndarray) -> float:
+def _nearest_reading(readings: np.ndarray) -> float:
+    """The nearest of one channel's sector readings (inf when no sector senses anything)."""
     hits = readings[readings != NO_READING]
     return float(hits.min()) if hits.size else math.inf

@@ -10,15 +10,18 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import Any
 
 
 @dataclass(frozen=True)
 class AgentConfig:
+    """The agent's settings (motivations, speeds, distances, map size, goal sequencing); frozen."""
+
     map_size: int = 41              # cells per side of every ESM and NM (odd)
     hunger_rate: float = 0.002      # hunger and thirst grow by this much per tick ...
     thirst_rate: float = 0.0025
-    need_threshold: float = 0.8     # ... and a need above this interrupts construction
-    sated_threshold: float = 0.05   # eat / drink until the need is back below this
+    need_threshold: float = 0.8     # ... and a need above this interrupts construction until one
+                                    # eat / drink succeeds, which resets it to 0 (`Motivations`)
     cruise_speed: float = 2.0       # world units per second when following a plan
     near_brick: float = 2.5         # Near-Brick: an available brick within this many cells
     reach: float = 1.3              # a brick closer than this (cells) is within the gripper's reach
@@ -46,10 +49,12 @@ class AgentConfig:
             raise ValueError("agent.goal_sequencing must be true or false")
 
     @classmethod
-    def from_mapping(cls, table: dict) -> "AgentConfig":
+    def from_mapping(cls, table: dict) -> AgentConfig:
+        """An AgentConfig from a TOML table; unknown keys are a ValueError naming the known ones."""
         known = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(table) - known)
         if unknown:
             raise ValueError(f"unknown agent setting(s): {', '.join(unknown)}; known: {', '.join(sorted(known))}")
-        return cls(**{k: (float(v) if isinstance(getattr(cls, k), float) and isinstance(v, int) else v)
-                      for k, v in table.items()})
+        values: dict[str, Any] = {k: (float(v) if isinstance(getattr(cls, k), float) and isinstance(v, int) else v)
+                                  for k, v in table.items()}
+        return cls(**values)

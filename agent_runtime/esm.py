@@ -1,9 +1,9 @@
-"""Egocentric spatial maps (paper §4.2.1, Fig. 4; MISSION A2).
+"""Egocentric spatial maps (paper §4.2.1, Fig. 4; A2 in docs/design.md).
 
 One square grid per kind of thing the agent keeps track of, stacked in one float32
 array `maps[layer, row, col]`: FOOD, WATER, BRICK, OBSTACLE (fixed walls and the world's
 edge; all four written from the sector sensors), CONFIG (the blueprint: the sites of
-`blueprint.SiteMemory` that fall on the map, rewritten by the Brain) and AGENT (other
+`far_memory.FarMemory` that fall on the map, rewritten by the Brain) and AGENT (other
 agents, rewritten from scratch each step because they move). One map cell is one world cell (one disc
 diameter); row 0 is the northmost row, columns grow eastwards, and the agent is always
 in the centre cell (size // 2, size // 2).
@@ -34,13 +34,14 @@ computed for a window of cell offsets fixed per sensor range, and cached per `fr
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numba import njit
 
 from protocol.messages import CHANNELS, NO_READING
 
-FOOD, WATER, BRICK, OBSTACLE, CONFIG, AGENT = range(6)   # layer indices
+FOOD, WATER, BRICK, OBSTACLE, CONFIG, AGENT = range(6)   # layer indices (world_server.discs has the disc kinds)
 LAYERS = 6
 # Map layer fed by each sensor channel, in CHANNELS order (food, water, brick, obstacle, agent).
 _CHANNEL_LAYER = np.array([{"food": FOOD, "water": WATER, "brick": BRICK, "obstacle": OBSTACLE,
@@ -82,7 +83,7 @@ class EgocentricMaps:
         self._windows: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._sector_dirs: dict[int, np.ndarray] = {}
         self._geometry_key: tuple | None = None
-        self._geometry: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._geometry: tuple[np.ndarray, ...] | None = None
 
     # ------------------------------------------------------------------ coordinates
 
@@ -94,11 +95,13 @@ class EgocentricMaps:
         return (self.centre - math.floor(self.frac[1] + oy + 0.5),
                 self.centre + math.floor(self.frac[0] + ox + 0.5))
 
-    def offset_of(self, row: int, col: int) -> tuple[float, float]:
-        """World offset (x, y), in cells, from the agent to the centre of cell (row, col)."""
+    def offset_of(self, row: Any, col: Any) -> tuple[Any, Any]:
+        """World offset (x, y), in cells, from the agent to the centre of cell (row, col)
+        (ints give floats, arrays of rows and columns give arrays)."""
         return (col - self.centre - float(self.frac[0]), self.centre - row - float(self.frac[1]))
 
     def contains(self, row: int, col: int) -> bool:
+        """Whether (row, col) is a cell of the map."""
         return 0 <= row < self.size and 0 <= col < self.size
 
     # ------------------------------------------------------------------ blueprint
@@ -269,6 +272,7 @@ class EgocentricMaps:
             core = _sector_pairs(angle, dist, SITE_BRICK_OFFSET, sectors)
             self._geometry = (cells, dist, pairs, vx, vy, core)
             self._geometry_key = key
+        assert self._geometry is not None
         return self._geometry
 
 

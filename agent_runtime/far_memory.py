@@ -104,6 +104,7 @@ class FarMemory:
         self.site_open[on[(clear_age[r, c] == 0) & (brick_layer[r, c] <= 0.5)]] = True
 
     def open_sites(self) -> int:
+        """How many sites of the blueprint are believed open (no brick seen on them)."""
         return int(self.site_open.sum())
 
     # ------------------------------------------------------------------ moving
@@ -129,6 +130,7 @@ class FarMemory:
 
     def _wall_window(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(map rows, map cols, grid x, grid y) of the map cells that lie in the world."""
+        assert self.bounds is not None  # asked only when there are walls, i.e. a known extent
         x0, y0, x1, y1 = self.bounds
         idx = np.arange(self.size)
         gx = self.pos[0] + idx - self.centre - x0       # per map column
@@ -161,7 +163,7 @@ class FarMemory:
     def mark_seen(self, radius: float) -> int:
         """The squares whose centre lies within `radius` cells of the agent have been seen;
         returns how many had never been seen before."""
-        if self.seen is None:
+        if self.seen is None or self.ever_seen is None:
             return 0
         centres = self._block_centres()
         near = np.hypot(centres[..., 0] - self.pos[0], centres[..., 1] - self.pos[1]) <= radius
@@ -171,6 +173,7 @@ class FarMemory:
         return new
 
     def _block_centres(self) -> np.ndarray:
+        assert self.seen is not None and self.bounds is not None  # asked only when the world's extent is known
         x0, y0, x1, y1 = self.bounds
         bx = x0 + np.minimum(np.arange(self.seen.shape[0]) * BLOCK + BLOCK // 2, x1 - x0 - 1)
         by = y0 + np.minimum(np.arange(self.seen.shape[1]) * BLOCK + BLOCK // 2, y1 - y0 - 1)
@@ -224,6 +227,7 @@ class FarMemory:
         return np.column_stack([rows[off], cols[off]])
 
     def far_bricks(self) -> np.ndarray:
+        """(rows, cols) as a (k, 2) array of the remembered free bricks, on the map or beyond it."""
         rows, cols = self.to_map(self.bricks)
         return np.column_stack([rows, cols])
 

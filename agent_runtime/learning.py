@@ -1,4 +1,4 @@
-"""The learning student of paper §5.1 (MISSION L2): the Fig. 8 network with learned weights.
+"""The learning student of paper §5.1 (L2): the Fig. 8 network with learned weights.
 
 A fully connected single-layer network from the six internal state nodes to the seven
 construction outputs, an excitatory weight (>= 0) and an inhibitory weight (<= 0) per
@@ -9,35 +9,11 @@ signals per step with the delta rule of §5.1:
 
     w_exc(t+1) = w_exc(t) + eta * R_j * a_i        w_inh(t+1) = w_inh(t) - eta * R_j * a_i
 
-How this file reads the rule (the paper leaves three things open):
-
-* Sign of the inhibitory update. Taken literally, with inhibitory weights stored
-  negative and summed with the excitatory ones, the two updates cancel: the summed input
-  (w_exc + w_inh) * a_i does not move at all. The text says what is meant: "with a
-  positive reinforcement, all excitatory weights that activated the behaviour are
-  increased and the inhibitory weights decreased", i.e. the inhibition is weakened. So the
-  minus applies to the inhibitory weight's magnitude |w_inh|: in signed terms both weights
-  move by +eta * R_j * a_i, and a +1 raises the output's input under the same state, a -1
-  lowers it.
-* R_j per output, but two signals per step. The arm signal is the R_j of the arm output
-  the student chose, the motor signal that of the motor output it chose; the other
-  outputs of the group are left alone. When the student chose no output of a group and
-  the teacher says -1 (the teacher wanted one), every output of that group is raised:
-  the student cannot know which one was wanted, and raising them all lets the strongest
-  fire next time, where a -1 corrects it if it is the wrong one. A +1 for choosing
-  nothing changes nothing.
-* When a +1 stops. The delta rule changes a weight by the error of the output, which is
-  zero once the output is what it should be; R_j is only the sign of that error. So a +1
-  strengthens the chosen output only while its summed input is below T + `margin`
-  (default 0.1): a right but barely firing output is pushed clear of the threshold, a
-  clearly firing one is left alone. A -1 always applies (the output fired, so it is on
-  the wrong side). Taken instead as "every +1 adds eta * a_i", the weights of an output
-  grow at every right step of a frequent state and drag along the states that share its
-  inputs: e.g. every right Grab at a brick (At-Brick, Near-Brick, Brick-Available,
-  Drop-Site-Available) raises Grab's input one step earlier, when only the last three are
-  active and Grab is wrong, so errors settle at a steady rate and never reach zero
-  (measured on Fig. 6: about 150-160 errors per 1,000-step trial from the second trial on
-  with eta = 0.05, and 60-70 even with the weights bounded to [-1, 1]).
+The rule leaves three things open: the sign of the inhibitory update (both weights move
+by +eta * R_j * a_i in signed terms, so a +1 raises the output's input), which outputs a
+group's one signal applies to (the chosen one; all of the group when none was chosen and
+the teacher says -1), and when a +1 stops (once the output's input is T + `margin`). Why,
+and what the literal readings give: docs/design.md, "Learning (§5.1)".
 
 Weights keep their signs (excitatory clipped at 0 from below, inhibitory at 0 from
 above) and have no other bound; with the margin they stop moving once no errors are made.
@@ -54,8 +30,17 @@ from pathlib import Path
 
 import numpy as np
 
-from agent_runtime.network import (ARM_OUTPUTS, MOTOR_OUTPUTS, NONE, OUTPUTS, STATE_NODES, THRESHOLD, ActionNetwork,
-                                   Choice, select)
+from agent_runtime.network import (
+    ARM_OUTPUTS,
+    MOTOR_OUTPUTS,
+    NONE,
+    OUTPUTS,
+    STATE_NODES,
+    THRESHOLD,
+    ActionNetwork,
+    Choice,
+    select,
+)
 
 FORMAT = "conag-student-weights"
 VERSION = 1
@@ -86,7 +71,7 @@ class Student:
         self.excite, self.inhibit, self.threshold = excite, inhibit, float(threshold)
 
     @classmethod
-    def random(cls, rng: np.random.Generator) -> "Student":
+    def random(cls, rng: np.random.Generator) -> Student:
         """Weights uniform in [0, 0.5] (excitatory) and [-0.5, 0] (inhibitory), as in §5.1."""
         return cls(rng.uniform(*INIT_EXCITE, SHAPE), rng.uniform(*INIT_INHIBIT, SHAPE))
 
@@ -95,6 +80,7 @@ class Student:
         return ActionNetwork(self.excite.copy(), self.inhibit.copy(), self.threshold)
 
     def choose(self, state: np.ndarray) -> Choice:
+        """The (arm, motor) outputs the current weights fire for the state node activations `state`."""
         net = np.asarray(state, dtype=np.float64) @ (self.excite + self.inhibit)
         return select(net, self.threshold)
 
@@ -131,7 +117,7 @@ class Student:
         os.replace(tmp, path)
 
     @classmethod
-    def load(cls, path: str | os.PathLike) -> "Student":
+    def load(cls, path: str | os.PathLike) -> Student:
         """Read weights written by `save`; a WeightsFileError names the file and what is wrong."""
         try:
             doc = json.loads(Path(path).read_text(encoding="utf-8"))

@@ -1,4 +1,4 @@
-"""Goal sequencing (paper §6, Fig. 15-18; MISSION G1-G2): calculateMatching and drop-site selection.
+"""Goal sequencing (paper §6, Fig. 15-18; G1-G2): calculateMatching and drop-site selection.
 
 The Matching grid lies cell for cell on the agent's ESMs. calculateMatching (Fig. 16)
 spreads activation a from the free bricks (S) and b from the unfilled drop sites (T),
@@ -19,31 +19,10 @@ Two implementations of the same algorithm:
   and minima over the grid, iterated until they settle), the reference the tests hold
   the compiled one to.
 
-Choices where Fig. 16 is silent (both implementations make them alike):
-- S is never updated, as in the figure: a brick can be matched to several sites. That is
-  also our answer to more sites than bricks: every site reachable from a brick is
-  matched to its nearest one, so no site's path is left unprotected because the bricks
-  in view ran out (an agent rarely sees the whole supply).
-- Sites that no brick can reach (walled in, or no bricks in view) are left unmatched
-  with match 0: they block nobody's path, and the loop ends when only they remain.
-- Step 3 compares a site's a + b with the best anywhere (the text: "the maximum
-  activation value is distributed to all nodes"), not only with its neighbours as the
-  listing's `a[m] + b[m]` reads. Sites that tie for the maximum are matched in the same
-  round, as step 4 matches every T[n] with hasMaxValue. Because S is fixed, the final
-  grid does not depend on the order of rounds; only `Matching.pairs`' order does.
-- Closed sites (an extension for several agents, see `calculate_matching`): a site the
-  agent has not seen open lately may have been filled by another agent, so paths avoid
-  crossing it; it is still matched (its path starts beside it), and a site whose every
-  way out crosses closed sites is matched as if they were open, so it stays protected.
-- succ(n) is Eq. 3 literally: the passable neighbour of largest a (smallest distance to
-  a brick), ties broken by the spreading module's move order (N, E, S, W, NE, SE, SW, NW)
-  and diagonals only between two free cells. Every succ is strictly nearer a brick, so a
-  trace ends, at the first brick it reaches.
-- A tie at the site itself starts a trace from every tied neighbour: a site equally near
-  bricks in several directions (Fig. 20's middle wall, between two sources) keeps all
-  those ways open, so sites on any of them wait. The paper's Fig. 20 has "some" middle
-  sites matched up and some down; a fixed tie-break would send all one way and leave the
-  other outer wall free to close first. `pairs` records the first trace's brick.
+Both make the same choices where Fig. 16 is silent (S is never updated; unreachable sites
+stay unmatched; step 3 compares with the best anywhere; succ is Eq. 3 in move order; a tie
+at a site traces every tied way; closed sites for several agents): docs/design.md, "Goal
+sequencing (§6)".
 """
 
 from __future__ import annotations
@@ -182,8 +161,8 @@ def _matching_kernel(bricks, sites, obstacles):
 
 def _compiled(bricks, sites, obstacles, closed) -> Matching:
     bricks, sites, walls = _grids(bricks, sites, obstacles, closed)
-    match, done, *cells = _matching_kernel(bricks, sites, walls)
-    return _result(match, done, *cells, sites)
+    match, done, site_r, site_c, brick_r, brick_c = _matching_kernel(bricks, sites, walls)
+    return _result(match, done, site_r, site_c, brick_r, brick_c, sites)
 
 
 def _around_closed(matcher, bricks, sites, obstacles, closed) -> Matching:
@@ -286,8 +265,8 @@ def _whole_grid(bricks, sites, obstacles, closed) -> Matching:
         todo &= ~chosen
         for r, c_ in zip(*np.nonzero(chosen)):  # the pairs, for the report only
             pairs.append((r, c_, *_trace_end(int(succ_r[r, c_]), int(succ_c[r, c_]), da, succ_r, succ_c)))
-    rows = np.array(pairs, np.int64).reshape(-1, 4).T
-    return _result(match, len(pairs), *rows, sites)
+    site_r, site_c, brick_r, brick_c = np.array(pairs, np.int64).reshape(-1, 4).T
+    return _result(match, len(pairs), site_r, site_c, brick_r, brick_c, sites)
 
 
 def _trace_end(r: int, c: int, da: np.ndarray, succ_r: np.ndarray, succ_c: np.ndarray) -> tuple[int, int]:

@@ -14,6 +14,8 @@ from agent_runtime.config import AgentConfig
 
 @dataclass
 class Motivations:
+    """Hunger and thirst (0 sated .. 1) and whether each has interrupted construction."""
+
     hunger: float = 0.0
     thirst: float = 0.0
     seeking_food: bool = False

@@ -59,6 +59,15 @@ class Choice:
 
 @dataclass(frozen=True)
 class ActionNetwork:
+    """The construction network of Fig. 8: state nodes -> outputs through excitatory and inhibitory weights.
+
+    The six state nodes (STATE_NODES) feed the seven outputs (OUTPUTS) through one
+    excitatory (>= 0) and one inhibitory (<= 0) weight per link; an output fires when its
+    summed input reaches the step threshold, and per group (arm, motor) the strongest firing
+    output is chosen (`select`). `engineered()` gives the paper's hand-set weights (the
+    teacher's network); a learned `Student` hands out frozen copies of its own.
+    """
+
     excite: np.ndarray    # (6, 7), >= 0
     inhibit: np.ndarray   # (6, 7), <= 0
     threshold: float = THRESHOLD
@@ -68,6 +77,7 @@ class ActionNetwork:
         return np.asarray(state, dtype=np.float64) @ (self.excite + self.inhibit)
 
     def choose(self, state: np.ndarray) -> Choice:
+        """The (arm, motor) outputs this network fires for the state node activations `state`."""
         return select(self.inputs(state), self.threshold)
 
 

@@ -1,4 +1,4 @@
-"""Q-learning of the construction sequence from the teacher's signals (paper §5.1, MISSION L4).
+"""Q-learning of the construction sequence from the teacher's signals (paper §5.1; L4).
 
 The paper's last paragraph of §5.1: Q-learning "with a suitable set of parameters showed
 comparable error rates". Here: tabular Q-learning over the 64 patterns of the six binary
@@ -32,6 +32,12 @@ def state_index(state) -> int:
 
 
 class QLearner:
+    """Tabular Q-learning of the arm and motor outputs over the 2^6 binary states (§5.1).
+
+    One Q table per group (arm, motor); greedy choice with random tie-breaks; the teacher's
+    +1 / -1 of a step is its reward, learned when the next state is known (discount `gamma`).
+    """
+
     def __init__(self, rng: np.random.Generator, gamma: float = 0.5):
         if not 0 <= gamma < 1:
             raise ValueError("gamma must be in [0, 1)")
@@ -45,6 +51,7 @@ class QLearner:
         return int(best[0] if len(best) == 1 else self.rng.choice(best))
 
     def choose(self, state) -> Choice:
+        """The greedy (arm, motor) actions in `state`; the outputs report their action values."""
         s = state_index(state)
         arm, motor = ARM_ACTIONS[self._greedy(self.arm_q[s])], MOTOR_ACTIONS[self._greedy(self.motor_q[s])]
         # The Decision's "outputs": each output's action value in this state.

@@ -1,4 +1,4 @@
-"""Navigation maps: spreading activation on a grid (paper §4.2.2, Eq. 1-2; MISSION A3).
+"""Navigation maps: spreading activation on a grid (paper §4.2.2, Eq. 1-2; A3).
 
 A navigation map (NM) is a grid of neurons. Goal cells start at activation 1, obstacle
 cells at -1, all others at 0 (Eq. 1), and every non-goal cell repeatedly takes the best

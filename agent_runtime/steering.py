@@ -14,10 +14,11 @@ import numpy as np
 
 
 def wrap(angle: float) -> float:
+    """The angle in [-pi, pi)."""
     return (angle + math.pi) % (2 * math.pi) - math.pi
 
 
-def steer_to(dx: float, dy: float, heading: float, cruise: float, dt: float = 0.1) -> tuple[float, float]:
+def steer_to(dx: float, dy: float, heading: float, cruise: float) -> tuple[float, float]:
     """Head for the point (dx, dy) (cells, x east, y north) and slow down near it.
 
     Speed drops with the heading error (turn first, then go) and with the distance, so
@@ -37,6 +38,6 @@ def away_from(dx: float, dy: float, heading: float, cruise: float) -> tuple[floa
     return steer_to(-dx, -dy, heading, cruise)
 
 
-def explore(heading: float, rng: np.random.Generator, max_turn: float, cruise: float) -> tuple[float, float]:
+def explore(rng: np.random.Generator, max_turn: float, cruise: float) -> tuple[float, float]:
     """A random walk: keep going, with a random turn each tick (the injected generator)."""
     return 0.6 * cruise, float(rng.uniform(-max_turn, max_turn))

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-EMPTY, BRICK = 0, 1
+LATTICE_EMPTY, LATTICE_BRICK = 0, 1  # the grid's cell values
 BLANK = 0  # state of a wandering agent; construction states are >= 1
 
 # 8-neighbourhood, clockwise from north; index constants name the directions.
@@ -26,8 +26,8 @@ OFFSETS = ((-1, 0), (-1, 1), (0, 1), (1, 1), (1, 0), (1, -1), (0, -1), (-1, -1))
 N, NE, E, SE, S, SW, W, NW = range(8)
 MOVES = (N, E, S, W)
 
-# Occupancy kinds in a sensed pattern entry (kind, visible state).
-FREE, WALL, AGENT, EDGE = 0, 1, 2, 3
+# Occupancy kinds in a sensed pattern entry (kind, visible state): what an agent sees of a neighbour.
+SEEN_FREE, SEEN_WALL, SEEN_AGENT, SEEN_EDGE = 0, 1, 2, 3
 NO_BRICK = -1  # rule condition: the neighbour is not a brick
 
 
@@ -73,6 +73,8 @@ class World:
 
 @dataclass(eq=False)
 class Result:
+    """How a lattice run ended: the final grid and brick states, the steps taken, built or not."""
+
     grid: np.ndarray
     brick_state: np.ndarray
     steps: int
@@ -84,11 +86,12 @@ def make_world(shape: tuple[int, int], seeds: dict[tuple[int, int], int]) -> Wor
     grid = np.zeros(shape, dtype=int)
     states = np.zeros(shape, dtype=int)
     for pos, state in seeds.items():
-        grid[pos], states[pos] = BRICK, state
+        grid[pos], states[pos] = LATTICE_BRICK, state
     return World(grid, states)
 
 
 def neighbour(pos: tuple[int, int], index: int) -> tuple[int, int]:
+    """The cell next to `pos` in direction `index` (N, NE, ... NW)."""
     dr, dc = OFFSETS[index]
     return pos[0] + dr, pos[1] + dc
 
@@ -97,12 +100,12 @@ def cell_view(world: World, pos: tuple[int, int]) -> tuple[int, int]:
     """What a neighbour sees of one cell: (kind, visible state)."""
     rows, cols = world.grid.shape
     if not (0 <= pos[0] < rows and 0 <= pos[1] < cols):
-        return EDGE, BLANK
-    if world.grid[pos] == BRICK:
-        return WALL, int(world.brick_state[pos])
+        return SEEN_EDGE, BLANK
+    if world.grid[pos] == LATTICE_BRICK:
+        return SEEN_WALL, int(world.brick_state[pos])
     if pos in world.agents:
-        return AGENT, world.agents[pos]
-    return FREE, BLANK
+        return SEEN_AGENT, world.agents[pos]
+    return SEEN_FREE, BLANK
 
 
 def sense(world: World, pos: tuple[int, int]) -> tuple[tuple[int, int], ...]:
@@ -111,13 +114,15 @@ def sense(world: World, pos: tuple[int, int]) -> tuple[tuple[int, int], ...]:
 
 
 def holds(condition: int, seen: tuple[int, int]) -> bool:
+    """Whether a sensed neighbour (kind, state) meets a rule condition (a brick state or NO_BRICK)."""
     kind, state = seen
     if condition == NO_BRICK:
-        return kind != WALL
-    return kind == WALL and state == condition
+        return kind != SEEN_WALL
+    return kind == SEEN_WALL and state == condition
 
 
 def matches(rule: Rule, state: int, pattern) -> bool:
+    """Whether `rule` fires for an agent in `state` sensing `pattern` (8 neighbours)."""
     return rule.state == state and all(holds(c, pattern[i]) for i, c in rule.require)
 
 
@@ -126,7 +131,7 @@ def decide(rule_set: RuleSet, state: int, pattern, rng: np.random.Generator):
     for rule in rule_set.rules:
         if matches(rule, state, pattern):
             return rule.action, rule.new_state
-    free = [d for d in MOVES if pattern[d][0] == FREE]
+    free = [d for d in MOVES if pattern[d][0] == SEEN_FREE]
     if not free:
         return "wait", state
     return "move", free[int(rng.integers(len(free)))]
@@ -148,7 +153,7 @@ def act(world: World, policy: Policy, pos, rng: np.random.Generator) -> None:
     action, arg = policy(state, sense(world, pos), rng)
     if action == "brick":
         del world.agents[pos]
-        world.grid[pos], world.brick_state[pos] = BRICK, arg
+        world.grid[pos], world.brick_state[pos] = LATTICE_BRICK, arg
     elif action == "move":
         world.agents[neighbour(pos, arg)] = world.agents.pop(pos)
     else:
@@ -156,6 +161,7 @@ def act(world: World, policy: Policy, pos, rng: np.random.Generator) -> None:
 
 
 def border_cells(shape: tuple[int, int]) -> list[tuple[int, int]]:
+    """The cells on the edge of the grid, where agents enter."""
     rows, cols = shape
     return [(r, c) for r in range(rows) for c in range(cols)
             if r in (0, rows - 1) or c in (0, cols - 1)]
@@ -164,7 +170,7 @@ def border_cells(shape: tuple[int, int]) -> list[tuple[int, int]]:
 def spawn(world: World, n_agents: int, rng: np.random.Generator) -> None:
     """Agents enter at random free border cells until the population is full."""
     free = [p for p in border_cells(world.grid.shape)
-            if world.grid[p] == EMPTY and p not in world.agents]
+            if world.grid[p] == LATTICE_EMPTY and p not in world.agents]
     missing = min(n_agents - len(world.agents), len(free))
     if missing <= 0:
         return
@@ -182,6 +188,7 @@ def step(world: World, policy: Policy, n_agents: int, rng: np.random.Generator) 
 
 
 def is_built(world: World, target: np.ndarray | None) -> bool:
+    """Whether the grid is exactly the target (never, without a target)."""
     return target is not None and np.array_equal(world.grid, target)
 
 

@@ -26,14 +26,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from .lattice import (
-    FREE,
     MOVES,
+    SEEN_FREE,
+    SEEN_WALL,
     RuleSet,
     matches,
     simulate_policy,
 )
 
-N_KINDS = 4  # FREE, WALL, AGENT, EDGE
+N_KINDS = 4  # SEEN_FREE, SEEN_WALL, SEEN_AGENT, SEEN_EDGE
 EXPLORE = 0  # class of "no rule fires": move to a random free 4-neighbour (or wait)
 
 
@@ -50,6 +51,7 @@ def n_classes(n_states: int) -> int:
 
 
 def to_class(action: str, new_state: int, n_states: int) -> int:
+    """The network's class of a rule's (action, new state): 0 explore, then brick, then wait."""
     if action == "brick":
         return 1 + new_state
     if action == "wait":
@@ -75,7 +77,7 @@ def teacher_class(rule_set: RuleSet, state: int, pattern, n_states: int) -> int:
 
 def explore(state: int, pattern, rng: np.random.Generator):
     """The implicit default of `lattice.decide` (same random draws)."""
-    free = [d for d in MOVES if pattern[d][0] == FREE]
+    free = [d for d in MOVES if pattern[d][0] == SEEN_FREE]
     if not free:
         return "wait", state
     return "move", free[int(rng.integers(len(free)))]
@@ -84,6 +86,7 @@ def explore(state: int, pattern, rng: np.random.Generator):
 # --------------------------------------------------------------------------- encoding
 
 def input_size(n_states: int) -> int:
+    """Length of an encoded input: own state one-hot, then per neighbour kind + state one-hots."""
     return n_states + 8 * (N_KINDS + n_states)
 
 
@@ -99,7 +102,7 @@ def encode(state: int, pattern, n_states: int) -> np.ndarray:
     for i, (kind, seen_state) in enumerate(pattern):
         base = n_states + i * width
         x[base + kind] = 1.0
-        if kind == 1:  # WALL: a brick, whose visible state the agent reads
+        if kind == SEEN_WALL:  # a brick, whose visible state the agent reads
             x[base + N_KINDS + seen_state] = 1.0
     return x
 
@@ -118,6 +121,7 @@ class ImitationNet:
         self.lr = lr
 
     def forward(self, x: np.ndarray):
+        """(hidden activations, class probabilities) for the inputs `x`."""
         h = np.tanh(x @ self.w1 + self.b1)
         z = h @ self.w2 + self.b2
         z = z - z.max(axis=-1, keepdims=True)
@@ -157,6 +161,7 @@ class NetPolicy:
     n_states: int
 
     def __call__(self, state: int, pattern, rng: np.random.Generator):
+        """The trained network's decision for an agent in `state` sensing `pattern`; explore if none."""
         cls = int(self.net.predict(encode(state, pattern, self.n_states)))
         decision = from_class(cls, self.n_states)
         return explore(state, pattern, rng) if decision is None else decision
@@ -174,6 +179,7 @@ class RecordingTeacher:
         self.targets: list[int] = []
 
     def __call__(self, state: int, pattern, rng: np.random.Generator):
+        """The rule set's decision, recording the encoded input and its class for training."""
         cls = teacher_class(self.rule_set, state, pattern, self.n_states)
         self.inputs.append(encode(state, pattern, self.n_states))
         self.targets.append(cls)
@@ -205,15 +211,15 @@ def learn(rule_set: RuleSet, seeds, shape, rng: np.random.Generator, epochs: int
     n_states = n_states_of(rule_set, seeds)
     x, y = collect(rule_set, seeds, shape, rng, episodes, n_agents)
     net = ImitationNet(input_size(n_states), n_hidden, n_classes(n_states), rng, lr)
-    errors = []
+    per_epoch = []
     for _ in range(epochs):
         order = rng.permutation(len(y))
         total = 0
         for start in range(0, len(y), batch):
             idx = order[start:start + batch]
             total += net.train_step(x[idx], y[idx])
-        errors.append(total)
-    errors = np.array(errors)
+        per_epoch.append(total)
+    errors = np.array(per_epoch)
     if return_net:
         return errors, net, NetPolicy(net, n_states), len(y)
     return errors

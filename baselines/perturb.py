@@ -10,9 +10,11 @@ closes no new agent can reach the inner one, which stays unfinished.
 """
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
-from .lattice import BRICK, EMPTY, World, make_world, rule_policy, simulate, step
+from .lattice import LATTICE_BRICK, LATTICE_EMPTY, World, make_world, rule_policy, simulate, step
 from .rules import corner_rules, corner_seeds, square_target
 
 STEPS = {"out": 1, "in": -1}
@@ -31,54 +33,58 @@ def outward(pos, target_origin, n) -> tuple[int, int]:
 
 def placed_bricks(world: World, seeds: dict) -> list[tuple[int, int]]:
     """Bricks laid by agents (not seeds), in a deterministic order."""
-    rows, cols = np.nonzero(world.grid == BRICK)
+    rows, cols = np.nonzero(world.grid == LATTICE_BRICK)
     return sorted(p for p in zip(rows.tolist(), cols.tolist()) if p not in seeds)
 
 
 def move_brick(world: World, src, dst) -> bool:
     """Move one brick (with its state) to a free cell; False if not possible."""
-    if world.grid[dst] != EMPTY or dst in world.agents:
+    if world.grid[dst] != LATTICE_EMPTY or dst in world.agents:
         return False
-    world.grid[dst], world.brick_state[dst] = BRICK, world.brick_state[src]
-    world.grid[src], world.brick_state[src] = EMPTY, 0
+    world.grid[dst], world.brick_state[dst] = LATTICE_BRICK, world.brick_state[src]
+    world.grid[src], world.brick_state[src] = LATTICE_EMPTY, 0
     return True
 
 
-def brick_mover(at_step: int, seeds: dict, origin, n: int, direction: str = "out"):
+class BrickMover:
     """An `on_step` hook: from `at_step` on, move the first placed brick once.
 
     The brick moves one cell away from ("out") or towards ("in") the centre.
     `moved` records (src, dst) once done.
     """
-    sign = STEPS[direction]
 
-    def hook(world: World, t: int) -> None:
-        if hook.moved or t < at_step:
+    def __init__(self, at_step: int, seeds: dict, origin, n: int, direction: str = "out"):
+        self.at_step, self.seeds, self.origin, self.n = at_step, seeds, origin, n
+        self.sign = STEPS[direction]
+        self.moved: tuple[tuple[int, int], tuple[int, int]] | None = None
+
+    def __call__(self, world: World, t: int) -> None:
+        """Once `at_step` is reached, move the first placed brick that can move (once only)."""
+        if self.moved or t < self.at_step:
             return
-        for src in placed_bricks(world, seeds):
-            dr, dc = outward(src, origin, n)
-            dst = (src[0] + sign * dr, src[1] + sign * dc)
+        for src in placed_bricks(world, self.seeds):
+            dr, dc = outward(src, self.origin, self.n)
+            dst = (src[0] + self.sign * dr, src[1] + self.sign * dc)
             if move_brick(world, src, dst):
-                hook.moved = (src, dst)
+                self.moved = (src, dst)
                 return
-
-    hook.moved = None
-    return hook
 
 
 def run_perturbed(rule_set, seeds, shape, n, origin, at_step, direction, n_agents,
                   max_steps, rng):
     """Simulate with one brick moved at `at_step`; returns (result, move)."""
-    hook = brick_mover(at_step, seeds, origin, n, direction)
+    hook = BrickMover(at_step, seeds, origin, n, direction)
     result = simulate(rule_set, seeds, shape, n_agents, max_steps, rng, on_step=hook)
     return result, hook.moved
 
 
 def ring_done(world: World, ring: np.ndarray) -> bool:
-    return bool(np.all(world.grid[ring == BRICK] == BRICK))
+    """Whether every cell of the ring mask holds a brick."""
+    return bool(np.all(world.grid[ring == LATTICE_BRICK] == LATTICE_BRICK))
 
 
 def inside(pos, origin, n) -> bool:
+    """Whether `pos` lies strictly inside the n x n square at `origin`."""
     return all(o < p < o + n - 1 for p, o in zip(pos, origin))
 
 
@@ -97,7 +103,7 @@ def nested_squares(outer_n: int, inner_n: int, n_agents: int, max_steps: int,
     world = make_world(shape, {**corner_seeds(outer_n, outer_o),
                                **corner_seeds(inner_n, inner_o)})
     rules = corner_rules(outer | inner)
-    done = {"outer": None, "inner": None, "enclosed": None}
+    done: dict[str, Any] = {"outer": None, "inner": None, "enclosed": None}
     for t in range(1, max_steps + 1):
         step(world, rule_policy(rules), n_agents, rng)
         if done["inner"] is None and ring_done(world, inner):

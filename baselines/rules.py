@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .lattice import BLANK, BRICK, NE, NO_BRICK, NW, SE, SW, E, N, Rule, RuleSet, S, W
+from .lattice import BLANK, LATTICE_BRICK, NE, NO_BRICK, NW, SE, SW, E, N, Rule, RuleSet, S, W
 
 TL, TR, BR, BL = 1, 2, 3, 4
 
@@ -50,12 +50,13 @@ def square_target(n: int, origin: tuple[int, int], shape) -> np.ndarray:
     """The ring of side n whose top-left corner is `origin`."""
     grid = np.zeros(shape, dtype=int)
     r, c = origin
-    grid[r:r + n, c:c + n] = BRICK
+    grid[r:r + n, c:c + n] = LATTICE_BRICK
     grid[r + 1:r + n - 1, c + 1:c + n - 1] = 0
     return grid
 
 
 def corner_seeds(n: int, origin) -> dict:
+    """The four corner seeds of an n x n square at `origin`: {cell: corner state}."""
     r, c = origin
     return {(r, c): TL, (r, c + n - 1): TR, (r + n - 1, c + n - 1): BR, (r + n - 1, c): BL}
 

@@ -29,10 +29,9 @@ from pathlib import Path
 
 import numpy as np
 
-
-from agent_runtime.esm import EgocentricMaps  # noqa: E402
-from protocol.messages import CHANNELS, NO_READING  # noqa: E402
-from world_server.buildability import check_layout  # noqa: E402
+from agent_runtime.esm import EgocentricMaps
+from protocol.messages import CHANNELS, NO_READING
+from world_server.buildability import check_layout
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -65,8 +64,8 @@ def realtime_ticks_per_second(seconds: float = 1.0) -> tuple[float, float]:
     """(measured ticks per second, the configured tick_rate) of a realtime world server
     serving quick_wall with no agent, on a loopback zenoh session."""
     from bus import BusOptions, open_session
-    from world_server.scenario import load_scenario
     from nodes.world_server import WorldServer
+    from world_server.scenario import load_scenario
     from world_server.world import World
 
     scenario = load_scenario(ROOT / "scenarios" / "quick_wall.toml")
@@ -101,7 +100,7 @@ def big_layout() -> list[str]:
     g[35, :] = "F"
     g[35, 50:53] = "."
     rng = np.random.default_rng(0)
-    free = np.argwhere(g[40:, :] == ".") + [40, 0]
+    free = np.argwhere(g[40:, :] == ".") + [40, 0]  # noqa: RUF005 -- numpy addition (row offset), not concatenation
     for r, c in free[rng.choice(len(free), int((g == "+").sum()) + 30, replace=False)]:
         g[r, c] = "b"
     g[119, 0] = "A"

@@ -133,7 +133,9 @@ def main(argv: list[str] | None = None) -> int:
               f"| {r['solve']:.3f} | {up_built:.1f}x | {up_solve:.1f}x | {TARGET_MS[n]} "
               f"| {yes[r['step'] <= TARGET_MS[n]]} | {yes[up_built >= TARGET_SPEEDUP]} |", flush=True)
         mix = ", ".join(f"{k} {v}" for k, v in sorted(r["behaviours"].items(), key=lambda kv: -kv[1]))
-        notes.append(f"{n} x {n}: {r['checked']} ticks timed in {r['episodes']} episode(s) (seeds from 6), each timed from tick {args.warmup} until the structure was complete (the last one until enough ticks); behaviours: {mix}")
+        notes.append(f"{n} x {n}: {r['checked']} ticks timed in {r['episodes']} episode(s) (seeds from 6), "
+                     f"each timed from tick {args.warmup} until the structure was complete (the last one until "
+                     f"enough ticks); behaviours: {mix}")
     print()
     print("Targets: decision step <= " + ", ".join(f"{v:g} ms at {k} x {k}" for k, v in TARGET_MS.items())
           + f"; the two navigation maps >= {TARGET_SPEEDUP:g}x faster than scipy computing the same two fields"

@@ -78,8 +78,8 @@ def ticks_per_second(n_agents: int, seconds: float, repeats: int = 5) -> list[fl
 
 def _agent_side(endpoint: str, ready, done) -> None:
     """Agent process: the real agent link, answering every frame with a command."""
-    from nodes.world_link import WorldLink
     from bus import BusOptions, open_session
+    from nodes.world_link import WorldLink
 
     session = open_session(BusOptions(connect=(endpoint,)))
     try:

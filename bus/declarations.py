@@ -25,7 +25,7 @@ def undeclare(*entities) -> None:
             continue
         try:
             entity.undeclare()
-        except Exception:  # the session may be closing already; nothing is left to free
+        except Exception:  # noqa: BLE001 -- the session may be closing already; nothing is left to free
             pass
 
 
@@ -46,6 +46,7 @@ class Declarations:
         return entity
 
     def close(self) -> None:
+        """Undeclare every entity, last declared first."""
         entities, self._entities = self._entities[::-1], []
         undeclare(*entities)
 

@@ -23,6 +23,7 @@ class Inbox:
         self._declared = Declarations()
 
     def subscribe(self, session, key: str) -> Inbox:
+        """Also receive every sample published under `key`."""
         self._declared.add(session.declare_subscriber(key, self._q.put))
         return self
 
@@ -75,4 +76,5 @@ class Presence:
         return events
 
     def undeclare(self) -> None:
+        """Undeclare the liveliness subscription."""
         self._inbox.undeclare()

@@ -60,7 +60,7 @@ def _stop_on_signals():
     """An Event set by SIGINT or SIGTERM, so loops finish their tick and close the session."""
     stop = threading.Event()
 
-    def handler(signum, _frame):
+    def handler(_signum, _frame):
         stop.set()
 
     previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
@@ -268,7 +268,7 @@ def cmd_agent(args) -> int:
     opts = _agent_options(args)
     report = AgentReport()
 
-    def raise_stop(signum, _frame):
+    def raise_stop(_signum, _frame):
         raise _Stopped()
 
     previous = {s: signal.signal(s, raise_stop) for s in (signal.SIGINT, signal.SIGTERM)}

@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import json
 import signal
-import tempfile
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Callable

@@ -172,17 +172,16 @@ def report(curves, baseline, plan: Plan, seconds: float, workers: int, quick: bo
     keys = list(curves)
     names = [label(*k, plan) for k in keys]
     lines = [f"# L3, L4 — learning the construction sequence (Fig. 9){' — QUICK smoke run' if quick else ''}", "",
-             f"Written by `python3 -m experiments.{STEM}{' --quick' if quick else ''}` in {seconds / 60:.1f} min "
-             f"on {workers} worker processes. Training environment `{TRAINING}` with one agent; {plan.runs} runs per "
+             (f"Written by `python3 -m experiments.{STEM}{' --quick' if quick else ''}` in {seconds / 60:.1f} min "
+              f"on {workers} worker processes. Training environment `{TRAINING}` with one agent; {plan.runs} runs per "
              f"curve, {plan.trials} trials of {plan.ticks:,} steps; before each trial the environment is reset "
-             "and the agent put at its start (fresh maps, weights kept). Error = a step where the student's "
-             "arm or motor output differs from the teacher's (the engineered network of Fig. 8 on the same "
-             "state nodes). Run r starts from the same random weights at every learning rate "
-             f"(seed [{plan.seed}, r]). Mean ± one standard deviation over the runs.", "",
+              "and the agent put at its start (fresh maps, weights kept). Error = a step where the student's "
+              "arm or motor output differs from the teacher's (the engineered network of Fig. 8 on the same "
+              "state nodes). Run r starts from the same random weights at every learning rate "
+              f"(seed [{plan.seed}, r]). Mean ± one standard deviation over the runs."), "",
              "| trial | " + " | ".join(names) + " |", "|---:|" + "---:|" * len(keys)]
-    for t in range(plan.trials):
-        lines.append(f"| {t + 1} | " + " | ".join(f"{curves[k]['mean'][t]:.1f} ± {curves[k]['sd'][t]:.1f}"
-                                                    for k in keys) + " |")
+    lines.extend(f"| {t + 1} | " + " | ".join(f"{curves[k]['mean'][t]:.1f} ± {curves[k]['sd'][t]:.1f}"
+                                              for k in keys) + " |" for t in range(plan.trials))
 
     def row(name, f):
         lines.append(f"| {name} | " + " | ".join(f(curves[k]) for k in keys) + " |")
@@ -199,12 +198,12 @@ def report(curves, baseline, plan: Plan, seconds: float, workers: int, quick: bo
     row("structure completed within the last trial", lambda c: f"{c['built_last']}/{len(c['runs'])}")
 
     lines += ["", "## The trained students in novel environments", "",
-              f"The first {plan.novel_students} trained students of each curve, after their last trial, build each "
-              f"scenario from its initial layout (at most {plan.novel_ticks:,} steps), first with learning off "
-              "(the teacher only counts their errors), then, the same students, with learning on at their "
-              "training rate. The engineered network of Fig. 8 (the teacher's) is the reference.", "",
-              "| learner | scenario | learning | completed | steps to complete: median (range) | "
-              "errors: mean (max) |", "|---|---|---|---:|---:|---:|"]
+              (f"The first {plan.novel_students} trained students of each curve, after their last trial, build each "
+               f"scenario from its initial layout (at most {plan.novel_ticks:,} steps), first with learning off "
+               "(the teacher only counts their errors), then, the same students, with learning on at their "
+               "training rate. The engineered network of Fig. 8 (the teacher's) is the reference."), "",
+              ("| learner | scenario | learning | completed | steps to complete: median (range) | "
+               "errors: mean (max) |"), "|---|---|---|---:|---:|---:|"]
     for name, b in baseline.items():
         lines.append(f"| engineered network (Fig. 8) | {name} | — | {'yes' if b['completed'] else 'no'} | "
                      f"{b['ticks']} | {b['errors']} |")

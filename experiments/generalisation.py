@@ -144,7 +144,7 @@ def _picture(run: sim.SimRun, sc: Scenario, job: Job, folder: Path) -> Path:
     from protocol.messages import DISC_KINDS
     from world_server.render import render_scenario
 
-    idx, xy, kind = run.world.discs.present_arrays()
+    _, xy, kind = run.world.discs.present_arrays()
     discs = [(x, y, DISC_KINDS[k]) for (x, y), k in zip(xy.tolist(), kind.tolist())]
     st = run.world.status()
     slug = "nearest" if job.mode == "nearest-first" else "ts"
@@ -186,7 +186,7 @@ def group_table(outcomes: list[Outcome], key, title: str) -> str:
     head = (f"| {title} | layouts | goal sequencing: completed | ticks (median) | distance / bound (median) "
             f"| nearest-first: completed | ticks (median) |")
     lines = [head, "|---|---|---|---|---|---|---|"]
-    for g in groups + ["all"]:
+    for g in [*groups, "all"]:
         mine = [o for o in outcomes if g == "all" or key(o) == g]
         ts = [o for o in mine if o.mode == "goal sequencing"]
         nf = [o for o in mine if o.mode == "nearest-first"]
@@ -203,21 +203,21 @@ def goals(outcomes: list[Outcome]) -> str:
     lost = [o for o in outcomes if o.bricks_total_end != o.bricks_total_start]
     return "\n".join([
         "| goal | target | measured | met |", "|---|---|---|---|",
-        f"| goal sequencing completes buildable layouts | >= 98% | {rate(ts):.1f}% of {len(ts)} | "
-        f"{'yes' if rate(ts) >= 98 else 'no'} |",
-        f"| ... with <= 3 agents in worlds up to 60 x 60 | 100% | {rate(small):.1f}% of {len(small)} | "
-        f"{'yes' if small and rate(small) == 100 else 'no'} |",
-        f"| bricks_total never changes | every run | {len(outcomes) - len(lost)}/{len(outcomes)} runs | "
-        f"{'yes' if not lost else 'no'} |"])
+        (f"| goal sequencing completes buildable layouts | >= 98% | {rate(ts):.1f}% of {len(ts)} | "
+         f"{'yes' if rate(ts) >= 98 else 'no'} |"),
+        (f"| ... with <= 3 agents in worlds up to 60 x 60 | 100% | {rate(small):.1f}% of {len(small)} | "
+         f"{'yes' if small and rate(small) == 100 else 'no'} |"),
+        (f"| bricks_total never changes | every run | {len(outcomes) - len(lost)}/{len(outcomes)} runs | "
+         f"{'yes' if not lost else 'no'} |")])
 
 
 FAILURE_CLASSES = (
-    ("sealed", "an agent holds a brick and no open site is reachable for it: the structure (or an agent's "
-               "body inside it) closed the way to the sites left"),
-    ("no supply", "no agent knows a reachable free brick: the supply was not found, or what is left is "
-                  "out of reach"),
-    ("busy, no fill", "agents navigate with a brick or to a brick, yet no site is filled (stale beliefs, "
-                      "agents in each other's way)"),
+    ("sealed", ("an agent holds a brick and no open site is reachable for it: the structure (or an agent's "
+                "body inside it) closed the way to the sites left")),
+    ("no supply", ("no agent knows a reachable free brick: the supply was not found, or what is left is "
+                   "out of reach")),
+    ("busy, no fill", ("agents navigate with a brick or to a brick, yet no site is filled (stale beliefs, "
+                       "agents in each other's way)")),
     ("out of ticks", "still filling sites when the layout's max_ticks ran out"),
 )
 
@@ -310,7 +310,7 @@ def generate_layouts(count: int, seed: int) -> None:
         sc = g.scenario()
         path = LAYOUTS / f"{k:03d}-{sc.name}.toml"
         path.write_text(g.text, encoding="utf-8")
-        print(f"{path.name}: {sc.cols}x{sc.rows}, {len(sc.cells('+'))} open sites, {sc.agents} agents",
+        print(f"{path.name}: {sc.cols}x{sc.rows}, {len(sc.cells_col_row('+'))} open sites, {sc.agents} agents",
               file=sys.stderr)
 
 
@@ -322,7 +322,7 @@ def quick_files(n: int) -> list[str]:
     """The `n` smallest layouts of the suite (by cells x agents): a smoke run in seconds."""
     def work(name: str) -> tuple[int, str]:
         sc = load_scenario(LAYOUTS / name)
-        return sc.cols * sc.rows * max(sc.agents, 1) + 50 * len(sc.cells("+")), name
+        return sc.cols * sc.rows * max(sc.agents, 1) + 50 * len(sc.cells_col_row("+")), name
     return [name for _, name in sorted(map(work, suite_files()))[:n]]
 
 

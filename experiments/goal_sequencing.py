@@ -65,8 +65,10 @@ def _inner(c) -> bool:
 # before the outer ring closes.
 PAPER_ORDER = {
     "fig18": ("D2 before D1", lambda f: 0 <= f[(8, 8)] < f[(7, 8)]),
-    "fig19": ("far wall first", lambda f: _done(f, _rows(f, 14)) < min(_done(f, _rows(f, 11)), _done(f, _rows(f, 8)))),
-    "fig20": ("middle wall first", lambda f: _done(f, _rows(f, 10)) < min(_done(f, _rows(f, 7)), _done(f, _rows(f, 13)))),
+    "fig19": ("far wall first",
+              lambda f: _done(f, _rows(f, 14)) < min(_done(f, _rows(f, 11)), _done(f, _rows(f, 8)))),
+    "fig20": ("middle wall first",
+              lambda f: _done(f, _rows(f, 10)) < min(_done(f, _rows(f, 7)), _done(f, _rows(f, 13)))),
     "nested_squares": ("inner square first", lambda f: _done(f, [c for c in f if _inner(c)])
                        < _done(f, [c for c in f if not _inner(c)])),
 }
@@ -184,8 +186,8 @@ def _num(v: float, fmt: str = ".0f") -> str:
 
 
 def table(rows: list[dict]) -> str:
-    lines = ["| scenario | agents | agent | completed | ticks (median) | distance (median) | lower bound "
-             "| distance / bound | fewest sites filled | paper's order | ideal order, known map |",
+    lines = [("| scenario | agents | agent | completed | ticks (median) | distance (median) | lower bound "
+              "| distance / bound | fewest sites filled | paper's order | ideal order, known map |"),
              "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         ideal_cell = "" if r["ideal"] is None else f"{r['ideal']:.0f}{'' if r['ideal_done'] else ' (stuck)'}"

@@ -72,10 +72,10 @@ def plot(out, path, n, n_seeds):
 
 def table(out, n, seeds, epochs, episodes, eval_runs, eval_steps) -> str:
     lines = [f"# R3 — learning the transition rule set (Fig. 11), square n={n}", "",
-             f"Seeds {list(seeds)}; {episodes} teacher episodes per seed (8 agents); "
-             f"{epochs} epochs of minibatch GD (batch 32, lr 0.5, 32 tanh hidden units). "
-             "Errors = decisions in the epoch whose network argmax differs from the "
-             "teacher's class, counted before each minibatch update. Mean ± std over seeds.",
+             (f"Seeds {list(seeds)}; {episodes} teacher episodes per seed (8 agents); "
+              f"{epochs} epochs of minibatch GD (batch 32, lr 0.5, 32 tanh hidden units). "
+              "Errors = decisions in the epoch whose network argmax differs from the "
+              "teacher's class, counted before each minibatch update. Mean ± std over seeds."),
              "", "| epoch | corners | sides |", "|---:|---:|---:|"]
     marks = sorted({1, 2, 3, 5, 10, 15, 20, 30, 40, 50, epochs} & set(range(1, epochs + 1)))
     for e in marks:

@@ -28,7 +28,7 @@ import numpy as np
 
 import sim
 from agent_runtime.config import AgentConfig
-from baselines.lattice import BRICK, simulate
+from baselines.lattice import LATTICE_BRICK, simulate
 from baselines.perturb import nested_squares, run_perturbed
 from baselines.rules import square_rules
 from experiments.report import write_section
@@ -211,7 +211,7 @@ def draw(ax, grid, target, title, moved=None):
     ax.set_yticks([])
     for r in range(rows):
         for c in range(cols):
-            want, have = target[r, c] == BRICK, grid[r, c] == BRICK
+            want, have = target[r, c] == LATTICE_BRICK, grid[r, c] == LATTICE_BRICK
             if have and want:
                 ax.add_patch(Rectangle((c, r), 1, 1, fc="0.25", ec="white"))
             elif have:
@@ -286,7 +286,7 @@ def fmt_steps(values):
     return f"{a.mean():.0f} ± {a.std():.0f} (min {a.min():.0f}, max {a.max():.0f})"
 
 
-def table(rseeds, square, moved, nested, conag):
+def table(square, moved, nested, conag):
     rows = ["| task | system | completed | steps / ticks (completed runs) | rules / states | agents |",
             "|---|---|---|---|---|---|"]
     for seeding in ("corners", "sides"):
@@ -366,7 +366,7 @@ def main(argv=None):
     outdir = Path(args.out)
     outdir.mkdir(parents=True, exist_ok=True)
     paths = pictures(square, moved, nested, outdir)
-    tab = table(rseeds, square, moved, nested, conag)
+    tab = table(square, moved, nested, conag)
     print(tab)
     write_section(args.doc, "R4", report(tab, paths, rseeds, cseeds, moves, nested, conag, q))
     return tab

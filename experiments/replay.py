@@ -1,5 +1,5 @@
 """Construction planned on a fully known map: the ideal order of goal sequencing, and a
-lower bound on the distance any agent must travel (paper §6, Fig. 13; MISSION G3).
+lower bound on the distance any agent must travel (paper §6, Fig. 13; G3).
 
 A live agent knows only what its sector sensors have shown it, one disc per sector, so
 the order it fills sites in depends on what it has seen. `replay` removes that: it runs

@@ -56,6 +56,7 @@ class Learning:
             raise ValueError("wait must be >= 0 seconds")
 
     def student(self, seed: int) -> Student:
+        """The learner to start from: the weights in `weights_in`, else random ones from `seed`."""
         if self.weights_in:
             return Student.load(self.weights_in)
         # A stream of its own: not the one the brain explores with.

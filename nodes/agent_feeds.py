@@ -29,6 +29,8 @@ STATE_EVERY = 100  # ticks between AgentState reports
 
 
 class AgentFeeds:
+    """Blueprint changes in (a FIFO inbox), the brain's AgentState reports out (see the module)."""
+
     def __init__(self, session: zenoh.Session, world_id: str, agent_id: str, every: int = STATE_EVERY):
         self.world_id, self.agent_id, self.every = world_id, agent_id, every
         self.bad = 0
@@ -64,6 +66,7 @@ class AgentFeeds:
             self.report(brain, tick)
 
     def report(self, brain, tick: int) -> None:
+        """Publish the brain's AgentState as of `tick`."""
         self._states.put(encode(brain.state_report(tick)))
         self._last_report = tick
 
@@ -72,6 +75,6 @@ class AgentFeeds:
         try:
             if brain is not None:
                 self.report(brain, tick)
-        except Exception as exc:  # on the way out (a signal mid-step, a closing session): never fatal
+        except Exception as exc:  # noqa: BLE001 -- on the way out (a signal mid-step, a closing session): never fatal
             log.debug("agent %s: no final state report: %s", self.agent_id, exc)
         self._declared.close()

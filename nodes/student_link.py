@@ -35,6 +35,8 @@ FIFO_CAPACITY = 4096
 
 @dataclass
 class LinkCounts:
+    """What a StudentLink has seen, for the agent's log and tests."""
+
     decisions: int = 0        # published
     reinforcements: int = 0   # received and matched to a pending decision
     errors: int = 0           # of those, with a -1 for the arm or the motor
@@ -45,6 +47,11 @@ class LinkCounts:
 
 
 class StudentLink:
+    """Decisions out (reliable), the teacher's reinforcements in (a FIFO inbox), paired by tick.
+
+    A context manager; see the module for what happens with no teacher.
+    """
+
     def __init__(self, session: zenoh.Session, world_id: str, agent_id: str, keep: int = 1024):
         self.agent_id, self.keep = agent_id, keep
         self.counts = LinkCounts()
@@ -135,4 +142,5 @@ class StudentLink:
                 log.warning("agent %s: teacher %s is gone; acting on the current weights", self.agent_id, teacher)
 
     def close(self) -> None:
+        """Undeclare the token watch, the inbox and the publisher."""
         self._declared.close()

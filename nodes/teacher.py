@@ -54,6 +54,7 @@ class TeacherLink:
             log.info("student %s is %s", agent, "here" if alive else "gone")
 
     def publisher(self, agent: str) -> zenoh.Publisher:
+        """The reliable reinforcement publisher for `agent`, declared when it is first needed."""
         pub = self._publishers.get(agent)
         if pub is None:
             pub = self.session.declare_publisher(keys.reinforcement(self.world_id, agent),
@@ -75,6 +76,7 @@ class TeacherLink:
         self.publisher(d.agent_id).put(encode(teacher.reinforce(d)))
 
     def close(self) -> None:
+        """Undeclare everything: the token, the watch and inbox, then the publishers."""
         self._declared.close()
         publishers, self._publishers = list(self._publishers.values()), {}
         undeclare(*publishers)

@@ -27,6 +27,11 @@ class AttachError(RuntimeError):
 
 
 class WorldLink:
+    """One agent's link to the world: its liveliness token, attach, sensor frames in, commands out.
+
+    A context manager; see the module for the frame channel ("latest wins").
+    """
+
     def __init__(self, session: zenoh.Session, world_id: str, agent_id: str):
         self.session, self.world_id, self.agent_id = session, world_id, agent_id
         self.bad_frames = 0
@@ -88,6 +93,7 @@ class WorldLink:
                 return frame
 
     def send(self, tick: int, speed: float = 0.0, turn: float = 0.0, action: str = "none") -> None:
+        """Publish the command (speed, turn, one-shot action) answering the frame of `tick`."""
         self._pub.put(encode(AgentCommand(self.agent_id, tick, speed, turn, action)))
 
     def close(self) -> None:

@@ -1,4 +1,4 @@
-"""The world server: the zenoh shell around `world_server.world.World` (MISSION W7, S1, S2).
+"""The world server: the zenoh shell around `world_server.world.World` (W7, S1, S2 in docs/design.md).
 
 Everything arriving on the bus (commands, liveliness changes, attach, perturb) is put on
 one queue by zenoh's callback threads and applied by the single loop thread, so the
@@ -27,7 +27,7 @@ import logging
 import queue
 import threading
 import time
-from typing import Callable
+from collections.abc import Callable
 
 import zenoh
 
@@ -41,6 +41,18 @@ log = logging.getLogger("conag.world")
 
 
 class WorldServer:
+    """The world on the bus: one loop thread applies every event and steps a `World`.
+
+    Commands, liveliness changes, attach requests (Hello) and perturbations arrive on one
+    queue from zenoh's threads; `run(stop)` declares the keys, then ticks in lockstep or
+    realtime `mode` (the scenario's by default) until `stop` is set, `max_ticks` is reached
+    or, with `stop_when_complete`, the structure is complete. It publishes each agent's
+    SensorFrame after a tick, a WorldStatus periodically (also handed to `on_status`) and a
+    new Blueprint when a perturbation changes the sites. `clock` is the time source
+    (injected for tests); in lockstep, `wait_agents` agents must attach before the first
+    tick.
+    """
+
     def __init__(self, world: World, session: zenoh.Session, *, mode: str | None = None,
                  max_ticks: int | None = None, stop_when_complete: bool = False, wait_agents: int = 1,
                  clock: Callable[[], float] = time.monotonic,

@@ -3,9 +3,10 @@
 Wire format: a msgpack map {"v": SCHEMA_VERSION, "t": type name, "f": [field values in
 declaration order]}. Tuples of floats (sensor readings, site coordinates, ...) travel as
 one msgpack bin of little-endian float64s: exact, and decoded by a single C call, which
-keeps the per-tick frame cheap on both ends of the bus. Decoding anything malformed (random bytes, wrong types, missing or
-extra fields, NaN/inf, unknown type, wrong version, oversize) raises ProtocolError and
-nothing else, so a receiver can count and drop bad input without ever crashing.
+keeps the per-tick frame cheap on both ends of the bus. Decoding anything malformed
+(random bytes, wrong types, missing or extra fields, NaN/inf, unknown type, wrong
+version, oversize) raises ProtocolError and nothing else, so a receiver can count and
+drop bad input without ever crashing.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import dataclasses
 import functools
 import struct
 import typing
+from typing import Any
 
 import msgpack
 
@@ -31,7 +33,7 @@ _BY_NAME = {cls.__name__: cls for cls in MESSAGE_TYPES}
 
 
 @functools.cache
-def _field_types(cls: type) -> tuple[tuple[str, object], ...]:
+def _field_types(cls: type) -> tuple[tuple[str, Any], ...]:
     hints = typing.get_type_hints(cls)
     return tuple((f.name, hints[f.name]) for f in dataclasses.fields(cls))
 
@@ -39,7 +41,7 @@ def _field_types(cls: type) -> tuple[tuple[str, object], ...]:
 @functools.cache
 def _wire_spec(cls: type) -> tuple[tuple[str, type, bool], ...]:
     """(name, scalar type, is a tuple of them) per field, worked out once per class."""
-    spec = []
+    spec: list[tuple[str, type, bool]] = []
     for name, hint in _field_types(cls):
         is_tuple = typing.get_origin(hint) is tuple
         spec.append((name, typing.get_args(hint)[0] if is_tuple else hint, is_tuple))
@@ -48,12 +50,12 @@ def _wire_spec(cls: type) -> tuple[tuple[str, type, bool], ...]:
 
 def encode(msg: object) -> bytes:
     """Encode a protocol message to bytes."""
-    name = type(msg).__name__
-    if _BY_NAME.get(name) is not type(msg):
-        raise TypeError(f"not a protocol message: {type(msg)!r}")
+    cls: type = type(msg)  # (a `type` for mypy, which does not take type[object] as hashable)
+    name = cls.__name__
+    if _BY_NAME.get(name) is not cls:
+        raise TypeError(f"not a protocol message: {cls!r}")
     values = [_pack_floats(v) if is_tuple and kind is float else list(v) if is_tuple else v
-              for v, (_, kind, is_tuple) in zip((getattr(msg, n) for n, _ in _field_types(type(msg))),
-                                                 _wire_spec(type(msg)))]
+              for v, (_, kind, is_tuple) in zip((getattr(msg, n) for n, _ in _field_types(cls)), _wire_spec(cls))]
     return msgpack.packb({"v": SCHEMA_VERSION, "t": name, "f": values}, use_bin_type=True)
 
 
@@ -68,7 +70,7 @@ def _check_scalar(value: object, kind: type, where: str) -> object:
     elif kind is float:
         if isinstance(value, (int, float)) and not isinstance(value, bool):
             return float(value)
-    elif kind is str:
+    elif kind is str:  # noqa: SIM102 -- one branch per kind, like those above
         if isinstance(value, str) and len(value) <= MAX_STRING:
             return value
     raise ProtocolError(f"{where}: expected {kind.__name__}, got {type(value).__name__}")
@@ -102,7 +104,7 @@ def decode(data: bytes, expected: type | tuple[type, ...] | None = None) -> obje
         raise ProtocolError(f"message of {size} bytes exceeds {MAX_MESSAGE_BYTES}")
     try:
         raw = msgpack.unpackb(bytes(data), raw=False, strict_map_key=True, use_list=True)
-    except Exception as exc:  # msgpack raises many types; all mean "not a message"
+    except Exception as exc:  # noqa: BLE001 -- msgpack raises many types; all mean "not a message"
         raise ProtocolError(f"not msgpack: {exc}") from None
     if not isinstance(raw, dict) or set(raw) != {"v", "t", "f"}:
         raise ProtocolError("not a ConAg envelope")

@@ -25,6 +25,7 @@ def check_id(value: str, what: str = "id") -> str:
 
 
 def world_root(world: str) -> str:
+    """The key prefix of everything about one world."""
     return f"{ROOT}/world/{check_id(world, 'world id')}"
 
 
@@ -98,20 +99,25 @@ def agent_of(key: str) -> str | None:
 
 # Liveliness tokens: the world declares one, every agent and teacher declares its own.
 def world_token(world: str) -> str:
+    """The world server's liveliness token."""
     return f"{world_root(world)}/alive/world"
 
 
 def agent_token(world: str, agent: str) -> str:
+    """An agent process's liveliness token (the world waits for it only while it exists)."""
     return f"{world_root(world)}/alive/agent/{check_id(agent, 'agent id')}"
 
 
 def all_agent_tokens(world: str) -> str:
+    """Every agent's liveliness token, to watch."""
     return f"{world_root(world)}/alive/agent/*"
 
 
 def teacher_token(world: str, teacher: str) -> str:
+    """A teacher's liveliness token (a student publishes decisions once it sees one)."""
     return f"{world_root(world)}/alive/teacher/{check_id(teacher, 'teacher id')}"
 
 
 def all_teacher_tokens(world: str) -> str:
+    """Every teacher's liveliness token, to watch."""
     return f"{world_root(world)}/alive/teacher/*"

@@ -44,7 +44,8 @@ def _float_fields(cls: type) -> tuple[str, ...]:
 
 def _finite(msg: object) -> None:
     """Reject NaN and infinity in any float or float tuple field."""
-    for name in _float_fields(type(msg)):
+    cls: type = type(msg)  # (a `type` for mypy, which does not take type[object] as hashable)
+    for name in _float_fields(cls):
         value = getattr(msg, name)
         values = value if isinstance(value, tuple) else (value,)
         # One sum is finite iff every term is (short of overflow, which the slow path

@@ -138,6 +138,7 @@ class FirstCompletion:
         self.tick: int | None = None
 
     def __call__(self, run: SimRun) -> None:
+        """Record the world's tick the first time the structure is complete."""
         if self.tick is None and run.world.completed():
             self.tick = run.world.tick
 

@@ -1,4 +1,4 @@
-"""Learning trials in one process (paper §5.1, Fig. 9): world, student, teacher, no bus.
+"""Learning trials in one process (paper §5.1, Fig. 9; L3): world, student, teacher, no bus.
 
 The same World, Brain, Student / QLearner and teacher core as the processes, stepped in
 lockstep by the simulation loop (`sim.loop`) for the many runs of the Fig. 9
@@ -8,13 +8,8 @@ the blueprint), `ticks` steps; each step the teacher reinforces the student's de
 and the student learns from it before acting on the next frame. The learner's weights
 carry over from trial to trial: that is what is learned.
 
-Between trials the whole environment is reset, not only the agent: the paper's student
-"was repeatedly placed in the same environment" and "moved to its initial position" after
-each trial. Left where they lay, the bricks would be on their sites after the first
-trial or two and every later trial would be the trivial "structure complete" state, so
-errors would fall to zero without anything being learned. A fresh `World` from the same
-scenario does the reset (and a fresh Brain gives the agent fresh maps: a body moved by
-hand would otherwise find its egocentric maps no longer matching what it senses).
+Between trials the whole environment is reset, not only the agent: a fresh `World` from
+the same scenario and a fresh Brain (why: docs/design.md, "Learning (§5.1)").
 """
 
 from __future__ import annotations
@@ -32,6 +27,8 @@ from world_server.scenario import Scenario
 
 @dataclass(frozen=True)
 class TrialResult:
+    """One learning trial: the student's errors against the teacher, and how far the build got."""
+
     errors: int            # steps where the student's (arm, motor) differs from the teacher's
     ticks: int             # steps taken
     sites_filled: int

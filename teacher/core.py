@@ -1,4 +1,4 @@
-"""The teacher's rule (paper §5.1, MISSION L1), with no bus: compare, then reinforce.
+"""The teacher's rule (paper §5.1; L1), with no bus: compare, then reinforce.
 
 The teacher is not in the world: it sees what the student sees (the six internal state
 nodes the student reports in its Decision), works out what the engineered network of
@@ -31,6 +31,7 @@ def signals(decision: Decision, network: ActionNetwork) -> tuple[int, int]:
 
 
 def is_error(r: Reinforcement) -> bool:
+    """Whether the teacher disagreed with the arm or the motor output of the step."""
     return r.arm < 0 or r.motor < 0
 
 
@@ -46,6 +47,7 @@ class StudentRecord:
 
     @property
     def recent_errors(self) -> int:
+        """Errors among the student's recent decisions."""
         return sum(self.recent)
 
 
@@ -58,6 +60,7 @@ class Teacher:
         self.bad_messages = 0  # decisions that could not be decoded (counted by the process)
 
     def reinforce(self, decision: Decision) -> Reinforcement:
+        """The two signals (+1 agree / -1 disagree, arm and motor) for a student's decision."""
         rec = self.students.setdefault(decision.agent_id, StudentRecord())
         arm, motor = signals(decision, self.network)
         r = Reinforcement(decision.agent_id, decision.tick, rec.next_seq, arm, motor)

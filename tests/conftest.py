@@ -10,8 +10,9 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable, TypeVar
+from typing import TypeVar
 
 import numpy as np
 import pytest
@@ -57,7 +58,7 @@ class Bus:
         for s in reversed(self.sessions):
             try:
                 s.close()
-            except Exception:
+            except Exception:  # noqa: BLE001 -- teardown: one session failing to close must not stop the rest
                 pass
 
 

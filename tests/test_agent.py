@@ -73,8 +73,9 @@ def test_agents_complete_the_structure_in_lockstep(name, agents, max_ticks):
     run, completed = _run(name, agents, max_ticks)
     status = run.world.status()
     assert completed, f"{name}: {status.sites_filled}/{status.sites_total} sites after {status.tick} ticks"
-    assert status.bricks_total == load_scenario(SCENARIOS / f"{name}.toml").cells("bB").shape[0]
-    assert sum(status.agent_drops) >= status.sites_total - len(load_scenario(SCENARIOS / f"{name}.toml").cells("B"))
+    sc = load_scenario(SCENARIOS / f"{name}.toml")
+    assert status.bricks_total == sc.cells_col_row("bB").shape[0]
+    assert sum(status.agent_drops) >= status.sites_total - len(sc.cells_col_row("B"))
 
 
 @pytest.mark.slow

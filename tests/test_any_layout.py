@@ -147,7 +147,7 @@ def test_a_site_no_path_reaches_is_not_beside_a_mouth():
     sites[2, 1] = sites[2, 3] = True
     depth = np.full((5, 5), 3.0)
     depth[2, 3] = 4.0                                   # deeper: stays a goal
-    assert _mouth_side(held, sites, depth).tolist() == ((np.arange(25).reshape(5, 5) == 11)).tolist()
+    assert _mouth_side(held, sites, depth).tolist() == (np.arange(25).reshape(5, 5) == 11).tolist()
     depth[2, 1] = np.inf                                # behind closed sites: no depth
     assert not _mouth_side(held, sites, depth).any()
 

@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 
 from baselines.lattice import (
     BLANK,
-    BRICK,
+    LATTICE_BRICK,
     NO_BRICK,
     Rule,
     RuleSet,
@@ -137,14 +137,14 @@ def test_moved_brick_gives_wrong_structure(seeding, direction, seed):
     assert moved is not None
     assert not result.built
     assert not np.array_equal(result.grid, rule_set.target)
-    assert result.grid[moved[1]] == BRICK  # the displaced brick stays a stray
+    assert result.grid[moved[1]] == LATTICE_BRICK  # the displaced brick stays a stray
 
 
 def test_moved_brick_outward_grows_a_spurious_wall():
     rule_set, seeds, shape = square_rules(8, "corners")
     result, _ = run_perturbed(rule_set, seeds, shape, 8, (3, 3), 20, "out",
                               8, 3000, np.random.default_rng(0))
-    stray = (result.grid == BRICK) & (rule_set.target == 0)
+    stray = (result.grid == LATTICE_BRICK) & (rule_set.target == 0)
     assert stray.sum() > 1  # more than the moved brick: the rules extended it
 
 

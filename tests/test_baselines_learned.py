@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from baselines.lattice import BLANK, EDGE, FREE, WALL, simulate
+from baselines.lattice import BLANK, SEEN_EDGE, SEEN_FREE, SEEN_WALL, simulate
 from baselines.learned import (
     EXPLORE,
     ImitationNet,
@@ -33,15 +33,15 @@ def corner_run():
 
 def test_encode_layout():
     n_states = 5
-    pattern = ((WALL, 3),) + ((FREE, BLANK),) * 6 + ((EDGE, BLANK),)
+    pattern = ((SEEN_WALL, 3),) + ((SEEN_FREE, BLANK),) * 6 + ((SEEN_EDGE, BLANK),)
     x = encode(BLANK, pattern, n_states)
     assert x.shape == (input_size(n_states),)
     width = 4 + n_states
     assert x[BLANK] == 1 and x[:n_states].sum() == 1
     first = x[n_states:n_states + width]
-    assert first[WALL] == 1 and first[4 + 3] == 1 and first.sum() == 2
+    assert first[SEEN_WALL] == 1 and first[4 + 3] == 1 and first.sum() == 2
     last = x[n_states + 7 * width:]
-    assert last[EDGE] == 1 and last.sum() == 1
+    assert last[SEEN_EDGE] == 1 and last.sum() == 1
     assert x.sum() == 1 + 2 + 6 + 1
 
 

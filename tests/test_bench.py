@@ -21,7 +21,7 @@ def bench(script: str, *args: str, timeout: float = 120) -> subprocess.Completed
 
 def test_world_benchmark_quick_run_prints_both_tables():
     r = bench("bench_world.py", "--endpoint", f"tcp/127.0.0.1:{free_port()}")
-    rows = [line for line in r.stdout.splitlines() if line.startswith("| 10 |") or line.startswith("| 100 |")]
+    rows = [line for line in r.stdout.splitlines() if line.startswith(("| 10 |", "| 100 |"))]
     assert len(rows) == 2
     assert all(float(row.split("|")[3].replace(",", "")) > 0 for row in rows)
     rtt = [line for line in r.stdout.splitlines() if line.startswith("| loopback")]

@@ -4,7 +4,7 @@ order that an independent replay (scipy's labelling, not the module's kernels) a
 from __future__ import annotations
 
 from collections import deque
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 
 import numpy as np
@@ -64,7 +64,7 @@ def brute_force(layout) -> bool:
                     todo.append(n)
         return seen
 
-    @lru_cache(maxsize=None)
+    @cache
     def solve(state: tuple[str, ...]) -> bool:
         grid = [list(row) for row in state]
         sites = [(c, r) for r, row in enumerate(grid) for c, ch in enumerate(row) if ch == "+"]
@@ -104,7 +104,7 @@ def test_every_shipped_scenario_is_buildable_and_the_order_replays(path):
     s = load_scenario(path)
     result = check_buildable(s)
     assert_proven(s.layout, result, s.agents)
-    assert sorted(result.order) == sorted(map(tuple, s.cells("+").tolist()))
+    assert sorted(result.order) == sorted(map(tuple, s.cells_col_row("+").tolist()))
 
 
 def test_fig18_the_pocket_end_is_filled_before_its_mouth():
@@ -116,7 +116,7 @@ def test_fig18_the_pocket_end_is_filled_before_its_mouth():
 def test_nested_squares_inner_ring_is_finished_before_the_outer_ring_closes():
     s = load_scenario(SCENARIOS[0].parent / "nested_squares.toml")
     order = check_buildable(s).order
-    sites = s.cells("+")
+    sites = s.cells_col_row("+")
     (c0, r0), (c1, r1) = sites.min(axis=0), sites.max(axis=0)
     outer = [i for i, (c, r) in enumerate(order) if c in (c0, c1) or r in (r0, r1)]
     inner = [i for i in range(len(order)) if i not in outer]

@@ -39,7 +39,7 @@ def test_declarations_undeclare_last_declared_first_once_on_leaving_the_block():
 
 def test_declarations_undeclare_on_an_exception_too():
     log: list[str] = []
-    with pytest.raises(ValueError), Declarations() as declared:
+    with pytest.raises(ValueError), Declarations() as declared:  # noqa: PT012 -- the raise is inside the block under test
         declared.add(Entity("subscriber", log))
         raise ValueError("boom")
     assert log == ["subscriber"]

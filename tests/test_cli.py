@@ -52,7 +52,7 @@ def test_world_runs_a_fixed_number_of_ticks_and_writes_a_summary(tmp_path):
     data = json.loads(summary.read_text(encoding="utf-8"))
     assert (data["ticks"], data["sites_total"], data["bricks_total"]) == (50, 3, 4)
     assert set(data) == {"scenario", "seed", "completed", "stalled", "ticks", "sites_total", "sites_filled",
-                         "bricks_total", "total_distance", "agents"}  # the run summary contract of MISSION.md
+                         "bricks_total", "total_distance", "agents"}  # the run summary (world_server/summary.py)
     assert data["scenario"] == "quick_wall" and data["completed"] is False
 
 
@@ -67,7 +67,7 @@ def test_status_perturb_and_sigterm_on_a_running_world(running_world):
     assert data["scenario"] == "quick_wall" and data["sites_total"] == 3 and data["bricks_total"] == 4
 
     s = load_scenario(QUICK_WALL)
-    x, y = s.to_world(s.cells("b"))[0]
+    x, y = s.to_world(s.cells_col_row("b"))[0]
     r = conag("perturb", "remove", "--at", f"{x},{y}", "--connect", ep)
     assert r.returncode == 0, r.stderr
     assert "removed brick" in r.stdout

@@ -1,4 +1,4 @@
-"""Egocentric spatial maps (paper §4.2.1, Fig. 4; MISSION A2).
+"""Egocentric spatial maps (paper §4.2.1, Fig. 4; A2).
 
 Offsets are in cells, x east and y north; map rows grow southwards. A "disc" in the
 shifting tests is one marked cell whose world position the test tracks independently of
@@ -18,13 +18,13 @@ from hypothesis import strategies as st
 
 from agent_runtime.esm import AGENT, BRICK, CONFIG, FOOD, OBSTACLE, WATER, EgocentricMaps, obstacle_trust
 from protocol.messages import CHANNELS, NO_READING, Perturbation
-
-NCH = len(CHANNELS)
-AG = CHANNELS.index("agent")
 from world_server.discs import IN_WORLD
 from world_server.scenario import parse_scenario
 from world_server.sensors import sense as world_sense
 from world_server.world import World
+
+NCH = len(CHANNELS)
+AG = CHANNELS.index("agent")
 
 SIZE = 41
 C = SIZE // 2
@@ -467,7 +467,7 @@ def reference_sense(m: EgocentricMaps, ranges: np.ndarray, reach: float) -> np.n
             ox, oy = m.offset_of(row, col)
             geometry[(row, col)] = (ox, oy, math.hypot(ox, oy), overlapped.get((row, col), set()))
     for layer in (FOOD, WATER, BRICK, OBSTACLE):
-        for cell, (ox, oy, d, overlapped) in geometry.items():
+        for cell, (_, _, d, overlapped) in geometry.items():
             if d > reach + 0.75:
                 continue
             if layer == BRICK and m.maps[CONFIG][cell] > 0.5:

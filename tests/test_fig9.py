@@ -1,4 +1,4 @@
-"""The Fig. 9 experiment (MISSION L3, L4): trials in one process, and the script's --quick run."""
+"""The Fig. 9 experiment (§5.1; L3, L4): trials in one process, and the script's --quick run."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""ConAg-TS agents (paper §6.2; MISSION G2-G3): the Brain's Matching grid shapes its goals,
+"""ConAg-TS agents (paper §6.2; G2-G3): the Brain's Matching grid shapes its goals,
 and agents build the paper's layouts that nearest-first cannot, in the order that keeps
 every site reachable. Builds run the real World and Brain code in one process (sim).
 """

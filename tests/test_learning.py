@@ -1,4 +1,4 @@
-"""The learning student (§5.1, MISSION L2) and the Q-learner (L4): pure rules, no bus, no world."""
+"""The learning student (§5.1, L2) and the Q-learner (L4): pure rules, no bus, no world."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""calculateMatching and drop-site selection on known maps (paper §6, Fig. 16-20; MISSION G1-G3).
+"""calculateMatching and drop-site selection on known maps (paper §6, Fig. 16-20; G1-G3).
 
 The compiled matching equals Fig. 16 done step by step on whole grids; the choices Fig. 16
 leaves open behave as documented; and on the paper's layouts the Matching grid and the
@@ -26,7 +26,7 @@ def layout(name: str):
 
 
 def grid_of(rows: str) -> dict[str, np.ndarray]:
-    lines = [line for line in rows.strip().splitlines()]
+    lines = rows.strip().splitlines()
     arr = np.array([list(line) for line in lines])
     return {ch: arr == ch for ch in "b+#"}
 

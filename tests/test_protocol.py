@@ -20,12 +20,12 @@ from protocol import (
     ACTIONS,
     BEHAVIOURS,
     CHANNELS,
-    AgentState,
-    Blueprint,
     MAX_MESSAGE_BYTES,
     MESSAGE_TYPES,
     SCHEMA_VERSION,
     AgentCommand,
+    AgentState,
+    Blueprint,
     Decision,
     Hello,
     Perturbation,
@@ -623,7 +623,7 @@ PER_WORLD = [keys.status, keys.perturb, keys.world_token, keys.all_agent_tokens,
 
 def test_root_carries_the_schema_version():
     # Processes speaking different wire versions must not even see each other's traffic.
-    assert keys.ROOT == f"conag/v{SCHEMA_VERSION}"
+    assert f"conag/v{SCHEMA_VERSION}" == keys.ROOT
 
 
 @pytest.mark.parametrize("fn", PER_WORLD, ids=lambda f: f.__name__)

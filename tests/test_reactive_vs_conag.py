@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from baselines.lattice import BRICK
+from baselines.lattice import LATTICE_BRICK
 from baselines.perturb import run_perturbed
 from baselines.rules import square_rules
 from experiments import reactive_vs_conag as rvc
@@ -18,13 +18,13 @@ def test_reactive_moved_brick_gives_wrong_structure(seeding):
     assert moved is not None
     assert not result.built
     assert not np.array_equal(result.grid, rule_set.target)
-    assert result.grid[moved[1]] == BRICK and rule_set.target[moved[1]] != BRICK
+    assert result.grid[moved[1]] == LATTICE_BRICK and rule_set.target[moved[1]] != LATTICE_BRICK
 
 
 def test_ring_scenario_matches_the_lattice_task():
     sc = rvc.ring_scenario("corners", 2)
-    assert len(sc.cells("+B")) == 20 and len(sc.cells("B")) == 4
-    assert len(sc.cells("b")) >= 16
+    assert len(sc.cells_col_row("+B")) == 20 and len(sc.cells_col_row("B")) == 4
+    assert len(sc.cells_col_row("b")) >= 16
 
 
 @pytest.mark.slow

@@ -38,7 +38,7 @@ def test_every_scenario_renders_with_each_of_its_disc_kinds_in_its_colour(tmp_pa
     width, height = _png_size(out)
     assert 300 <= width <= 3000 and 200 <= height <= 3000
     for kind, cells in (("food", "F"), ("water", "W"), ("brick", "bB")):
-        assert _has_colour(out, DISC_STYLE[kind]["facecolor"]) == (len(s.cells(cells)) > 0), kind
+        assert _has_colour(out, DISC_STYLE[kind]["facecolor"]) == (len(s.cells_col_row(cells)) > 0), kind
 
 
 def test_overrides_replace_agents_and_discs(tmp_path):

@@ -1,4 +1,4 @@
-"""Navigation maps (paper §4.2.2 Eq. 1-2, MISSION A3): the distance field is the true
+"""Navigation maps (paper §4.2.2 Eq. 1-2, A3): the distance field is the true
 8-connected shortest path, equals the paper's spreading rule, and its gradient leads to a goal."""
 
 from __future__ import annotations

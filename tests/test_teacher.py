@@ -1,4 +1,4 @@
-"""The teacher (paper §5.1, MISSION L1) and learning students over the bus.
+"""The teacher (paper §5.1, L1) and learning students over the bus.
 
 The bus tests run a real `conag teacher` process; students are a real `conag agent
 --learn` process or `run_agent` in a thread, against a world server in this process.

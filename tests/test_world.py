@@ -1,4 +1,4 @@
-"""The world core (paper §3, MISSION W1-W7) driven directly, without a bus.
+"""The world core (paper §3; W1-W7 in docs/design.md) driven directly, without a bus.
 
 Small worlds come from inline scenario strings. World coordinates: x east, y north,
 one unit = one cell; cell (col, row) has its centre at (col + 0.5, rows - 1 - row + 0.5).
@@ -61,7 +61,7 @@ def face_nearest_brick(w, agent: str = "a") -> None:
 def test_the_gripper_takes_the_brick_in_front_not_a_nearer_one_behind():
     w = make("\n".join(["......", ".bAb..", "......"]), grab_reach=1.5)
     w.attach("a")
-    x, y, _ = w.agent_poses()[0]
+    x, _, _ = w.agent_poses()[0]
     w.heading[0] = 0.0                       # facing east, a brick 1.0 away on each side
     tick(w, {"a": (0.0, 0.0, "grab")})
     held = w.agents["a"].holding
@@ -376,7 +376,7 @@ def test_an_agent_driving_into_a_disc_stops_at_contact_and_never_passes():
         w.attach(a)
     contact = w.cfg.agent_radius + w.cfg.disc_radius
     for _ in range(60):
-        tick(w, {a: (3.0, 0.0, "none") for a in "xyz"})
+        tick(w, dict.fromkeys("xyz", (3.0, 0.0, "none")))
         xs = w.agent_poses()[:, 0]
         assert np.all(6.5 - xs >= contact - STEP)
     np.testing.assert_allclose(w.agent_poses()[:, 0], 6.5 - contact, atol=TOL)

@@ -10,14 +10,23 @@ import sys
 import time
 
 import msgpack
-import zenoh
 import numpy as np
 import pytest
+import zenoh
 
 from nodes.world_link import WorldLink
 from protocol import keys
 from protocol.codec import decode, encode
-from protocol.messages import CHANNELS, NO_READING, SCHEMA_VERSION, AgentCommand, Hello, Perturbation, PerturbResult, SensorFrame
+from protocol.messages import (
+    CHANNELS,
+    NO_READING,
+    SCHEMA_VERSION,
+    AgentCommand,
+    Hello,
+    Perturbation,
+    PerturbResult,
+    SensorFrame,
+)
 from tests.conftest import ROOT, Bus, RunningWorld, free_port, wait_until
 from tests.scripted import ScriptedBody
 from world_server.scenario import load_scenario

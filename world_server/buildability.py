@@ -40,12 +40,14 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-Cell = tuple[int, int]  # (col, row), row 0 is the north, as Scenario.cells
+Cell = tuple[int, int]  # (col, row), row 0 is the north, as Scenario.cells_col_row
 
-# Cell codes in the kernels' padded grid. Walkable cells are <= SITE, cells an agent can
-# eventually clear a way through are <= BRICK.
-EMPTY, SITE, BRICK, BLOCK = 0, 1, 2, 3
-_CODE = {".": EMPTY, "A": EMPTY, "+": SITE, "b": BRICK, "F": BLOCK, "W": BLOCK, "B": BLOCK, "#": BLOCK}
+# Cell codes in the kernels' padded grid (not the world's disc kinds, nor the ESM layers).
+# Walkable cells are <= SITE_CELL, cells an agent can eventually clear a way through are
+# <= BRICK_CELL.
+EMPTY_CELL, SITE_CELL, BRICK_CELL, BLOCK_CELL = 0, 1, 2, 3
+_CODE = {".": EMPTY_CELL, "A": EMPTY_CELL, "+": SITE_CELL, "b": BRICK_CELL,
+         "F": BLOCK_CELL, "W": BLOCK_CELL, "B": BLOCK_CELL, "#": BLOCK_CELL}
 
 # Search outcomes and the reasons a candidate fill is refused (kernel return codes).
 _OK, _STUCK, _BUDGET = 0, 1, 2
@@ -63,6 +65,8 @@ MAX_BRICK_CHOICES = 4
 
 @dataclass(frozen=True)
 class Buildability:
+    """The verdict of `check_buildable`: ok or why not, and a fill order with its bricks that works."""
+
     ok: bool
     reason: str = ""                   # empty when ok; otherwise a sentence naming (col,row) cells
     order: tuple[Cell, ...] = ()       # the open sites in a fill order that works
@@ -86,7 +90,7 @@ def check_layout(layout: Sequence[str], agents: int | None = None, work: int = S
     on every `A`). `work` bounds the backtracking, in cell visits."""
     grid, cols = _encode(layout)
     starts = _starts(layout, agents)
-    if not (grid == SITE).any():
+    if not (grid == SITE_CELL).any():
         return Buildability(False, "no open drop site: every site already holds a brick"
                             if any("B" in row for row in layout) else "no drop site")
     if not len(starts):
@@ -109,7 +113,7 @@ def reachable(layout: Sequence[Sequence[str]], starts: Sequence[Cell] | None = N
     if starts is None:
         starts = [(c, r) for r, row in enumerate(layout) for c, ch in enumerate(row) if ch == "A"]
     idx = np.array([(r + 1) * (cols + 2) + c + 1 for c, r in starts], np.int64)
-    labels, _ = _label(grid, cols + 2, SITE)
+    labels, _ = _label(grid, cols + 2, SITE_CELL)
     mine = np.unique(labels[idx][labels[idx] >= 0])
     return {_cell(int(i), cols) for i in np.flatnonzero(np.isin(labels, mine) & (labels >= 0))}
 
@@ -118,10 +122,10 @@ def reachable(layout: Sequence[Sequence[str]], starts: Sequence[Cell] | None = N
 
 
 def _encode(layout: Sequence[Sequence[str]]) -> tuple[np.ndarray, int]:
-    """Flat padded code grid (a BLOCK border, so neighbours never leave the array), and cols."""
+    """Flat padded code grid (a BLOCK_CELL border, so neighbours never leave the array), and cols."""
     rows, cols = len(layout), len(layout[0])
-    grid = np.full((rows + 2, cols + 2), BLOCK, np.int8)
-    lut = np.full(128, BLOCK, np.int8)
+    grid = np.full((rows + 2, cols + 2), BLOCK_CELL, np.int8)
+    lut = np.full(128, BLOCK_CELL, np.int8)
     for ch, code in _CODE.items():
         lut[ord(ch)] = code
     chars = np.array([[min(ord(ch), 127) for ch in row] for row in layout], np.int64).reshape(rows, cols)
@@ -149,14 +153,14 @@ def _starts(layout: Sequence[str], agents: int | None) -> np.ndarray:
 def _necessary(grid: np.ndarray, cols: int, starts: np.ndarray) -> tuple[str, int]:
     """Why a site can never be reached or an area has too few bricks ('' if neither), and
     how many bricks the agents can reach beyond one per open site."""
-    labels, n = _label(grid, cols + 2, BRICK)
+    labels, n = _label(grid, cols + 2, BRICK_CELL)
     mine = np.zeros(n, bool)
     mine[labels[starts]] = True
-    sites = np.flatnonzero(grid == SITE)
+    sites = np.flatnonzero(grid == SITE_CELL)
     lost = sites[~mine[labels[sites]]]
     if len(lost):
         return _walled_off(grid, labels, lost[0], cols), 0
-    bricks = np.flatnonzero(grid == BRICK)
+    bricks = np.flatnonzero(grid == BRICK_CELL)
     site_count = np.bincount(labels[sites], minlength=n)
     brick_count = np.bincount(labels[bricks], minlength=n)
     short = np.flatnonzero(mine & (brick_count < site_count))
@@ -175,7 +179,7 @@ def _count(n: int, noun: str) -> str:
 
 
 def _walled_off(grid: np.ndarray, labels: np.ndarray, s: int, cols: int) -> str:
-    held = int((grid[labels == labels[s]] == BRICK).sum())
+    held = int((grid[labels == labels[s]] == BRICK_CELL).sum())
     if held:
         return f"site {_fmt(_cell(s, cols))} is walled off from every agent start (with {_count(held, 'brick')})"
     return f"site {_fmt(_cell(s, cols))} is inside a closed ring with no brick and no way in"
@@ -198,7 +202,7 @@ def _fmt(cell: Cell) -> str:
 def _priority(grid: np.ndarray, cols: int, starts: np.ndarray) -> np.ndarray:
     """Open sites, hardest to keep open first: deepest, then farthest from the bricks."""
     depth, dist = _depth_and_brick_distance(grid, cols + 2, starts)
-    sites = np.flatnonzero(grid == SITE)
+    sites = np.flatnonzero(grid == SITE_CELL)
     return sites[np.lexsort((sites, -dist[sites], -depth[sites]))]
 
 
@@ -232,7 +236,7 @@ def _label(grid, width, top):
 
 @njit(cache=True)
 def _layers(grid, width, sources, costly):
-    """Fewest cells of code `costly` entered on a way from any source over cells <= BRICK
+    """Fewest cells of code `costly` entered on a way from any source over cells <= BRICK_CELL
     (sites are crossed by walking, bricks by taking them). Unreached cells get n + 1."""
     n = grid.size
     big = n + 1
@@ -253,7 +257,7 @@ def _layers(grid, width, sources, costly):
             sp -= 1
             u = cur[sp]
             for v in (u - 1, u + 1, u - width, u + width):
-                if grid[v] > BRICK or out[v] != big:
+                if grid[v] > BRICK_CELL or out[v] != big:
                     continue
                 if grid[v] == costly:
                     out[v] = d + 1
@@ -274,12 +278,12 @@ def _depth_and_brick_distance(grid, width, starts):
     """depth: fewest sites crossed from a start (bricks are passable: they can be taken);
     dist: walking steps from the nearest free brick. Unreached cells get a large value."""
     n = grid.size
-    depth = _layers(grid, width, starts, SITE)
+    depth = _layers(grid, width, starts, SITE_CELL)
     dist = np.full(n, n + 1, np.int64)
     queue = np.empty(n, np.int64)
     head = tail = 0
     for i in range(n):
-        if grid[i] == BRICK:
+        if grid[i] == BRICK_CELL:
             dist[i] = 0
             queue[tail] = i
             tail += 1
@@ -287,7 +291,7 @@ def _depth_and_brick_distance(grid, width, starts):
         u = queue[head]
         head += 1
         for v in (u - 1, u + 1, u - width, u + width):
-            if grid[v] <= SITE and dist[v] == n + 1:
+            if grid[v] <= SITE_CELL and dist[v] == n + 1:
                 dist[v] = dist[u] + 1
                 queue[tail] = v
                 tail += 1
@@ -296,35 +300,35 @@ def _depth_and_brick_distance(grid, width, starts):
 
 @njit(cache=True)
 def _try_fill(grid, width, s, rank, walk, walk_start, dig, starts, fail):
-    """Fill site s if that is safe: put a BLOCK there and take the `rank`-th best usable
-    brick (its cell becomes EMPTY). Return the brick, or -1 with `fail` = (kind, site, other)."""
-    grid[s] = BLOCK
-    part, n_parts = _label(grid, width, BRICK)
+    """Fill site s if that is safe: put a BLOCK_CELL there and take the `rank`-th best usable
+    brick (its cell becomes EMPTY_CELL). Return the brick, or -1 with `fail` = (kind, site, other)."""
+    grid[s] = BLOCK_CELL
+    part, n_parts = _label(grid, width, BRICK_CELL)
     agent_part = np.zeros(n_parts, np.bool_)
     for a in starts:
         agent_part[part[a]] = True
     n_sites = np.zeros(n_parts, np.int64)
     n_bricks = np.zeros(n_parts, np.int64)
     for i in range(grid.size):
-        if grid[i] == SITE:
+        if grid[i] == SITE_CELL:
             if not agent_part[part[i]]:
-                grid[s] = SITE
+                grid[s] = SITE_CELL
                 fail[0], fail[1], fail[2] = _CUTS_SITE, s, i
                 return -1
             n_sites[part[i]] += 1
-        elif grid[i] == BRICK:
+        elif grid[i] == BRICK_CELL:
             n_bricks[part[i]] += 1
     for p in range(n_parts):
         if agent_part[p] and n_bricks[p] < n_sites[p]:
-            grid[s] = SITE
+            grid[s] = SITE_CELL
             fail[0], fail[1], fail[2] = _TOO_FEW, s, s
             return -1
     brick = _usable_brick(grid, width, s, rank, walk, walk_start, dig, part, agent_part, n_sites, n_bricks)
     if brick < 0:
-        grid[s] = SITE
+        grid[s] = SITE_CELL
         fail[0], fail[1], fail[2] = _NO_BRICK, s, s
         return -1
-    grid[brick] = EMPTY
+    grid[brick] = EMPTY_CELL
     return brick
 
 
@@ -350,7 +354,7 @@ def _usable_brick(grid, width, s, rank, walk, walk_start, dig, part, agent_part,
             if walk[v] == own:
                 queue[tail] = v
                 tail += 1
-            elif grid[v] == BRICK and (walk_start[own] or _touches_agents(v, width, walk, walk_start)):
+            elif grid[v] == BRICK_CELL and (walk_start[own] or _touches_agents(v, width, walk, walk_start)):
                 p = part[v]
                 if not agent_part[p] or n_bricks[p] - n_sites[p] >= 1:
                     found[nf] = v
@@ -363,7 +367,7 @@ def _usable_brick(grid, width, s, rank, walk, walk_start, dig, part, agent_part,
 
 @njit(cache=True)
 def _touches_agents(v, width, walk, walk_start):
-    for w in (v - 1, v + 1, v - width, v + width):
+    for w in (v - 1, v + 1, v - width, v + width):  # noqa: SIM110 -- numba compiles this loop, not any() of a generator
         if walk[w] >= 0 and walk_start[walk[w]]:
             return True
     return False
@@ -385,7 +389,7 @@ def _search(grid, width, prio, starts, max_attempts, max_bricks):
     best_fail = np.zeros(3, np.int64)
     k = nxt = nxt_rank = attempts = best = 0
     while k < n:
-        walk, n_walk = _label(grid, width, SITE)
+        walk, n_walk = _label(grid, width, SITE_CELL)
         walk_start = np.zeros(n_walk, np.bool_)
         for a in starts:
             walk_start[walk[a]] = True
@@ -419,8 +423,8 @@ def _search(grid, width, prio, starts, max_attempts, max_bricks):
         if k == 0:
             return _STUCK, best, sites[:0], bricks[:0], best_fail
         k -= 1  # undo the last fill; resume with its next brick, then its next site
-        grid[sites[k]] = SITE
-        grid[bricks[k]] = BRICK
+        grid[sites[k]] = SITE_CELL
+        grid[bricks[k]] = BRICK_CELL
         filled[pos[k]] = False
         nxt, nxt_rank = pos[k], rank[k] + 1
     return _OK, n, sites, bricks, best_fail
@@ -438,4 +442,4 @@ def _dig_distance(grid, width, prio, filled, walk, walk_start):
             n += 1
     if n == 0:
         return np.zeros(grid.size, np.int64)
-    return _layers(grid, width, cut[:n], BRICK)
+    return _layers(grid, width, cut[:n], BRICK_CELL)

@@ -1,6 +1,6 @@
 """World configuration: a frozen dataclass, loaded from a TOML table.
 
-Units: one world unit is one map cell, which is one disc diameter (MISSION W1). Time
+Units: one world unit is one map cell, which is one disc diameter (paper §3; W1). Time
 advances in ticks of `dt` simulated seconds.
 """
 
@@ -13,6 +13,8 @@ from dataclasses import dataclass
 
 @dataclass(frozen=True)
 class WorldConfig:
+    """The world's physical settings (sizes, speeds, sensors, gripper, noise); frozen."""
+
     cell_size: float = 1.0          # one disc diameter; layout cells are this wide
     disc_radius: float = 0.5
     agent_radius: float = 0.3       # < disc_radius so an agent fits through a one-cell gap
@@ -55,7 +57,7 @@ class WorldConfig:
             raise ValueError("world.sensor_sectors must be an integer from 1 to 64")
 
     @classmethod
-    def from_mapping(cls, table: dict) -> "WorldConfig":
+    def from_mapping(cls, table: dict) -> WorldConfig:
         """Build from a TOML table, rejecting unknown keys (a typo must not pass silently)."""
         known = {f.name: f.type for f in dataclasses.fields(cls)}
         unknown = sorted(set(table) - set(known))

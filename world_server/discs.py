@@ -11,11 +11,13 @@ import numpy as np
 
 from protocol.messages import DISC_KINDS
 
-FOOD, WATER, BRICK = (DISC_KINDS.index(k) for k in ("food", "water", "brick"))
+FOOD_DISC, WATER_DISC, BRICK_DISC = (DISC_KINDS.index(k) for k in ("food", "water", "brick"))  # `kind` values
 IN_WORLD, CARRIED, GONE = 0, 1, 2
 
 
 class DiscStore:
+    """Every disc of the world (food, water, bricks): positions, kinds and states, by index."""
+
     def __init__(self, xy: np.ndarray, kinds: np.ndarray):
         self.xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2).copy()
         self.kind = np.asarray(kinds, dtype=np.int64).copy()
@@ -29,6 +31,7 @@ class DiscStore:
     # Every change goes through these methods, so the arrays the sensors read each tick
     # are gathered once per change instead of once per tick.
     def add(self, xy: tuple[float, float], kind: int) -> int:
+        """A new disc of `kind` at `xy`, in the world; returns its index."""
         self.xy = np.vstack([self.xy, np.asarray(xy, dtype=np.float64).reshape(1, 2)])
         self.kind = np.append(self.kind, kind)
         self.state = np.append(self.state, IN_WORLD)
@@ -36,15 +39,18 @@ class DiscStore:
         return len(self.kind) - 1
 
     def carry(self, index: int) -> None:
+        """The disc is grabbed: under an agent, out of the world."""
         self.state[index] = CARRIED
         self._present = None
 
     def place(self, index: int, xy) -> None:
+        """The disc is back in the world at `xy` (dropped or moved)."""
         self.xy[index] = xy
         self.state[index] = IN_WORLD
         self._present = None
 
     def remove(self, index: int) -> None:
+        """The disc is gone for good (a perturbation); its index stays taken."""
         self.state[index] = GONE
         self._present = None
 
@@ -90,12 +96,12 @@ class DiscStore:
 
     def bricks_total(self) -> int:
         """Bricks that exist: in the world or carried. Only a perturbation changes this."""
-        return int(np.count_nonzero((self.kind == BRICK) & (self.state != GONE)))
+        return int(np.count_nonzero((self.kind == BRICK_DISC) & (self.state != GONE)))
 
     def filled_sites(self, site_codes: np.ndarray, cell_code) -> np.ndarray:
         """Boolean per site: a present brick lies in the site's cell.
 
         `cell_code` maps (n, 2) world positions to the same integer codes as `site_codes`.
         """
-        bricks = np.flatnonzero((self.kind == BRICK) & (self.state == IN_WORLD))
+        bricks = np.flatnonzero((self.kind == BRICK_DISC) & (self.state == IN_WORLD))
         return np.isin(site_codes, cell_code(self.xy[bricks]))

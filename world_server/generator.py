@@ -50,6 +50,8 @@ class GenerationError(RuntimeError):
 
 @dataclass(frozen=True)
 class GeneratedScenario:
+    """A generated layout: what was drawn (family, size, agents, supply) and the scenario file text."""
+
     name: str
     seed: int
     family: str
@@ -65,10 +67,12 @@ class GeneratedScenario:
     text: str = field(repr=False)     # the scenario file
 
     def scenario(self) -> Scenario:
+        """The scenario file parsed."""
         return parse_scenario(self.text, f"<{self.name}>")
 
     @property
     def size(self) -> tuple[int, int]:
+        """(cols, rows)."""
         return self.cols, self.rows
 
 
@@ -402,7 +406,7 @@ class _World:
     def _pile(self, rng, n: int, centre: tuple[int, int]) -> bool:
         """A compact block of n bricks near `centre`, on free cells only."""
         rows, cols = self.shape
-        w = max(1, int(round(math.sqrt(n) * rng.uniform(0.7, 1.4))))
+        w = max(1, round(math.sqrt(n) * rng.uniform(0.7, 1.4)))
         h = -(-n // w)
         free = self.free()
         for _ in range(60):
@@ -424,7 +428,7 @@ class _World:
             cand = cells[rng.integers(len(cells), size=16)]
             dist = np.min([np.abs(cand - p).sum(axis=1) for p in chosen], axis=0)
             chosen.append(cand[int(np.argmax(dist))])
-        return [tuple(map(int, p)) for p in chosen]
+        return [(int(p[0]), int(p[1])) for p in chosen]
 
     # -- agents
 
@@ -437,10 +441,7 @@ class _World:
             return False
         struct = np.argwhere(self.reserved)
         dist = np.min(np.abs(cells[:, None, :] - struct[None, ::max(1, len(struct) // 64), :]).sum(axis=2), axis=1)
-        if near:
-            pool = cells[dist <= np.quantile(dist, 0.1)]
-        else:
-            pool = cells[dist >= np.quantile(dist, 0.9)]
+        pool = cells[dist <= np.quantile(dist, 0.1)] if near else cells[dist >= np.quantile(dist, 0.9)]
         first = tuple(pool[rng.integers(len(pool))])
         blob = _bfs_cells(free, first, k)
         if len(blob) < k:
@@ -578,12 +579,12 @@ def _letter_stamp(rng, budget: int, span: int) -> np.ndarray:
     scale = int(rng.integers(1, 4))
     while scale > 1 and (7 * scale > span or min(cells.values()) * scale * scale > budget):
         scale -= 1
-    fits = sorted(ch for ch in cells if cells[ch] * scale * scale <= budget) or [min(cells, key=cells.get)]
+    fits = sorted(ch for ch in cells if cells[ch] * scale * scale <= budget) or [min(cells, key=cells.__getitem__)]
     word = [str(rng.choice(fits))]
     while len(word) < 3 and rng.random() < 0.6:
         nxt = str(rng.choice(sorted(cells)))
         width = (len(word) + 1) * 6 * scale
-        if sum(cells[ch] for ch in word + [nxt]) * scale * scale > budget or width > span:
+        if sum(cells[ch] for ch in [*word, nxt]) * scale * scale > budget or width > span:
             break
         word.append(nxt)
     glyphs = [np.array([list(r) for r in _FONT[ch].split("|")]) for ch in word]

@@ -20,6 +20,8 @@ _READ = batch.BodyFields.BODY_ID | batch.BodyFields.POSITION | batch.BodyFields.
 
 
 class Physics:
+    """The pymunk space: static discs and obstacle walls, and one round body per agent."""
+
     def __init__(self, cfg: WorldConfig, size: tuple[float, float], obstacles_xy: np.ndarray):
         self.cfg = cfg
         self.space = pymunk.Space()
@@ -45,13 +47,17 @@ class Physics:
             self.space.add(pymunk.Segment(self.space.static_body, a, b, 0.05))
 
     # discs -------------------------------------------------------------------------
-    def add_disc(self, index: int, xy: tuple[float, float], group: int = 0) -> None:
+    def add_disc(self, index: int, xy: tuple[float, float] | np.ndarray, group: int = 0) -> None:
+        """A static circle for disc `index` at `xy`; `group` (an agent's index + 1) lets that agent
+        pass through it (a brick it has just dropped).
+        """
         shape = pymunk.Circle(self.space.static_body, self.cfg.disc_radius, (float(xy[0]), float(xy[1])))
         shape.filter = pymunk.ShapeFilter(group=group)
         self.space.add(shape)
         self._discs[index] = shape
 
     def remove_disc(self, index: int) -> None:
+        """Take disc `index` out of the space (grabbed or removed)."""
         self.space.remove(self._discs.pop(index))
 
     def release_disc(self, index: int) -> None:
@@ -59,7 +65,7 @@ class Physics:
         self._discs[index].filter = pymunk.ShapeFilter(group=0)
 
     # agents ------------------------------------------------------------------------
-    def add_agent(self, xy: tuple[float, float]) -> int:
+    def add_agent(self, xy: tuple[float, float] | np.ndarray) -> int:
         """Add a round agent body; returns its index. Its collision group is index + 1,
         which a brick it drops shares until the agent has moved off it."""
         body = pymunk.Body(self.cfg.agent_mass, math.inf)
@@ -85,6 +91,7 @@ class Physics:
 
     @property
     def agent_count(self) -> int:
+        """How many agent bodies there are (dead ones included)."""
         return len(self._bodies)
 
     def state(self) -> tuple[np.ndarray, np.ndarray]:
@@ -116,6 +123,7 @@ class Physics:
         batch.set_space_bodies(self.space, batch.BodyFields.FORCE, self._write)
 
     def step(self) -> None:
+        """Advance the space by one tick (`dt` simulated seconds)."""
         self.space.step(self.cfg.dt)
         self._state = None
 

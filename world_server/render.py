@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import LineCollection
@@ -70,7 +71,7 @@ def draw_world(ax, scenario: Scenario, *,
     """Draw the bird's-eye world on an existing matplotlib axes (see `render_scenario`
     for `agents` and `discs`); `legend` puts the key "right" of or "below" the axes, or
     nowhere (None)."""
-    agents = _layout_agents(scenario) if agents is None else [tuple(map(float, a)) for a in agents]
+    agents = _layout_agents(scenario) if agents is None else [(float(x), float(y), float(h)) for x, y, h in agents]
     discs = _layout_discs(scenario) if discs is None else [_checked_disc(d) for d in discs]
     _setup_axes(ax, scenario)
     handles: dict[str, object] = {}
@@ -80,18 +81,20 @@ def draw_world(ax, scenario: Scenario, *,
     _draw_sites(ax, scenario, handles)
     _draw_agents(ax, scenario, agents, handles)
     if legend and handles:
-        where = {"right": {"loc": "upper left", "bbox_to_anchor": (1.02, 1.0)},
-                 "below": {"loc": "upper center", "bbox_to_anchor": (0.5, -0.13), "ncol": len(handles)}}[legend]
+        places: dict[str, dict[str, Any]] = {
+            "right": {"loc": "upper left", "bbox_to_anchor": (1.02, 1.0)},
+            "below": {"loc": "upper center", "bbox_to_anchor": (0.5, -0.13), "ncol": len(handles)}}
+        where = places[legend]
         ax.legend(list(handles.values()), list(handles), handler_map={Circle: _CircleHandler()},
                   fontsize="small", frameon=False, **where)
 
 
 def _layout_agents(scenario: Scenario) -> list[tuple[float, float, float]]:
-    return [(x, y, 0.0) for x, y in scenario.to_world(scenario.cells("A")).tolist()]
+    return [(x, y, 0.0) for x, y in scenario.to_world(scenario.cells_col_row("A")).tolist()]
 
 
 def _layout_discs(scenario: Scenario) -> list[tuple[float, float, str]]:
-    cells = scenario.cells("".join(_LAYOUT_DISCS))
+    cells = scenario.cells_col_row("".join(_LAYOUT_DISCS))
     kinds = [_LAYOUT_DISCS[scenario.layout[r][c]] for c, r in cells.tolist()]
     return [(x, y, k) for (x, y), k in zip(scenario.to_world(cells).tolist(), kinds)]
 
@@ -121,7 +124,7 @@ def _draw_grid(ax, scenario: Scenario) -> None:
 
 def _draw_obstacles(ax, scenario: Scenario, legend: dict) -> None:
     size = scenario.world.cell_size
-    for x, y in scenario.to_world(scenario.cells("#")).tolist():
+    for x, y in scenario.to_world(scenario.cells_col_row("#")).tolist():
         square = Rectangle((x - size / 2, y - size / 2), size, size, color=OBSTACLE_COLOUR, zorder=1)
         legend["obstacle"] = ax.add_patch(square)
 
@@ -133,7 +136,7 @@ def _draw_discs(ax, scenario: Scenario, discs, legend: dict) -> None:
 
 
 def _draw_sites(ax, scenario: Scenario, legend: dict) -> None:
-    for x, y in scenario.to_world(scenario.cells("+B")).tolist():
+    for x, y in scenario.to_world(scenario.cells_col_row("+B")).tolist():
         site = ax.add_patch(Circle((x, y), scenario.world.disc_radius, zorder=3, **SITE_STYLE))
         legend.setdefault("drop site", site)
 
@@ -149,7 +152,7 @@ def _draw_agents(ax, scenario: Scenario, agents, legend: dict) -> None:
 class _CircleHandler(HandlerPatch):
     """Legend entries for circles are small circles in the artist's own style."""
 
-    def create_artists(self, legend, orig_handle, xdescent, ydescent, width, height, fontsize, trans):
+    def create_artists(self, legend, orig_handle, xdescent, ydescent, width, height, fontsize, trans):  # noqa: ARG002
         centre = (width / 2 - xdescent, height / 2 - ydescent)
         circle = Circle(centre, min(width, height) / 2)
         self.update_prop(circle, orig_handle, legend)

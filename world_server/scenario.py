@@ -1,4 +1,4 @@
-"""Scenario files (MISSION.md contract): TOML with a bird's-eye ASCII layout.
+"""Scenario files (a contract, docs/design.md): TOML with a bird's-eye ASCII layout.
 
     name = "quick_wall"          # required
     seed = 7                     # required, integer
@@ -16,6 +16,10 @@ Layout: one character a cell, north row first: `.` empty, `F` food, `W` water, `
 brick, `+` drop site (empty), `B` brick already on a drop site, `#` fixed obstacle,
 `A` an agent's start. Common indentation is removed; rows must have equal length.
 Every error names the file, line and column and what was expected.
+
+Two conventions for a cell: bool grids (`Scenario.grid`, like the agents' maps) are
+indexed [row, col]; cell coordinates (`Scenario.cells_col_row`, `to_world`, `to_cell`,
+and the scenario files' comments) are (col, row), column first like (x, y).
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from world_server.config import WorldConfig
 
@@ -49,6 +54,8 @@ class ScenarioError(ValueError):
 
 @dataclass(frozen=True)
 class Scenario:
+    """A parsed scenario file: name, seed, agents, tick mode and limit, the layout rows, the world."""
+
     name: str
     seed: int
     agents: int
@@ -61,14 +68,19 @@ class Scenario:
 
     @property
     def rows(self) -> int:
+        """Rows of the layout (north first)."""
         return len(self.layout)
 
     @property
     def cols(self) -> int:
+        """Columns of the layout (west first)."""
         return len(self.layout[0])
 
-    def cells(self, chars: str) -> np.ndarray:
-        """(k, 2) int array of (col, row) of every cell holding one of `chars`, reading order."""
+    def cells_col_row(self, chars: str) -> np.ndarray:
+        """(k, 2) int array of (col, row) of every cell holding one of `chars`, reading order.
+
+        Column first, as `to_world` and `to_cell` take and give cells (x before y); the
+        grids (`grid`, the agents' maps) are indexed [row, col] instead."""
         found = [(c, r) for r, line in enumerate(self.layout) for c, ch in enumerate(line) if ch in chars]
         return np.array(found, dtype=np.int64).reshape(-1, 2)
 
@@ -76,13 +88,13 @@ class Scenario:
         """bool [row, col]: where the layout holds one of `chars` (row 0 is the north)."""
         return np.isin(np.array([list(line) for line in self.layout]), list(chars))
 
-    def to_world(self, cells: np.ndarray) -> np.ndarray:
+    def to_world(self, cells: ArrayLike) -> np.ndarray:
         """Cell (col, row) -> world (x, y) of the cell centre; y grows northwards."""
         cells = np.asarray(cells, dtype=np.float64).reshape(-1, 2)
         size = self.world.cell_size
         return np.column_stack([(cells[:, 0] + 0.5) * size, (self.rows - 1 - cells[:, 1] + 0.5) * size])
 
-    def to_cell(self, xy: np.ndarray) -> np.ndarray:
+    def to_cell(self, xy: ArrayLike) -> np.ndarray:
         """World (x, y) -> the (col, row) of the cell holding it."""
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
         size = self.world.cell_size
@@ -101,6 +113,7 @@ def load_scenario(path: str | Path) -> Scenario:
 
 
 def parse_scenario(text: str, path: str = "<string>") -> Scenario:
+    """Parse and validate scenario TOML `text` (`path` names it in errors); raise ScenarioError."""
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -143,7 +156,7 @@ def parse_scenario(text: str, path: str = "<string>") -> Scenario:
         raise ScenarioError(path, *_key_pos(lines, bad), "valid [world] settings", str(exc)) from None
     scenario = Scenario(name=name, seed=seed, agents=agents, tick_mode=tick_mode, max_ticks=max_ticks,
                         layout=layout, world=world, description=description, path=path)
-    free = len(scenario.cells(".A"))
+    free = len(scenario.cells_col_row(".A"))
     if agents > free:
         raise ScenarioError(path, *_key_pos(lines, "agents"),
                             f"at most {free} agents (empty cells and A starts in the layout)", str(agents))

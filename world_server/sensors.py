@@ -1,4 +1,4 @@
-"""Per-colour sector range sensors (paper §3, MISSION W2), for every agent in one call.
+"""Per-colour sector range sensors (paper §3; W2), for every agent in one call.
 
 Each agent has, per channel (food, water, brick, agent), `sectors` sensors covering
 360°: sector k sees compass angles [k, k+1) * 2*pi/sectors counter-clockwise from east

@@ -26,8 +26,9 @@ class StallClock:
     which the agents have not had a chance at). A build with nothing left to do never
     stalls. Where the agents say how much of the world they have first seen while
     searching for bricks (`searched`), more of it is progress too: on a large world the
-    supply may lie far from everyone, and a team still sweeping for it is not stuck. A repair after a brick was knocked off counts once the count is back above
-    its best, so a repair slower than `limit` ticks is reported as a stall.
+    supply may lie far from everyone, and a team still sweeping for it is not stuck. A
+    repair after a brick was knocked off counts once the count is back above its best, so
+    a repair slower than `limit` ticks is reported as a stall.
     """
 
     def __init__(self, limit: int):
@@ -80,7 +81,7 @@ def stall_report(status: WorldStatus, idle_ticks: int, states: Mapping[str, Agen
     """The stall report: a headline and one line per agent (see `agent_line`)."""
     head = (f"STALLED at tick {status.tick}: no site filled for {idle_ticks} ticks "
             f"({status.sites_filled}/{status.sites_total} sites)")
-    return [head] + agent_lines(status, states)
+    return [head, *agent_lines(status, states)]
 
 
 def agent_lines(status: WorldStatus, states: Mapping[str, AgentState]) -> list[str]:

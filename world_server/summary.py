@@ -1,4 +1,4 @@
-"""The run summary of MISSION.md, built from the world's final status (`conag world --summary`, `conag run`).
+"""The run summary (a contract, docs/design.md), from the world's final status (`conag world --summary`, `conag run`).
 
 {scenario, seed, completed, stalled, ticks, sites_total, sites_filled, bricks_total,
  total_distance, agents: [{id, distance, grabs, drops, restarts, behaviour_ticks}]}
@@ -25,13 +25,14 @@ def behaviour_ticks(state: AgentState | None) -> dict[str, int]:
 
 def run_summary(status: WorldStatus, states: Mapping[str, AgentState] | None = None,
                 stalled: bool = False) -> dict:
+    """The run summary (see the module) of a final status, with the agents' last AgentStates."""
     states = states or {}
     agents = sorted(
         ({"id": a, "distance": round(d, 6), "grabs": g, "drops": dr, "restarts": r,
           "behaviour_ticks": behaviour_ticks(states.get(a))}
          for a, d, g, dr, r in zip(status.agent_ids, status.agent_distance, status.agent_grabs,
                                    status.agent_drops, status.agent_restarts)),
-        key=lambda agent: agent["id"])  # by id, not by who happened to attach first
+        key=lambda agent: str(agent["id"]))  # by id, not by who happened to attach first
     return {
         "scenario": status.scenario,
         "seed": status.seed,
@@ -48,6 +49,7 @@ def run_summary(status: WorldStatus, states: Mapping[str, AgentState] | None = N
 
 def write_summary(status: WorldStatus, path: str | Path, states: Mapping[str, AgentState] | None = None,
                   stalled: bool = False) -> dict:
+    """Write the run summary as JSON to `path`; returns it."""
     summary = run_summary(status, states, stalled)
     Path(path).write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
     return summary

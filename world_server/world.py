@@ -13,9 +13,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from protocol.messages import (ACTIONS, CHANNELS, DISC_KINDS, SITE_OPS, Blueprint, Perturbation, PerturbResult,
-                               SensorFrame, Welcome, WorldStatus)
-from world_server.discs import BRICK, FOOD, WATER, DiscStore
+from protocol.messages import (
+    ACTIONS,
+    CHANNELS,
+    DISC_KINDS,
+    SITE_OPS,
+    Blueprint,
+    Perturbation,
+    PerturbResult,
+    SensorFrame,
+    Welcome,
+    WorldStatus,
+)
+from world_server.discs import BRICK_DISC, FOOD_DISC, WATER_DISC, DiscStore
 from world_server.physics import Physics, motor_update
 from world_server.scenario import Scenario
 from world_server.sensors import sense
@@ -23,11 +33,13 @@ from world_server.sensors import sense
 GRAB, DROP, EAT, DRINK = (ACTIONS.index(a) for a in ("grab", "drop", "eat", "drink"))
 OBSTACLE_CHANNEL = CHANNELS.index("obstacle")
 FLAGS = ("grabbed", "dropped", "ate", "drank")
-_LAYOUT_KINDS = {"F": FOOD, "W": WATER, "b": BRICK, "B": BRICK}
+_LAYOUT_KINDS = {"F": FOOD_DISC, "W": WATER_DISC, "b": BRICK_DISC, "B": BRICK_DISC}
 
 
 @dataclass
 class AgentRecord:
+    """One agent body's bookkeeping: its index in the arrays, alive, carried brick, counters."""
+
     agent_id: str
     index: int
     alive: bool = True
@@ -39,6 +51,15 @@ class AgentRecord:
 
 
 class World:
+    """The world of paper §3 as arrays and a pymunk space, stepped one tick at a time.
+
+    Built from a scenario (discs, walls, drop sites, agent starts) and a random generator
+    (the noise). Agents `attach` by id (getting a body and the Welcome) and `detach`; each
+    tick the caller gives every live agent's command (`set_command`), calls `step`, and
+    hands out the `frames`. `status`, `sites_filled`, `completed` and `blueprint` report
+    the build; `perturb` removes, adds or moves a disc or changes the blueprint.
+    """
+
     def __init__(self, scenario: Scenario, rng: np.random.Generator | None = None, world_id: str = "w0"):
         self.scenario = scenario
         self.cfg = scenario.world
@@ -46,7 +67,7 @@ class World:
         self.rng = rng if rng is not None else np.random.default_rng(scenario.seed)
         self.tick = 0
         self.size = scenario.size
-        cells = {ch: scenario.cells(ch) for ch in "FWbB#A+"}
+        cells = {ch: scenario.cells_col_row(ch) for ch in "FWbB#A+"}
         disc_cells = np.vstack([cells[ch] for ch in "FWbB"])
         kinds = np.concatenate([np.full(len(cells[ch]), _LAYOUT_KINDS[ch]) for ch in "FWbB"])
         self.discs = DiscStore(scenario.to_world(disc_cells), kinds)
@@ -130,6 +151,7 @@ class World:
         rec.alive = False
 
     def live_agents(self) -> list[str]:
+        """Ids of the attached, live agents, in attach order."""
         return [r.agent_id for r in self._order if r.alive]
 
     def _grow_arrays(self) -> None:
@@ -138,13 +160,13 @@ class World:
             setattr(self, name, np.append(arr, np.zeros(1, arr.dtype)))
         self.odometry = np.vstack([self.odometry, np.zeros((1, 2))])
         self.flags = np.vstack([self.flags, np.zeros((1, len(FLAGS)), bool)])
-        self._ranges = np.vstack([self._ranges, np.zeros((1,) + self._ranges.shape[1:])])
+        self._ranges = np.vstack([self._ranges, np.zeros((1, *self._ranges.shape[1:]))])
 
     def _free_start(self) -> np.ndarray:
         """First `A` start not taken by a body, else the first clear empty cell (reading order)."""
         taken, _ = self.physics.state()
         clear = self.cfg.agent_radius * 2 + 0.1
-        candidates = [self._starts, self.scenario.to_world(self.scenario.cells("."))]
+        candidates = [self._starts, self.scenario.to_world(self.scenario.cells_col_row("."))]
         present = self.discs.xy[self.discs.present()]
         for xy in np.vstack(candidates):
             if taken.size and np.min(np.hypot(*(taken - xy).T)) < clear:
@@ -220,7 +242,7 @@ class World:
             # The gripper is in front: it takes the nearest brick within reach there, so an
             # agent facing a free brick does not pick up the structure brick beside it.
             brick = self.discs.nearest_in_front(xy, self.heading[rec.index], self.cfg.grab_reach,
-                                                self.cfg.grab_cone, BRICK)
+                                                self.cfg.grab_cone, BRICK_DISC)
             if brick >= 0:
                 self.discs.carry(brick)
                 self.physics.remove_disc(brick)
@@ -231,9 +253,9 @@ class World:
             self._drop(rec, xy)
             self.flags[rec.index, 1] = True
         elif action == EAT:
-            self.flags[rec.index, 2] = self.discs.nearest(xy, touch, FOOD) >= 0
+            self.flags[rec.index, 2] = self.discs.nearest(xy, touch, FOOD_DISC) >= 0
         elif action == DRINK:
-            self.flags[rec.index, 3] = self.discs.nearest(xy, touch, WATER) >= 0
+            self.flags[rec.index, 3] = self.discs.nearest(xy, touch, WATER_DISC) >= 0
 
     def _drop(self, rec: AgentRecord, xy: np.ndarray) -> None:
         # The brick lands under the agent (paper §3); it ignores that agent until the agent
@@ -253,6 +275,7 @@ class World:
 
     # what the world reports ------------------------------------------------------------------
     def frame(self, agent_id: str) -> SensorFrame:
+        """What the agent senses after the last tick: heading, odometry, range sectors, action results."""
         rec = self.agents[agent_id]
         i = rec.index
         flags = dict(zip(FLAGS, self.flags[i].tolist()))
@@ -266,6 +289,7 @@ class World:
         return [self.frame(r.agent_id) for r in self._order if r.alive]
 
     def sites_filled(self) -> np.ndarray:
+        """Per drop site (world order), whether a brick lies on it."""
         return self.discs.filled_sites(self._site_codes, self._cell_code)
 
     def completed(self) -> bool:
@@ -278,6 +302,7 @@ class World:
                          site_xs=tuple(self.sites_xy[:, 0].tolist()), site_ys=tuple(self.sites_xy[:, 1].tolist()))
 
     def status(self) -> WorldStatus:
+        """The build's progress and per-agent counters, as the server publishes them."""
         filled = int(self.sites_filled().sum())
         total = len(self.sites_xy)
         pos = self._positions
@@ -300,6 +325,7 @@ class World:
 
     # perturbation (paper §4.5, Fig. 6b/6c, Fig. 12) -------------------------------------------
     def perturb(self, p: Perturbation) -> PerturbResult:
+        """Apply a perturbation (remove, add or move a disc; add or remove a site); says if it worked."""
         def inside(x: float, y: float) -> bool:
             return 0 <= x <= self.size[0] and 0 <= y <= self.size[1]
 
