@@ -36,39 +36,39 @@ def _status(run: sim.SimRun):
     return run.world.status()
 
 
+def _assert_builds(name: str, ticks: int, **cfg) -> sim.SimRun:
+    """Build tests/layouts/NAME.toml in process for up to `ticks`; it must complete."""
+    run = _build(name, ticks, **cfg)
+    st = _status(run)
+    assert st.completed, f"{st.sites_filled}/{st.sites_total} at tick {st.tick}"
+    return run
+
+
 # ------------------------------------------------------------------ the failure classes, end to end
 
 @pytest.mark.slow
 @pytest.mark.parametrize("sequencing", [True, False], ids=["goal-sequencing", "nearest-first"])
 def test_a_blueprint_beyond_the_map_at_attach_is_built(sequencing):
     # Before: the agents never learned the blueprint and stood still (distance 0) to the limit.
-    run = _build("far_blueprint", 12000, goal_sequencing=sequencing)
-    st = _status(run)
-    assert st.completed, f"{st.sites_filled}/{st.sites_total} at tick {st.tick}"
+    _assert_builds("far_blueprint", 12000, goal_sequencing=sequencing)
 
 
 @pytest.mark.slow
 def test_the_far_side_of_a_ring_is_not_forgotten_while_fetching_bricks():
     # Before: 18 of 25 sites after 60,000 ticks, one agent idle and two wandering.
-    run = _build("ring_pillar", 12000)
-    st = _status(run)
-    assert st.completed, f"{st.sites_filled}/{st.sites_total} at tick {st.tick}"
+    _assert_builds("ring_pillar", 12000)
 
 
 @pytest.mark.slow
 def test_agents_route_through_the_gaps_of_a_wall_they_sense():
     # Before: an agent carrying a brick pushed against a `#` wall it could not see.
-    run = _build("hash_walls", 20000)
-    st = _status(run)
-    assert st.completed, f"{st.sites_filled}/{st.sites_total} at tick {st.tick}"
+    _assert_builds("hash_walls", 20000)
 
 
 @pytest.mark.slow
 def test_two_agents_at_the_end_of_an_edge_wall_do_not_livelock():
     # Before: two agents spent thousands of ticks avoiding each other at the wall's end.
-    run = _build("edge_wall_livelock", 15000)
-    st = _status(run)
-    assert st.completed, f"{st.sites_filled}/{st.sites_total} at tick {st.tick}"
+    run = _assert_builds("edge_wall_livelock", 15000)
     for brain in run.brains.values():
         assert brain.behaviour_ticks["avoid"] < 1000
 
@@ -77,18 +77,14 @@ def test_two_agents_at_the_end_of_an_edge_wall_do_not_livelock():
 def test_a_food_corridor_is_filled_from_its_far_end_and_never_sealed():
     # Before: 3 of 11 sites. The agent at the mouth saw ways out sideways where the walls'
     # far discs hide behind the near ones, filled the mouth and sealed the rest.
-    run = _build("food_corridor", 8000)
-    st = _status(run)
-    assert st.completed, f"{st.sites_filled}/{st.sites_total} at tick {st.tick}"
+    _assert_builds("food_corridor", 8000)
 
 
 @pytest.mark.slow
 def test_pockets_beside_structure_bricks_are_not_sealed_over_a_ghost():
     # Before: 24 of 25 sites. A ghost brick on a deep open site (a structure brick beside it
     # seen at the same distance) was never cleared, and the mouth was filled over it.
-    run = _build("twin_pockets", 8000)
-    st = _status(run)
-    assert st.completed, f"{st.sites_filled}/{st.sites_total} at tick {st.tick}"
+    _assert_builds("twin_pockets", 8000)
 
 
 def test_a_mouth_site_waits_while_the_site_behind_it_is_open_on_seen_ground():
