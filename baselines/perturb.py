@@ -10,7 +10,7 @@ closes no new agent can reach the inner one, which stays unfinished.
 """
 from __future__ import annotations
 
-from typing import Any
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -88,13 +88,19 @@ def inside(pos, origin, n) -> bool:
     return all(o < p < o + n - 1 for p, o in zip(pos, origin))
 
 
-def nested_squares(outer_n: int, inner_n: int, n_agents: int, max_steps: int,
-                   rng: np.random.Generator, margin: int = 3) -> dict:
-    """Build a ring inside a ring with the corner rules (Fig. 14).
+@dataclass(frozen=True)
+class NestedResult:
+    """How the nested squares went (Fig. 14), and the final lattice."""
 
-    Returns when each ring was finished (None if never), how many agents
-    were enclosed when the outer ring closed, and the final world.
-    """
+    outer: int | None     # the step the outer ring was finished at, None if never
+    inner: int | None     # the same for the inner ring
+    enclosed: int | None  # agents inside the outer ring when it closed, None if it never did
+    world: World
+
+
+def nested_squares(outer_n: int, inner_n: int, n_agents: int, max_steps: int,
+                   rng: np.random.Generator, margin: int = 3) -> NestedResult:
+    """Build a ring inside a ring with the corner rules (Fig. 14)."""
     shape = (outer_n + 2 * margin,) * 2
     outer_o = (margin, margin)
     inner_o = (margin + (outer_n - inner_n) // 2,) * 2
@@ -103,15 +109,16 @@ def nested_squares(outer_n: int, inner_n: int, n_agents: int, max_steps: int,
     world = make_world(shape, {**corner_seeds(outer_n, outer_o),
                                **corner_seeds(inner_n, inner_o)})
     rules = corner_rules(outer | inner)
-    done: dict[str, Any] = {"outer": None, "inner": None, "enclosed": None}
+    outer_at: int | None = None
+    inner_at: int | None = None
+    enclosed: int | None = None
     for t in range(1, max_steps + 1):
         step(world, rule_policy(rules), n_agents, rng)
-        if done["inner"] is None and ring_done(world, inner):
-            done["inner"] = t
-        if done["outer"] is None and ring_done(world, outer):
-            done["outer"] = t
-            done["enclosed"] = sum(inside(p, outer_o, outer_n) for p in world.agents)
-        if done["inner"] and done["outer"]:
+        if inner_at is None and ring_done(world, inner):
+            inner_at = t
+        if outer_at is None and ring_done(world, outer):
+            outer_at = t
+            enclosed = sum(inside(p, outer_o, outer_n) for p in world.agents)
+        if inner_at and outer_at:
             break
-    done["world"] = world
-    return done
+    return NestedResult(outer_at, inner_at, enclosed, world)

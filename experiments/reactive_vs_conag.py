@@ -22,14 +22,15 @@ lattice_nested.png and EXPERIMENTS.md; prints the markdown table.
 from __future__ import annotations
 
 import argparse
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 import sim
 from agent_runtime.config import AgentConfig
-from baselines.lattice import LATTICE_BRICK, simulate
-from baselines.perturb import nested_squares, run_perturbed
+from baselines.lattice import LATTICE_BRICK, Result, RuleSet, simulate
+from baselines.perturb import NestedResult, nested_squares, run_perturbed
 from baselines.rules import square_rules
 from experiments.report import write_section
 from protocol.messages import Perturbation
@@ -43,26 +44,58 @@ NESTED_MODES = (("nearest-first", False), ("goal sequencing", True))
 
 
 # ---------------------------------------------------------------- reactive system
-def reactive_square(seeding: str, seeds, n=N, n_agents=8, max_steps=5000):
+Cell = tuple[int, int]
+
+
+@dataclass(frozen=True)
+class ReactiveSquare:
+    """The reactive system on the square (Fig. 10): one lattice result per rng seed."""
+
+    rule_set: RuleSet
+    runs: list[Result]
+    n_agents: int
+    max_steps: int
+
+
+@dataclass(frozen=True)
+class ReactiveMoved:
+    """The square with one brick moved (Fig. 12): per rng seed, the result and the move (src, dst), if made."""
+
+    rule_set: RuleSet
+    runs: list[tuple[Result, tuple[Cell, Cell] | None]]
+    n_agents: int
+    max_steps: int
+
+
+@dataclass(frozen=True)
+class ReactiveNested:
+    """A ring of side `inner` inside a ring of side `outer` (Fig. 14), one result per rng seed."""
+
+    runs: list[NestedResult]
+    n_agents: int
+    max_steps: int
+    outer: int
+    inner: int
+
+
+def reactive_square(seeding: str, seeds, n=N, n_agents=8, max_steps=5000) -> ReactiveSquare:
     rule_set, bricks, shape = square_rules(n, seeding)
     runs = [simulate(rule_set, bricks, shape, n_agents, max_steps, np.random.default_rng(s))
             for s in seeds]
-    return {"rule_set": rule_set, "runs": runs, "n_agents": n_agents, "max_steps": max_steps}
+    return ReactiveSquare(rule_set, runs, n_agents, max_steps)
 
 
-def reactive_moved(seeding: str, seeds, n=N, at_step=10, n_agents=8, max_steps=3000):
+def reactive_moved(seeding: str, seeds, n=N, at_step=10, n_agents=8, max_steps=3000) -> ReactiveMoved:
     rule_set, bricks, shape = square_rules(n, seeding)
-    out = []
-    for s in seeds:
-        result, moved = run_perturbed(rule_set, bricks, shape, n, (3, 3), at_step, "out",
-                                      n_agents, max_steps, np.random.default_rng(s))
-        out.append((result, moved))
-    return {"rule_set": rule_set, "runs": out, "n_agents": n_agents, "max_steps": max_steps}
+    runs = [run_perturbed(rule_set, bricks, shape, n, (3, 3), at_step, "out", n_agents, max_steps,
+                          np.random.default_rng(s))
+            for s in seeds]
+    return ReactiveMoved(rule_set, runs, n_agents, max_steps)
 
 
-def reactive_nested(seeds, outer=12, inner=4, n_agents=8, max_steps=4000):
+def reactive_nested(seeds, outer=12, inner=4, n_agents=8, max_steps=4000) -> ReactiveNested:
     runs = [nested_squares(outer, inner, n_agents, max_steps, np.random.default_rng(s)) for s in seeds]
-    return {"runs": runs, "n_agents": n_agents, "max_steps": max_steps, "outer": outer, "inner": inner}
+    return ReactiveNested(runs, n_agents, max_steps, outer, inner)
 
 
 # ---------------------------------------------------------------- ConAg scenarios
@@ -133,11 +166,58 @@ def nested_scenario(agents, outer=8, inner=4):
                     layout_text([(outer, "corners"), (inner, "corners")], agents, margin=6), agents)
 
 
-def conag_ring(seeding, agents, seed=0, max_ticks=6000):
+@dataclass(frozen=True)
+class MovedBrick:
+    """The brick `MoveOnce` moved: when, from which site, where to, and what the world then said."""
+
+    tick: int
+    site: int                       # index of the site the brick was on
+    src: tuple[float, float]
+    dst: tuple[float, float]
+    site_unfilled_after: bool       # the site became an unfilled drop site again
+    dst_on_site: bool               # the brick landed on a drop site
+
+
+@dataclass(frozen=True)
+class Ring:
+    """Drop sites filled of one ring of the nested squares; prints as "filled/total"."""
+
+    filled: int
+    total: int
+
+    def __str__(self) -> str:
+        return f"{self.filled}/{self.total}"
+
+    @property
+    def complete(self) -> bool:
+        return self.filled == self.total
+
+
+@dataclass(frozen=True)
+class ConagRun:
+    """One ConAg build: completed within `budget` ticks or not, after how many, how far it got."""
+
+    completed: bool
+    ticks: int
+    filled: int
+    total: int
+    grabs: int                      # bricks grabbed, all agents together
+    budget: int                     # the max_ticks the build was given
+    inner: Ring | None = None       # nested squares only
+    outer: Ring | None = None
+    move: MovedBrick | None = None  # moved brick only
+
+
+def conag_result(run: sim.SimRun, done: bool, budget: int, **extra) -> ConagRun:
+    """The `ConagRun` of a finished loop, from the world's status."""
+    st = run.world.status()
+    return ConagRun(done, st.tick, st.sites_filled, st.sites_total, sum(st.agent_grabs), budget, **extra)
+
+
+def conag_ring(seeding, agents, seed=0, max_ticks=6000) -> ConagRun:
     run = sim.start(ring_scenario(seeding, agents), seed=seed)
     done = run.run(max_ticks).completed
-    st = run.world.status()
-    return {"completed": done, "ticks": st.tick, "filled": st.sites_filled, "total": st.sites_total}
+    return conag_result(run, done, max_ticks)
 
 
 class MoveOnce:
@@ -148,7 +228,7 @@ class MoveOnce:
     def __init__(self, run: sim.SimRun, after_placed: int):
         self.after_placed = after_placed
         self.seeds = run.world.sites_filled().copy()  # the B seeds
-        self.move: dict | None = None
+        self.move: MovedBrick | None = None
 
     def moved(self, _run: sim.SimRun) -> bool:
         return self.move is not None
@@ -167,37 +247,33 @@ class MoveOnce:
         res = world.perturb(Perturbation("move", float(x), float(y), to_x=to[0], to_y=to[1]))
         if not res.ok:
             raise RuntimeError(res.message)
-        self.move = {"tick": world.tick, "site": i, "src": (float(x), float(y)), "dst": to,
-                     "site_unfilled_after": not bool(world.sites_filled()[i]),
-                     "dst_on_site": bool(np.any(np.all(np.isclose(world.sites_xy, to), axis=1)))}
+        self.move = MovedBrick(world.tick, i, (float(x), float(y)), (float(to[0]), float(to[1])),
+                               site_unfilled_after=not bool(world.sites_filled()[i]),
+                               dst_on_site=bool(np.any(np.all(np.isclose(world.sites_xy, to), axis=1))))
 
 
-def conag_moved(seeding, agents, seed=0, after_placed=3, max_ticks=8000):
+def conag_moved(seeding, agents, seed=0, after_placed=3, max_ticks=8000) -> ConagRun:
     """Build the ring; once `after_placed` bricks were placed by agents, move one
     of them one cell outward (`MoveOnce`), then keep running until complete."""
     run = sim.start(ring_scenario(seeding, agents), seed=seed)
     mover = MoveOnce(run, after_placed)
     run.run(max_ticks, until_complete=False, stop=[mover.moved], observers=[mover])
     done = run.run(max_ticks - run.world.tick).completed
-    st = run.world.status()
-    return {"completed": done, "ticks": st.tick, "filled": st.sites_filled,
-            "total": st.sites_total, "move": mover.move, "grabs": sum(st.agent_grabs)}
+    return conag_result(run, done, max_ticks, move=mover.move)
 
 
-def conag_nested(agents, seed=0, max_ticks=20000, sequencing=True):
+def conag_nested(agents, seed=0, max_ticks=20000, sequencing=True) -> ConagRun:
     """Build the nested rings, with goal sequencing (ConAg-TS, §6) or nearest-first (§4)."""
     sc = nested_scenario(agents)
     run = sim.start(sc, seed=seed, cfg=AgentConfig(goal_sequencing=sequencing))
     done = run.run(max_ticks).completed
-    st = run.world.status()
     # inner ring: sites within 2 cells (Chebyshev) of the centre
     centre = np.array(sc.size) / 2
     inner = np.max(np.abs(run.world.sites_xy - centre), axis=1) < 2.5 * sc.world.cell_size
     filled = run.world.sites_filled()
-    return {"completed": done, "ticks": st.tick, "filled": st.sites_filled, "total": st.sites_total,
-            "inner": f"{int(filled[inner].sum())}/{int(inner.sum())}",
-            "outer": f"{int(filled[~inner].sum())}/{int((~inner).sum())}",
-            "grabs": sum(st.agent_grabs)}
+    return conag_result(run, done, max_ticks,
+                        inner=Ring(int(filled[inner].sum()), int(inner.sum())),
+                        outer=Ring(int(filled[~inner].sum()), int((~inner).sum())))
 
 
 # ---------------------------------------------------------------- pictures
@@ -234,8 +310,8 @@ def pictures(square, moved, nested, outdir: Path):
     fig, axes = plt.subplots(1, 2, figsize=(7, 3.8))
     for ax, seeding in zip(axes, ("corners", "sides")):
         d = square[seeding]
-        r = d["runs"][0]
-        rs = d["rule_set"]
+        r = d.runs[0]
+        rs = d.rule_set
         draw(ax, r.grid, rs.target, f"{seeding} seeds: {'built' if r.built else 'NOT built'} "
              f"in {r.steps} steps\n{len(rs.rules)} rules / {len(rs.states)} states")
     fig.suptitle("Reactive system, square n=6 (Fig. 10)\n" + legend, fontsize=8)
@@ -247,8 +323,8 @@ def pictures(square, moved, nested, outdir: Path):
     fig, axes = plt.subplots(1, 2, figsize=(7, 3.8))
     for ax, seeding in zip(axes, ("corners", "sides")):
         d = moved[seeding]
-        r, mv = d["runs"][0]
-        draw(ax, r.grid, d["rule_set"].target,
+        r, mv = d.runs[0]
+        draw(ax, r.grid, d.rule_set.target,
              f"{seeding} seeds, brick moved out (arrow)\n{'built' if r.built else 'wrong structure'} "
              f"after {r.steps} steps", moved=mv)
     fig.suptitle("Reactive system, moved brick (Fig. 12)\n" + legend, fontsize=8)
@@ -258,16 +334,16 @@ def pictures(square, moved, nested, outdir: Path):
     plt.close(fig)
 
     from baselines.rules import square_target
-    out = nested["runs"][0]
-    world = out["world"]
+    out = nested.runs[0]
+    world = out.world
     shape = world.grid.shape
-    o_n, i_n = nested["outer"], nested["inner"]
+    o_n, i_n = nested.outer, nested.inner
     target = square_target(o_n, (3, 3), shape) | square_target(i_n, (3 + (o_n - i_n) // 2,) * 2, shape)
     fig, ax = plt.subplots(figsize=(4.2, 4.6))
     draw(ax, world.grid, target,
-         f"nested {o_n}+{i_n}: outer ring done at step {out['outer']},\n"
-         f"inner ring {'done at ' + str(out['inner']) if out['inner'] else 'never finished'} "
-         f"({nested['max_steps']} steps), {out['enclosed']} agents enclosed")
+         f"nested {o_n}+{i_n}: outer ring done at step {out.outer},\n"
+         f"inner ring {'done at ' + str(out.inner) if out.inner else 'never finished'} "
+         f"({nested.max_steps} steps), {out.enclosed} agents enclosed")
     ax.text(0.5, -0.04, legend, transform=ax.transAxes, ha="center", va="top", fontsize=6)
     fig.suptitle("Reactive system, nested squares (Fig. 14)", fontsize=9)
     fig.tight_layout()
@@ -290,44 +366,44 @@ def table(square, moved, nested, conag):
     rows = ["| task | system | completed | steps / ticks (completed runs) | rules / states | agents |",
             "|---|---|---|---|---|---|"]
     for seeding in ("corners", "sides"):
-        d = square[seeding]
-        rs = d["rule_set"]
-        built = [r for r in d["runs"] if r.built]
-        rows.append(f"| square n=6, {seeding} seeds | reactive | {len(built)}/{len(d['runs'])} | "
+        sq = square[seeding]
+        rs = sq.rule_set
+        built = [r for r in sq.runs if r.built]
+        rows.append(f"| square n=6, {seeding} seeds | reactive | {len(built)}/{len(sq.runs)} | "
                     f"{fmt_steps(r.steps for r in built)} steps | {len(rs.rules)} rules / {len(rs.states)} states "
-                    f"| {d['n_agents']} (re-entering) |")
+                    f"| {sq.n_agents} (re-entering) |")
         for agents, runs in conag["square"][seeding].items():
-            ok = [r for r in runs if r["completed"]]
+            ok = [r for r in runs if r.completed]
             rows.append(f"| square n=6, {seeding} seeds | ConAg | {len(ok)}/{len(runs)} | "
-                        f"{fmt_steps(r['ticks'] for r in ok)} ticks | {CONAG_RULES} | {agents} |")
+                        f"{fmt_steps(r.ticks for r in ok)} ticks | {CONAG_RULES} | {agents} |")
     for seeding in ("corners", "sides"):
-        d = moved[seeding]
-        rs = d["rule_set"]
-        built = sum(r.built for r, _ in d["runs"])
-        wrong = sum(not np.array_equal(r.grid, rs.target) for r, _ in d["runs"])
-        rows.append(f"| moved brick, {seeding} seeds | reactive | {built}/{len(d['runs'])} "
-                    f"(wrong structure {wrong}/{len(d['runs'])}) | stopped at "
-                    f"{fmt_steps(r.steps for r, _ in d['runs'])} steps | {len(rs.rules)} rules / "
-                    f"{len(rs.states)} states | {d['n_agents']} |")
+        mv = moved[seeding]
+        rs = mv.rule_set
+        built = sum(r.built for r, _ in mv.runs)
+        wrong = sum(not np.array_equal(r.grid, rs.target) for r, _ in mv.runs)
+        rows.append(f"| moved brick, {seeding} seeds | reactive | {built}/{len(mv.runs)} "
+                    f"(wrong structure {wrong}/{len(mv.runs)}) | stopped at "
+                    f"{fmt_steps(r.steps for r, _ in mv.runs)} steps | {len(rs.rules)} rules / "
+                    f"{len(rs.states)} states | {mv.n_agents} |")
         for agents, runs in conag["moved"][seeding].items():
-            ok = [r for r in runs if r["completed"]]
-            info = "; ".join(f"{r['filled']}/{r['total']} filled, {r['grabs']} grabs" for r in runs)
+            ok = [r for r in runs if r.completed]
+            info = "; ".join(f"{r.filled}/{r.total} filled, {r.grabs} grabs" for r in runs)
             rows.append(f"| moved brick, {seeding} seeds | ConAg | {len(ok)}/{len(runs)} ({info}) | "
-                        f"{fmt_steps(r['ticks'] for r in ok)} ticks (budget {runs[0]['budget']}) "
+                        f"{fmt_steps(r.ticks for r in ok)} ticks (budget {runs[0].budget}) "
                         f"| {CONAG_RULES} | {agents} |")
-    inner_done = sum(o["inner"] is not None for o in nested["runs"])
-    outer_done = sum(o["outer"] is not None for o in nested["runs"])
-    rows.append(f"| nested squares {nested['outer']}+{nested['inner']} | reactive | "
-                f"{sum(o['inner'] is not None and o['outer'] is not None for o in nested['runs'])}"
-                f"/{len(nested['runs'])} (outer {outer_done}, inner {inner_done}) | "
-                f"{nested['max_steps']} steps budget | 8 rules / 4 states (corner rules) | "
-                f"{nested['n_agents']} |")
+    inner_done = sum(o.inner is not None for o in nested.runs)
+    outer_done = sum(o.outer is not None for o in nested.runs)
+    rows.append(f"| nested squares {nested.outer}+{nested.inner} | reactive | "
+                f"{sum(o.inner is not None and o.outer is not None for o in nested.runs)}"
+                f"/{len(nested.runs)} (outer {outer_done}, inner {inner_done}) | "
+                f"{nested.max_steps} steps budget | 8 rules / 4 states (corner rules) | "
+                f"{nested.n_agents} |")
     for (mode, agents), runs in conag["nested"].items():
-        ok = [r for r in runs if r["completed"]]
-        filled = "; ".join(f"outer {r['outer']}, inner {r['inner']}" for r in runs)
+        ok = [r for r in runs if r.completed]
+        filled = "; ".join(f"outer {r.outer}, inner {r.inner}" for r in runs)
         rows.append(f"| nested squares 8+4 | ConAg ({mode}) | {len(ok)}/{len(runs)} "
-                    f"(sites filled: {filled}) | {fmt_steps(r['ticks'] for r in ok)} ticks "
-                    f"(budget {runs[0]['budget']}) | {CONAG_RULES} | {agents} |")
+                    f"(sites filled: {filled}) | {fmt_steps(r.ticks for r in ok)} ticks "
+                    f"(budget {runs[0].budget}) | {CONAG_RULES} | {agents} |")
     return "\n".join(rows)
 
 
@@ -353,14 +429,12 @@ def main(argv=None):
         conag["square"][seeding] = {a: [conag_ring(seeding, a, seed=s) for s in cseeds] for a in agent_counts}
         conag["moved"][seeding] = {}
         for a in agent_counts:
-            runs = [dict(conag_moved(seeding, a, seed=s, max_ticks=moved_ticks), budget=moved_ticks)
-                    for s in cseeds]
+            runs = [conag_moved(seeding, a, seed=s, max_ticks=moved_ticks) for s in cseeds]
             conag["moved"][seeding][a] = runs
-            moves += [(seeding, a, r["move"]) for r in runs]
+            moves += [(seeding, a, r.move) for r in runs]
     for mode, sequencing in NESTED_MODES:
         for a in agent_counts:
-            runs = [dict(conag_nested(a, seed=s, max_ticks=nested_ticks, sequencing=sequencing), budget=nested_ticks)
-                    for s in cseeds]
+            runs = [conag_nested(a, seed=s, max_ticks=nested_ticks, sequencing=sequencing) for s in cseeds]
             conag["nested"][(mode, a)] = runs
 
     outdir = Path(args.out)
@@ -374,13 +448,13 @@ def main(argv=None):
 
 def report(tab, paths, rseeds, cseeds, moves, nested, conag, quick):
     rel = [p.name for p in paths]
-    stray = sum(1 for _, _, m in moves if m and not m["dst_on_site"] and m["site_unfilled_after"])
+    stray = sum(1 for _, _, m in moves if m and not m.dst_on_site and m.site_unfilled_after)
     moved_runs = [r for d in conag["moved"].values() for runs in d.values() for r in runs]
-    moved_ok, moved_n = sum(r["completed"] for r in moved_runs), len(moved_runs)
+    moved_ok, moved_n = sum(r.completed for r in moved_runs), len(moved_runs)
     def nested_counts(mode):
         runs = [r for (m, _), rs in conag["nested"].items() if m == mode for r in rs]
-        shut = sum(r["outer"].split("/")[0] == r["outer"].split("/")[1] and not r["completed"] for r in runs)
-        return sum(r["completed"] for r in runs), len(runs), shut
+        shut = sum(r.outer.complete and not r.completed for r in runs)
+        return sum(r.completed for r in runs), len(runs), shut
     nf_ok, nf_n, nf_shut = nested_counts("nearest-first")
     ts_ok, ts_n, ts_shut = nested_counts("goal sequencing")
     return f"""## R4 — the reactive lattice system against ConAg (paper §5.2, Fig. 10, 12, 14)
@@ -407,7 +481,7 @@ non-seed site's brick is moved one cell outward with `world.perturb(Perturbation
 in {stray}/{len(moves)} runs the move left its site unfilled and put the brick off every site.
 
 Nested squares. Reactive: a 4x4 ring inside a 12x12 ring, corner seeds, corner rules
-(`baselines/perturb.nested_squares`), {nested['max_steps']} steps. ConAg: a 4x4 ring inside an
+(`baselines/perturb.nested_squares`), {nested.max_steps} steps. ConAg: a 4x4 ring inside an
 8x8 ring (one free cell between them), corner seeds as `B`, free bricks outside (at least two
 empty cells away from the outer ring).
 

@@ -151,9 +151,9 @@ def test_moved_brick_outward_grows_a_spurious_wall():
 @pytest.mark.parametrize("seed", [0] + [pytest.param(s, marks=pytest.mark.slow) for s in (1, 2, 3)])
 def test_nested_inner_square_is_never_finished(seed):
     out = nested_squares(12, 4, 8, 4000, np.random.default_rng(seed))
-    assert out["outer"] is not None
-    assert out["inner"] is None
-    assert out["enclosed"] == 0
+    assert out.outer is not None
+    assert out.inner is None
+    assert out.enclosed == 0
 
 
 def test_inner_square_alone_is_buildable():

@@ -30,23 +30,23 @@ def test_ring_scenario_matches_the_lattice_task():
 @pytest.mark.slow
 def test_conag_completes_ring_from_corner_seeds():
     r = rvc.conag_ring("corners", 2, seed=0, max_ticks=3000)
-    assert r["completed"] and r["filled"] == r["total"] == 20
+    assert r.completed and r.filled == r.total == 20
 
 
 def test_conag_moved_brick_leaves_its_site_and_the_structure():
     """The disturbance itself: the site is unfilled again, the brick lies off every site."""
     r = rvc.conag_moved("corners", 2, seed=0, max_ticks=300)
-    move = r["move"]
+    move = r.move
     assert move is not None
-    assert move["site_unfilled_after"]
-    assert not move["dst_on_site"]
+    assert move.site_unfilled_after
+    assert not move.dst_on_site
 
 
 @pytest.mark.slow
 def test_conag_completes_ring_after_moved_brick():
     r = rvc.conag_moved("corners", 2, seed=0, max_ticks=3000)
-    assert not r["move"]["dst_on_site"]
-    assert r["completed"] and r["filled"] == r["total"]
+    assert r.move is not None and not r.move.dst_on_site
+    assert r.completed and r.filled == r.total
 
 
 @pytest.mark.slow
@@ -54,10 +54,10 @@ def test_conag_with_goal_sequencing_finishes_the_nested_squares_the_reactive_rul
     # 2,722 ticks (seed 0): Explore sweeps only while searching for a brick, so the agent that
     # waits with one for its next site to open stays near the structure.
     r = rvc.conag_nested(1, seed=0, max_ticks=5000, sequencing=True)
-    assert r["completed"] and r["inner"] == "12/12" and r["outer"] == "28/28"
+    assert r.completed and r.inner == rvc.Ring(12, 12) and r.outer == rvc.Ring(28, 28)
 
 
 @pytest.mark.slow
 def test_conag_nearest_first_closes_the_outer_ring_first_like_the_reactive_rules():
     r = rvc.conag_nested(1, seed=0, max_ticks=4000, sequencing=False)
-    assert not r["completed"] and r["outer"] == "28/28" and r["inner"] != "12/12"
+    assert not r.completed and r.outer == rvc.Ring(28, 28) and r.inner != rvc.Ring(12, 12)
