@@ -76,68 +76,116 @@ def label(kind: str, eta: float, plan: Plan) -> str:
     return f"Q-learning (alpha = {eta:g}, gamma = {plan.q_gamma:g})"
 
 
-def one_run(job: tuple[str, float, int, Plan]) -> dict:
+@dataclass(frozen=True)
+class NovelTrial:
+    """A learner building a novel scenario from its initial layout (a record of fig9_learning.json)."""
+
+    completed: bool
+    ticks: int
+    errors: int
+    sites_filled: int
+    sites_total: int
+
+
+@dataclass(frozen=True)
+class LearningRun:
+    """One learner through every trial; the novel environments only for the first `plan.novel_students` runs."""
+
+    kind: str                                            # "delta" or "q"
+    eta: float                                           # learning rate (alpha for Q-learning)
+    run: int
+    errors: tuple[int, ...]                              # per trial
+    completed_at: tuple[int | None, ...]                 # per trial
+    novel: dict[str, NovelTrial] | None = None           # by scenario stem, learning off
+    novel_learning: dict[str, NovelTrial] | None = None  # the same student afterwards, learning on
+    student: Student | None = None                       # the trained weights (delta rule only)
+
+    def to_json(self) -> dict:
+        """The run as fig9_learning.json stores it: no weights, the novel keys only where the run has them."""
+        out: dict = dict(kind=self.kind, eta=self.eta, run=self.run, errors=list(self.errors),
+                         completed_at=list(self.completed_at))
+        for key, trials in (("novel", self.novel), ("novel_learning", self.novel_learning)):
+            if trials is not None:
+                out[key] = {name: asdict(t) for name, t in trials.items()}
+        return out
+
+
+@dataclass(frozen=True)
+class Curve:
+    """The runs of one learner and rate, and what the report reads off them (trials count from 1)."""
+
+    runs: list[LearningRun]
+    errors: np.ndarray                         # runs x trials
+    mean: np.ndarray                           # per trial, over the runs
+    sd: np.ndarray
+    first_zero: int | None                     # first trial whose mean is 0
+    stays_zero: int | None                     # first trial from which the mean stays 0
+    per_run_first_zero: list[int | None]       # each run's first trial with 0 errors
+    built_last: int                            # runs that completed the structure in their last trial
+
+
+def one_run(job: tuple[str, float, int, Plan]) -> LearningRun:
     """One learner through every trial, then (for the first few runs) the novel environments."""
     kind, eta, run, plan = job
     rng = np.random.default_rng([plan.seed, run])  # run r starts from the same weights at every rate
     learner = Student.random(rng) if kind == "delta" else QLearner(rng, gamma=plan.q_gamma)
     results = run_learning(load_scenario(ROOT / TRAINING), learner, trials=plan.trials, ticks=plan.ticks, eta=eta,
                            seed=plan.seed, run=run, cfg=AGENT)
-    out = dict(kind=kind, eta=eta, run=run, errors=[r.errors for r in results],
-               completed_at=[r.completed_at for r in results])
+    novel = novel_learning = None
     if run < plan.novel_students:
         # Learning off first; then (the same student, so last) learning on, as it would in a `conag agent --learn`.
-        out["novel"] = {Path(p).stem: novel_trial(learner, p, plan, run) for p in NOVEL}
-        out["novel_learning"] = {Path(p).stem: novel_trial(learner, p, plan, run, eta=eta) for p in NOVEL}
-    if kind == "delta":
-        out["weights"] = {"excite": learner.excite.tolist(), "inhibit": learner.inhibit.tolist()}
-    return out
+        novel = {Path(p).stem: novel_trial(learner, p, plan, run) for p in NOVEL}
+        novel_learning = {Path(p).stem: novel_trial(learner, p, plan, run, eta=eta) for p in NOVEL}
+    # a copy of the trained weights: the record should not share the learner's mutable arrays
+    student = Student(learner.excite, learner.inhibit) if kind == "delta" else None
+    return LearningRun(kind, eta, run, tuple(r.errors for r in results), tuple(r.completed_at for r in results),
+                       novel, novel_learning, student)
 
 
-def novel_trial(learner, path: str, plan: Plan, run: int, eta: float | None = None) -> dict:
+def novel_trial(learner, path: str, plan: Plan, run: int, eta: float | None = None) -> NovelTrial:
     """Build `path` from its initial layout; the learner learns (at `eta`) only if `eta` is given."""
     r = run_trial(load_scenario(ROOT / path), learner, Teacher(), ticks=plan.novel_ticks, eta=eta or 0.0,
                   seed=trial_seed(plan.seed, run, 10_000), learn=eta is not None, until_complete=True, cfg=AGENT)
-    return dict(completed=r.completed_at is not None, ticks=r.ticks, errors=r.errors, sites_filled=r.sites_filled,
-                sites_total=r.sites_total)
+    return NovelTrial(completed=r.completed_at is not None, ticks=r.ticks, errors=r.errors,
+                      sites_filled=r.sites_filled, sites_total=r.sites_total)
 
 
-def run_all(plan: Plan, workers: int) -> tuple[list[dict], float]:
+def run_all(plan: Plan, workers: int) -> tuple[list[LearningRun], float]:
     jobs = [(kind, eta, run, plan) for run in range(plan.runs) for kind, eta in plan.curves()]
     total_trials = len(jobs) * plan.trials
     started = time.monotonic()
-    done: list[dict] = []
+    done: list[LearningRun] = []
     with mp.get_context("spawn").Pool(workers) as pool:
         for out in pool.imap_unordered(one_run, jobs):
             done.append(out)
             elapsed = time.monotonic() - started
             left = elapsed / len(done) * (len(jobs) - len(done))
             print(f"[fig9] {len(done)}/{len(jobs)} runs, {len(done) * plan.trials}/{total_trials} trials done | "
-                  f"{label(out['kind'], out['eta'], plan)}, run {out['run']}: errors per trial "
-                  f"{' '.join(map(str, out['errors']))} (current {out['errors'][-1]}) | "
+                  f"{label(out.kind, out.eta, plan)}, run {out.run}: errors per trial "
+                  f"{' '.join(map(str, out.errors))} (current {out.errors[-1]}) | "
                   f"{elapsed / 60:.1f} min, about {left / 60:.1f} min left", file=sys.stderr, flush=True)
-    done.sort(key=lambda o: (o["kind"] != "delta", o["eta"], o["run"]))
+    done.sort(key=lambda o: (o.kind != "delta", o.eta, o.run))
     return done, time.monotonic() - started
 
 
-def curves_of(done: list[dict], plan: Plan) -> dict[tuple[str, float], dict]:
+def curves_of(done: list[LearningRun], plan: Plan) -> dict[tuple[str, float], Curve]:
     curves = {}
     for kind, eta in plan.curves():
-        runs = [o for o in done if o["kind"] == kind and o["eta"] == eta]
-        errors = np.array([o["errors"] for o in runs])
+        runs = [o for o in done if o.kind == kind and o.eta == eta]
+        errors = np.array([o.errors for o in runs])
         mean = errors.mean(0)
         zero = np.flatnonzero(mean == 0)
         stays = next((t for t in range(plan.trials) if (mean[t:] == 0).all()), None)
-        per_run = [next((t + 1 for t, e in enumerate(o["errors"]) if e == 0), None) for o in runs]
-        curves[(kind, eta)] = dict(runs=runs, errors=errors, mean=mean, sd=errors.std(0),
-                                   first_zero=int(zero[0]) + 1 if len(zero) else None,
-                                   stays_zero=None if stays is None else stays + 1, per_run_first_zero=per_run,
-                                   built_last=sum(o["completed_at"][-1] is not None for o in runs))
+        per_run = [next((t + 1 for t, e in enumerate(o.errors) if e == 0), None) for o in runs]
+        curves[(kind, eta)] = Curve(runs=runs, errors=errors, mean=mean, sd=errors.std(0),
+                                    first_zero=int(zero[0]) + 1 if len(zero) else None,
+                                    stays_zero=None if stays is None else stays + 1, per_run_first_zero=per_run,
+                                    built_last=sum(o.completed_at[-1] is not None for o in runs))
     return curves
 
 
-def engineered_baseline(plan: Plan) -> dict:
-    """The engineered network (the teacher's) on the novel environments: ticks to build."""
+def engineered_baseline(plan: Plan) -> dict[str, NovelTrial]:
+    """The engineered network (the teacher's) on the novel environments, by scenario stem: ticks to build."""
     net = engineered()
     return {Path(p).stem: novel_trial(net, p, plan, 0) for p in NOVEL}
 
@@ -154,7 +202,7 @@ def plot(curves, plan: Plan, path: Path) -> None:
         c = curves[key]
         shift = (i - (len(keys) - 1) / 2) * 0.08
         style = "s--" if key[0] == "q" else "o-"
-        ax.errorbar(trials + shift, c["mean"], yerr=c["sd"], fmt=style, ms=3.5, capsize=2, lw=1.2,
+        ax.errorbar(trials + shift, c.mean, yerr=c.sd, fmt=style, ms=3.5, capsize=2, lw=1.2,
                     label=label(*key, plan))
     ax.set_xlabel(f"trial ({plan.ticks:,} steps each, environment of Fig. 6)")
     ax.set_ylabel("errors per trial (steps where student ≠ teacher)")
@@ -180,7 +228,7 @@ def report(curves, baseline, plan: Plan, seconds: float, workers: int, quick: bo
               "state nodes). Run r starts from the same random weights at every learning rate "
               f"(seed [{plan.seed}, r]). Mean ± one standard deviation over the runs."), "",
              "| trial | " + " | ".join(names) + " |", "|---:|" + "---:|" * len(keys)]
-    lines.extend(f"| {t + 1} | " + " | ".join(f"{curves[k]['mean'][t]:.1f} ± {curves[k]['sd'][t]:.1f}"
+    lines.extend(f"| {t + 1} | " + " | ".join(f"{curves[k].mean[t]:.1f} ± {curves[k].sd[t]:.1f}"
                                               for k in keys) + " |" for t in range(plan.trials))
 
     def row(name, f):
@@ -190,12 +238,12 @@ def report(curves, baseline, plan: Plan, seconds: float, workers: int, quick: bo
         return "—" if v is None else str(v)
 
     lines += ["", "| | " + " | ".join(names) + " |", "|---|" + "---:|" * len(keys)]
-    row("**first trial with mean errors 0**", lambda c: f"**{trial(c['first_zero'])}**")
-    row("first trial from which the mean stays 0", lambda c: trial(c["stays_zero"]))
-    row("runs with 0 errors in the last trial", lambda c: f"{int((c['errors'][:, -1] == 0).sum())}/{len(c['runs'])}")
-    row("first zero-error trial of a run: median (max)", lambda c: _median_max(c["per_run_first_zero"]))
-    row("errors in trial 1: mean", lambda c: f"{c['mean'][0]:.1f}")
-    row("structure completed within the last trial", lambda c: f"{c['built_last']}/{len(c['runs'])}")
+    row("**first trial with mean errors 0**", lambda c: f"**{trial(c.first_zero)}**")
+    row("first trial from which the mean stays 0", lambda c: trial(c.stays_zero))
+    row("runs with 0 errors in the last trial", lambda c: f"{int((c.errors[:, -1] == 0).sum())}/{len(c.runs)}")
+    row("first zero-error trial of a run: median (max)", lambda c: _median_max(c.per_run_first_zero))
+    row("errors in trial 1: mean", lambda c: f"{c.mean[0]:.1f}")
+    row("structure completed within the last trial", lambda c: f"{c.built_last}/{len(c.runs)}")
 
     lines += ["", "## The trained students in novel environments", "",
               (f"The first {plan.novel_students} trained students of each curve, after their last trial, build each "
@@ -205,16 +253,16 @@ def report(curves, baseline, plan: Plan, seconds: float, workers: int, quick: bo
               ("| learner | scenario | learning | completed | steps to complete: median (range) | "
                "errors: mean (max) |"), "|---|---|---|---:|---:|---:|"]
     for name, b in baseline.items():
-        lines.append(f"| engineered network (Fig. 8) | {name} | — | {'yes' if b['completed'] else 'no'} | "
-                     f"{b['ticks']} | {b['errors']} |")
+        lines.append(f"| engineered network (Fig. 8) | {name} | — | {'yes' if b.completed else 'no'} | "
+                     f"{b.ticks} | {b.errors} |")
     for field, mode in (("novel", "off"), ("novel_learning", "on")):
         for k in keys:
-            novel = [o[field] for o in curves[k]["runs"] if field in o]
+            novel = [trials for o in curves[k].runs if (trials := getattr(o, field)) is not None]
             for name in baseline:
                 rs = [n[name] for n in novel]
-                done = [r["ticks"] for r in rs if r["completed"]]
+                done = [r.ticks for r in rs if r.completed]
                 steps = f"{int(np.median(done))} ({min(done)}-{max(done)})" if done else "—"
-                errs = [r["errors"] for r in rs]
+                errs = [r.errors for r in rs]
                 lines.append(f"| {label(*k, plan)} | {name} | {mode} | {len(done)}/{len(rs)} | {steps} | "
                              f"{np.mean(errs):.1f} ({max(errs)}) |")
     return "\n".join(lines) + "\n"
@@ -247,12 +295,12 @@ def main(argv=None) -> int:
     plot(curves, plan, out / f"{STEM}.png")
     text = report(curves, baseline, plan, seconds, args.workers, args.quick)
     (out / f"{STEM}.md").write_text(text, encoding="utf-8")
-    raw = dict(plan=asdict(plan), seconds=seconds, runs=[{k: v for k, v in o.items() if k != "weights"} for o in done])
+    raw = dict(plan=asdict(plan), seconds=seconds, runs=[o.to_json() for o in done])
     (out / f"{STEM}.json").write_text(json.dumps(raw) + "\n", encoding="utf-8")
-    saved = next(o for o in done if o["kind"] == "delta" and o["run"] == 0
-                 and o["eta"] == (plan.student_eta if plan.student_eta in plan.etas else plan.etas[0]))
-    Student(np.array(saved["weights"]["excite"]), np.array(saved["weights"]["inhibit"])).save(
-        out / "fig9_student.json")
+    saved = next(o for o in done if o.kind == "delta" and o.run == 0
+                 and o.eta == (plan.student_eta if plan.student_eta in plan.etas else plan.etas[0]))
+    assert saved.student is not None  # every delta-rule run keeps its weights
+    saved.student.save(out / "fig9_student.json")
     print(text)
     print(f"wrote {out / STEM}.md, .png, .json and {out / 'fig9_student.json'}", file=sys.stderr)
     return 0
