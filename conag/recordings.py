@@ -15,13 +15,14 @@ from __future__ import annotations
 import json
 import sys
 import threading
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 from conag.common import bus_args, bus_options, stop_on_signals
 
 EXIT_DIFFERENT = 1
+VERIFY_TIMEOUT = 3600.0  # seconds: the replayed world's lockstep timeout (off, in effect)
 
 
 def add_commands(sub) -> None:
@@ -174,6 +175,9 @@ def _verify(args, rec, entries, world_id: str) -> int:
     for limit in script.limits:
         print(f"warning: {limit}: the replay may differ from then on", file=sys.stderr)
     scenario = parse_scenario(rec.info["scenario"], rec.info.get("scenario_path", "<recording>"))
+    # The script stands in for every command the recorded world stepped without: this one
+    # never times out itself (a busy machine makes the replay slower, not different).
+    scenario = replace(scenario, world=replace(scenario.world, lockstep_timeout=VERIFY_TIMEOUT))
     world = World(scenario, np.random.default_rng(int(rec.info["seed"])), world_id=world_id)
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -193,15 +197,16 @@ def _verify(args, rec, entries, world_id: str) -> int:
                 if not args.quiet and tick % 500 == 0:
                     print(f"tick {tick}", flush=True)
 
-            result = drive_world(client, script, world_id, stop, on_tick=progress)
+            result = drive_world(client, script, world_id, stop, on_tick=progress, timeout=60.0)
             world_stop.set()
             thread.join(10)
         finally:
             client.close()
             serve.close()
     if result.identical:
+        lost = f" ({result.dropped} dropped on the bus, not compared)" if result.dropped else ""
         print(f"identical: {result.matched} frames of {len(script.agents())} agents over ticks 0-"
-              f"{script.last_tick + 1} match the recording", flush=True)
+              f"{script.last_tick + 1} match the recording{lost}", flush=True)
         return 0
     print(f"DIFFERENT: {result.first_difference or 'no frame compared'} ({result.matched} frames matched before)",
           flush=True)

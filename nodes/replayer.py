@@ -26,7 +26,7 @@ import zenoh
 from bus import Declarations, Inbox
 from protocol import keys
 from protocol.codec import ProtocolError, decode, encode
-from protocol.messages import Hello, PerturbResult, SensorFrame
+from protocol.messages import Hello, LockstepTimeout, PerturbResult, SensorFrame
 from recording.mcap_log import Entry
 from recording.replay import Comparison, LockstepScript, paced
 
@@ -60,6 +60,9 @@ def publish_recording(session: zenoh.Session, entries: list[Entry], stop: thread
     return sent
 
 
+DROP_GRACE = 2.0  # seconds to wait for the rest of a tick's frames once one has come
+
+
 class DriveError(RuntimeError):
     """The world did not answer in time (no attach reply, no frame)."""
 
@@ -74,12 +77,14 @@ def drive_world(session: zenoh.Session, script: LockstepScript, world_id: str, s
     result = Comparison()
     with Declarations() as declared:
         frames = declared.add(Inbox(1 << 16).subscribe(session, keys.all_agents(world_id, "sensors")))
+        timeouts = declared.add(Inbox(1024).subscribe(session, keys.lockstep_timeouts(world_id)))
         commands: dict[str, zenoh.Publisher] = {}
         for tick in range(last + 2):   # the frames of last + 1 answer the commands of last
             # The step to `tick` (the world takes it once every attached agent's command came,
             # or after its lockstep timeout where the recording holds none), then the attaches
             # and perturbations of `tick`, each as the world met them, then the commands.
-            if not _collect(frames, script, dict.fromkeys(commands, tick), result, timeout, stop):
+            ok = _collect(frames, script, dict.fromkeys(commands, tick), result, timeout, stop)
+            if _timed_out(timeouts, script, result) or not ok:
                 break
             if tick > last:
                 break
@@ -87,7 +92,9 @@ def drive_world(session: zenoh.Session, script: LockstepScript, world_id: str, s
                 a = welcome.agent_id
                 if a not in commands:
                     declared.add(session.liveliness().declare_token(keys.agent_token(world_id, a)))
-                    commands[a] = declared.add(session.declare_publisher(keys.command(world_id, a), express=True))
+                    commands[a] = declared.add(session.declare_publisher(
+                        keys.command(world_id, a), reliability=zenoh.Reliability.RELIABLE,
+                        congestion_control=zenoh.CongestionControl.BLOCK))
                 _attach(session, world_id, a, timeout)
                 if not _collect(frames, script, {a: tick}, result, timeout, stop):
                     return result
@@ -99,6 +106,23 @@ def drive_world(session: zenoh.Session, script: LockstepScript, world_id: str, s
             if on_tick is not None:
                 on_tick(tick)
     return result
+
+
+def _timed_out(timeouts: Inbox, script: LockstepScript, result: Comparison) -> bool:
+    """Whether the replayed world stepped without a command where the recorded one did not
+    (this process fell a lockstep timeout behind: the replay can no longer be exact)."""
+    while (sample := timeouts.get(0)) is not None:
+        try:
+            t = decode(sample.payload.to_bytes(), LockstepTimeout)
+        except ProtocolError:
+            continue
+        extra = [a for a in t.agent_ids if (t.tick, a) not in script.missed]
+        if extra:
+            result.first_difference = (
+                f"the replayed world stepped from tick {t.tick} without the command of {', '.join(extra)}: its "
+                "lockstep timeout passed before the replay sent it (this machine too busy?)")
+            return True
+    return False
 
 
 def _attach(session: zenoh.Session, world_id: str, agent: str, timeout: float) -> None:
@@ -134,6 +158,11 @@ def _collect(frames: Inbox, script: LockstepScript, pending: dict[str, int], res
             return False
         sample = frames.get(min(0.1, max(deadline - time.monotonic(), 0)))
         if sample is None:
+            if len(waiting) < len(pending) and time.monotonic() >= deadline - timeout + DROP_GRACE:
+                # The world sent this tick's frames together and some came: the rest were dropped
+                # on the way (frames are "latest wins", congestion control DROP). Not compared.
+                result.dropped += len(waiting)
+                return True
             if time.monotonic() >= deadline:
                 raise DriveError(f"no frame for tick {min(pending.values())} from the world within {timeout:g} s "
                                  f"(waiting for {', '.join(sorted(waiting))})")

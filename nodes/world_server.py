@@ -18,7 +18,8 @@ Bad input of any kind is counted in `WorldStatus.bad_messages` and otherwise ign
 For whoever listens besides the asker (a recorder, `conag echo`), every Welcome is also
 published on the agent's `welcome` key and every perturbation, with its tick and outcome,
 as a `Perturbed` on the world's `perturbed` key (both reliable): the queries themselves
-reach the world alone.
+reach the world alone. A lockstep step taken without some agents' commands (the timeout
+passed) is published as a `LockstepTimeout`, so a replay can step without them too.
 
 A perturbation that changes the blueprint (add_site, remove_site) is followed by the new
 Blueprint, published reliably (RELIABLE, congestion control BLOCK: an agent must not miss
@@ -39,7 +40,16 @@ import zenoh
 from bus import Declarations, watch_tokens
 from protocol import keys
 from protocol.codec import ProtocolError, decode, encode
-from protocol.messages import SITE_OPS, AgentCommand, AgentState, Hello, Perturbation, Perturbed, WorldStatus
+from protocol.messages import (
+    SITE_OPS,
+    AgentCommand,
+    AgentState,
+    Hello,
+    LockstepTimeout,
+    Perturbation,
+    Perturbed,
+    WorldStatus,
+)
 from world_server.world import World
 
 log = logging.getLogger("conag.world")
@@ -125,6 +135,7 @@ class WorldServer:
         reliable = dict(reliability=zenoh.Reliability.RELIABLE, congestion_control=zenoh.CongestionControl.BLOCK)
         self._blueprint_pub = add(s.declare_publisher(keys.blueprint(w), **reliable))
         self._perturbed_pub = add(s.declare_publisher(keys.perturbed(w), **reliable))
+        self._timeout_pub = add(s.declare_publisher(keys.lockstep_timeouts(w), **reliable))
 
     # the loop --------------------------------------------------------------------------------
     def run(self, stop: threading.Event) -> WorldStatus:
@@ -166,6 +177,8 @@ class WorldServer:
                     if self.mode == "lockstep":
                         late = sorted(set(live) - self._answered)
                         log.debug("tick %d: no command from %s in time", self.world.tick, ", ".join(late))
+                        self._timeout_pub.put(encode(LockstepTimeout(self.world.world_id, self.world.tick,
+                                                                     tuple(late))))
                     return True
                 timeout = min(last_tick + period - now, 0.05)
             try:

@@ -57,6 +57,11 @@ def perturbed(world: str) -> str:
     return f"{world_root(world)}/perturbed"
 
 
+def lockstep_timeouts(world: str) -> str:
+    """LockstepTimeout publications (reliable): the world stepped without some agents' commands."""
+    return f"{world_root(world)}/lockstep_timeout"
+
+
 def run_control(world: str) -> str:
     """Queryable of a running `conag run`: a RunControl in, a RunControlResult back."""
     return f"{world_root(world)}/run/control"

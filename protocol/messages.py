@@ -285,6 +285,27 @@ class Perturbed:
 
 
 @dataclass(frozen=True)
+class LockstepTimeout:
+    """World -> anyone (published, reliable, only when it happens): in lockstep, the world
+    stepped from `tick` without the commands of `agent_ids` (its lockstep timeout passed).
+
+    Their commands for `tick` take effect at a later step, when they come: a replay of the
+    run must send them then (`recording.replay`).
+    """
+
+    world_id: str
+    tick: int
+    agent_ids: tuple[str, ...]
+
+    def __post_init__(self) -> None:
+        check_id(self.world_id, "world id")
+        _require(self.tick >= 0, "LockstepTimeout.tick must be >= 0")
+        _require(len(self.agent_ids) <= MAX_AGENTS_IN_STATUS, "LockstepTimeout lists too many agents")
+        for a in self.agent_ids:
+            check_id(a, "agent id")
+
+
+@dataclass(frozen=True)
 class Decision:
     """Student -> teacher, once per step: its internal state nodes and what it chose.
 
@@ -411,5 +432,5 @@ class RunControlResult:
 MESSAGE_TYPES: tuple[type, ...] = (
     Hello, Welcome, SensorFrame, AgentCommand, WorldStatus,
     Perturbation, PerturbResult, Decision, Reinforcement, RunControl, RunControlResult,
-    Blueprint, AgentState, Perturbed,
+    Blueprint, AgentState, Perturbed, LockstepTimeout,
 )

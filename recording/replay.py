@@ -12,16 +12,20 @@ compare. Fed the same attaches, commands and perturbations at the same ticks, a 
 built from the same scenario and seed sends the same frames, byte for byte (lockstep is
 deterministic: docs/design.md, "Determinism").
 
-A command is sent at the tick the world was at when it arrived, not at the tick it
-answers: the world keeps each agent's newest command and steps once every live agent has
-answered the current tick, or when its lockstep timeout passes (an agent compiling its
-kernels on a first run answers its first frames seconds late). The recorder cannot see
-when the world received a command, so it takes the tick of the newest frame recorded
-before it (never less than the command's own tick): a command answers a frame, and the
-world's next frame comes after the world had it, over one more hop than the command took
-to the recorder. A late command is therefore sent late again, and the replayed world
-waits through the same timeouts (a second each, by default) and steps without it, as the
-original did. What a recording cannot replay exactly, and `LockstepScript.limits` names:
+A command is sent at the tick the world was at when it arrived: the world keeps each
+agent's newest command and steps once every live agent has answered the current tick, or
+when its lockstep timeout passes (an agent compiling its kernels on a first run answers
+its first frames seconds late). A command answers a frame, so it arrives at the tick it
+names, unless the world stepped on without it: then the world published a
+LockstepTimeout naming the agent, and the command took effect at the tick of the newest
+frame recorded before it (at least one later). (The recorder's order alone cannot tell:
+a command on time may reach it after the next frame.) For the step the world took
+without it, the script adds a stand-in command of that tick holding what the world then
+had: the speed set point of the agent's last command (0 after an attach), no turn and no
+action (those are one-shot), or the whole of a late command that came at that tick. So a
+replayed world never has to time out itself, and `conag replay --verify` runs it with
+the timeout off: a busy machine slows the replay down, it does not change it.
+What a recording cannot replay exactly, and `LockstepScript.limits` names:
 an agent that went away mid-run (the world stops its body when its liveliness token
 goes, at a tick the recording does not hold) and so one restarted.
 """
@@ -34,7 +38,7 @@ from dataclasses import dataclass, field
 from typing import TypeVar, cast
 
 from protocol.codec import ProtocolError, decode
-from protocol.messages import AgentCommand, Perturbation, Perturbed, SensorFrame, Welcome
+from protocol.messages import AgentCommand, LockstepTimeout, Perturbation, Perturbed, SensorFrame, Welcome
 from recording.mcap_log import Entry
 
 T = TypeVar("T")
@@ -68,6 +72,7 @@ class LockstepScript:
     perturbations: dict[int, list[Perturbation]] = field(default_factory=lambda: defaultdict(list))
     frames: dict[tuple[int, str], list[bytes]] = field(default_factory=lambda: defaultdict(list))
     last_tick: int = 0
+    missed: set[tuple[int, str]] = field(default_factory=set)  # (tick, agent): stepped without its command
     limits: list[str] = field(default_factory=list)  # why this recording may not replay exactly
 
     @classmethod
@@ -76,6 +81,15 @@ class LockstepScript:
         script = cls()
         welcomed: dict[str, Welcome] = {}
         world_tick = 0  # the newest frame's tick: where the world was
+        entries = list(entries)
+        missed = script.missed
+        for e in entries:
+            if e.key.endswith("/lockstep_timeout"):
+                try:
+                    t = _decode(e.data, LockstepTimeout)
+                except ProtocolError:
+                    continue
+                missed.update((t.tick, a) for a in t.agent_ids)
         for e in entries:
             leaf = e.key.rsplit("/", 1)[-1]
             try:
@@ -88,7 +102,7 @@ class LockstepScript:
                     script.attaches[w.tick].append(w)
                 elif leaf == "command":
                     c = _decode(e.data, AgentCommand)
-                    at = max(c.tick, world_tick)
+                    at = max(c.tick + 1, world_tick) if (c.tick, c.agent_id) in missed else c.tick
                     script.commands[at].append(c)
                     script.last_tick = max(script.last_tick, at)
                 elif leaf == "perturbed":
@@ -101,7 +115,25 @@ class LockstepScript:
                     world_tick = max(world_tick, f.tick)
             except ProtocolError:
                 continue  # what the world did not understand either changed nothing
+        script._add_stand_ins()
         return script
+
+    def _add_stand_ins(self) -> None:
+        """A command for each (tick, agent) the world stepped without (see the module)."""
+        speed: dict[str, float] = {}
+        for tick in range(self.last_tick + 1):
+            for w in self.attaches.get(tick, ()):
+                speed[w.agent_id] = 0.0
+            came: dict[str, AgentCommand] = {}
+            for c in self.commands.get(tick, ()):
+                came[c.agent_id] = c
+                speed[c.agent_id] = c.speed
+            for t, a in sorted(self.missed):
+                if t == tick:
+                    last = came.get(a)
+                    stand_in = (AgentCommand(a, tick, last.speed, last.turn, last.action) if last is not None
+                                else AgentCommand(a, tick, speed.get(a, 0.0), 0.0, "none"))
+                    self.commands[tick].append(stand_in)
 
     def agents(self) -> list[str]:
         """Every agent that attached, in the order it first did."""
@@ -119,6 +151,7 @@ class Comparison:
 
     matched: int = 0
     missing: int = 0          # frames the world sent that the recording lacks (its recorder missed them)
+    dropped: int = 0          # frames the world sent that the bus dropped on the way to the replay
     first_difference: str = ""
     _seen: dict[tuple[int, str], int] = field(default_factory=dict)
 

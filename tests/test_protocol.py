@@ -28,6 +28,7 @@ from protocol import (
     Blueprint,
     Decision,
     Hello,
+    LockstepTimeout,
     Perturbation,
     Perturbed,
     PerturbResult,
@@ -77,6 +78,7 @@ EXAMPLES: dict[type, object] = {
     ),
     Perturbation: Perturbation(op="move", x=1.0, y=2.0, kind="brick", to_x=3.5, to_y=-1.0),
     PerturbResult: PerturbResult(ok=True, message="moved brick", tick=501),
+    LockstepTimeout: LockstepTimeout(world_id="w", tick=7, agent_ids=("a2", "a3")),
     Perturbed: Perturbed(tick=501, op="move", x=1.0, y=2.0, kind="brick", to_x=3.5, to_y=-1.0, ok=True,
                          message="moved brick"),
     Decision: Decision(
@@ -620,7 +622,7 @@ def test_constructible_string_fields_decode(cls):
 W, A = "w1", "a1"
 
 PER_AGENT = [keys.attach, keys.welcome, keys.sensors, keys.command, keys.decision, keys.reinforcement]
-PER_WORLD = [keys.status, keys.perturb, keys.perturbed, keys.world_token, keys.all_agent_tokens,
+PER_WORLD = [keys.status, keys.perturb, keys.perturbed, keys.lockstep_timeouts, keys.world_token, keys.all_agent_tokens,
              keys.all_teacher_tokens, keys.world_root]
 
 
