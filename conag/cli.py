@@ -10,6 +10,9 @@
     conag run SCENARIO        a world and its agents as processes, until the structure is done
     conag generate --seed N   write seeded, buildable scenario files (or a --suite of them)
     conag check FILE...       parse scenario files and check their structure can be built
+    conag record OUT.mcap     record every message of a world to an MCAP file
+    conag replay FILE.mcap    publish a recording again (--verify: reproduce it with a fresh world)
+    conag echo KEY_EXPR       print the decoded messages on a key
 
 Every process that touches the bus takes --zenoh-config FILE, --connect ENDPOINT,
 --listen ENDPOINT and --mode. Ctrl-C and SIGTERM stop a process cleanly.
@@ -22,13 +25,15 @@ import json
 import logging
 import signal
 import sys
-import threading
 import time
-from contextlib import contextmanager
 from dataclasses import asdict
 
-from bus import MODES, BusOptions, Declarations, open_session
+from bus import BusOptions, Declarations, open_session
+from conag.common import bus_args as _bus_args
+from conag.common import bus_options as _bus
+from conag.common import stop_on_signals as _stop_on_signals
 from conag.layouts import add_commands as add_layout_commands
+from conag.recordings import add_commands as add_recording_commands
 from world_server.summary import write_summary
 
 EXIT_USAGE = 2
@@ -38,37 +43,6 @@ RUN_EPILOG = f"""exit codes: 0 the structure is complete; 1 an error; {EXIT_USAG
 {EXIT_INCOMPLETE} not complete when the tick limit passed or the run was stopped; {EXIT_STALLED} stalled: no site was
 filled for --stall-ticks ticks (a report of every agent's position, behaviour and blocker is printed first)"""
 AGENT_MAP_SIZE = 41  # AgentConfig's default, without importing the agent for --help
-
-
-def _bus_args(p: argparse.ArgumentParser) -> None:
-    g = p.add_argument_group("bus")
-    g.add_argument("--zenoh-config", metavar="FILE", help="a zenoh JSON5 configuration file")
-    g.add_argument("--connect", metavar="ENDPOINT", action="append", default=[],
-                   help="zenoh endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)")
-    g.add_argument("--listen", metavar="ENDPOINT", action="append", default=[],
-                   help="zenoh endpoint to listen on (repeatable)")
-    g.add_argument("--mode", choices=MODES, help="zenoh mode (default peer)")
-    g.add_argument("--world-id", default="w0", help="which world on the bus (default w0)")
-
-
-def _bus(args) -> BusOptions:
-    return BusOptions(args.zenoh_config, tuple(args.connect), tuple(args.listen), args.mode)
-
-
-@contextmanager
-def _stop_on_signals():
-    """An Event set by SIGINT or SIGTERM, so loops finish their tick and close the session."""
-    stop = threading.Event()
-
-    def handler(_signum, _frame):
-        stop.set()
-
-    previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield stop
-    finally:
-        for s, h in previous.items():
-            signal.signal(s, h)
 
 
 def _status_line(st) -> str:
@@ -338,13 +312,16 @@ def cmd_run(args) -> int:
                       headless=args.headless, quiet=args.quiet,
                       extra_agent_args=("--map-size", str(args.map_size), *learn_args,
                                         *(("--nearest-first",) if args.nearest_first else ())),
-                      teacher=args.teacher, weights_dir=args.weights_dir, stall_ticks=args.stall_ticks)
+                      teacher=args.teacher, weights_dir=args.weights_dir, stall_ticks=args.stall_ticks,
+                      record=args.record)
     with _stop_on_signals() as stop:
         summary = run(opts, stop)
     state = "complete" if summary["completed"] else "STALLED" if summary["stalled"] else "NOT complete"
     print(f"{summary['scenario']}: {state}: {summary['sites_filled']}/{summary['sites_total']} sites in "
           f"{summary['ticks']} ticks, {len(summary['agents'])} agents, total distance "
           f"{summary['total_distance']:.1f}")
+    if args.record:
+        print(f"recording written to {args.record}")
     if args.summary == "-":
         print(json.dumps(summary, indent=2))
     elif args.summary:
@@ -369,8 +346,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for add in (_add_world, _add_status, _add_perturb, _add_agent, _add_teacher, _add_run, _add_control,
-                _add_render, add_layout_commands, _add_router):  # add_layout_commands: generate, check
-        add(sub)
+                _add_render, add_layout_commands, add_recording_commands, _add_router):
+        add(sub)  # add_layout_commands: generate, check; add_recording_commands: record, replay, echo
     return p
 
 
@@ -456,6 +433,8 @@ def _add_run(sub) -> None:
     u.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
                    help="where the world listens (default tcp/127.0.0.1:7447)")
     u.add_argument("--world-id", default="w0")
+    u.add_argument("--record", metavar="OUT.mcap",
+                   help="record every message of the run to an MCAP file (conag record; see conag replay)")
     u.add_argument("--map-size", type=int, default=AGENT_MAP_SIZE, metavar="N",
                    help=f"cells per side of every agent's maps, odd (default {AGENT_MAP_SIZE})")
     u.add_argument("--nearest-first", action="store_true",

@@ -8,6 +8,10 @@ run summary. A run that fills no site for `stall_ticks` ticks is stalled: it pri
 (`world_server.stall.StallWatch`: each agent's position and last AgentState), stops
 everything and is marked `stalled` in the summary, so a stuck build never just sits
 there until the limit.
+
+With `record`, a `conag record` process records the run (`nodes/recorder.py`): it starts
+after the world and before the agents, which start once it has heard the world, so the
+recording holds every tick; it stops last, after the agents' final state reports.
 """
 
 from __future__ import annotations
@@ -47,6 +51,7 @@ class RunOptions:
     teacher: bool = False             # also run a teacher process (`conag teacher`)
     weights_dir: str | None = None    # learning agents save their weights to weights_dir/<id>.json
     stall_ticks: int = DEFAULT_STALL_TICKS  # stop when no site is filled for this many ticks; 0: never
+    record: str | None = None         # record the run to this MCAP file (`conag record`)
 
 
 @dataclass
@@ -139,6 +144,11 @@ class RunBus:
         if state.agent_id == keys.agent_of(str(sample.key_expr)):
             self.watch.states[state.agent_id] = state
 
+    def recording(self) -> bool:
+        """Whether a recorder of this world has heard it (its liveliness token is up)."""
+        key = keys.recorder_token(self.opts.world_id, "recorder")
+        return any(r.ok is not None for r in self.session.liveliness().get(key, timeout=0.5))
+
     def close(self) -> None:
         self._declared.close()
         self.session.close()
@@ -167,8 +177,14 @@ def run(opts: RunOptions, stop: threading.Event) -> dict:
     fleet = Fleet(opts)
     watch = StallWatch(opts.stall_ticks)
     tty = sys.stdout.isatty() and not opts.headless
-    with RunBus(opts, fleet, watch, tty):
+    recorder = None
+    with RunBus(opts, fleet, watch, tty) as run_bus:
         try:
+            if opts.record:
+                recorder = _start_recorder(opts)
+                _wait_until(run_bus.recording, stop.is_set, lambda: recorder.poll() is not None)
+                if recorder.poll() is not None:
+                    raise RuntimeError(f"the recorder exited ({recorder.returncode}) before the run started")
             for i in range(n_agents):
                 fleet.start(f"a{i + 1}")
             _wait_until(lambda: world.poll() is not None, stop.is_set, lambda: watch.stalled)
@@ -179,6 +195,8 @@ def run(opts: RunOptions, stop: threading.Event) -> dict:
             fleet.stop_all()
             if teacher is not None:
                 _stop(teacher)
+            if recorder is not None:
+                _stop(recorder, grace=60.0)  # last: it writes what is queued, the summary and the footer
     if tty and not watch.stalled:
         print()
     summary = _final_summary(final_path, world)
@@ -199,6 +217,15 @@ def _start_teacher(opts: RunOptions) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "conag", "teacher", "--world-id", opts.world_id,
                              "--connect", opts.endpoint, "--quiet"], stdin=subprocess.DEVNULL,
                             stdout=subprocess.DEVNULL)
+
+
+def _start_recorder(opts: RunOptions) -> subprocess.Popen:
+    seed = opts.seed if opts.seed is not None else opts.scenario.seed
+    cmd = [sys.executable, "-m", "conag", "record", opts.record, "--world-id", opts.world_id,
+           "--connect", opts.endpoint, "--scenario", opts.scenario_path, "--seed", str(seed),
+           "--note", f"agents={opts.agents if opts.agents is not None else opts.scenario.agents}",
+           "--note", "agent_args=" + " ".join(opts.extra_agent_args)]
+    return subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
 
 
 def _start_world(opts: RunOptions, n_agents: int, final_path: Path) -> subprocess.Popen:

@@ -15,6 +15,12 @@ When the token disappears (process killed), its body stops and drops any brick w
 stands; when a process with the same id attaches again, it gets the same body back.
 Bad input of any kind is counted in `WorldStatus.bad_messages` and otherwise ignored.
 
+For whoever listens besides the asker (a recorder, `conag echo`), every Welcome is also
+published on the agent's `welcome` key and every perturbation, with its tick and outcome,
+as a `Perturbed` on the world's `perturbed` key (both reliable): the queries themselves
+reach the world alone. A lockstep step taken without some agents' commands (the timeout
+passed) is published as a `LockstepTimeout`, so a replay can step without them too.
+
 A perturbation that changes the blueprint (add_site, remove_site) is followed by the new
 Blueprint, published reliably (RELIABLE, congestion control BLOCK: an agent must not miss
 a site); a queryable on the same key answers the current one. The agents' AgentState
@@ -34,7 +40,16 @@ import zenoh
 from bus import Declarations, watch_tokens
 from protocol import keys
 from protocol.codec import ProtocolError, decode, encode
-from protocol.messages import SITE_OPS, AgentCommand, AgentState, Hello, Perturbation, WorldStatus
+from protocol.messages import (
+    SITE_OPS,
+    AgentCommand,
+    AgentState,
+    Hello,
+    LockstepTimeout,
+    Perturbation,
+    Perturbed,
+    WorldStatus,
+)
 from world_server.world import World
 
 log = logging.getLogger("conag.world")
@@ -117,8 +132,10 @@ class WorldServer:
         add(s.declare_queryable(keys.blueprint(w), self._on_blueprint_query))
         add(s.declare_subscriber(keys.all_agents(w, "state"), self._on_agent_state))
         self._status_pub = add(s.declare_publisher(keys.status(w)))
-        self._blueprint_pub = add(s.declare_publisher(keys.blueprint(w), reliability=zenoh.Reliability.RELIABLE,
-                                                      congestion_control=zenoh.CongestionControl.BLOCK))
+        reliable = dict(reliability=zenoh.Reliability.RELIABLE, congestion_control=zenoh.CongestionControl.BLOCK)
+        self._blueprint_pub = add(s.declare_publisher(keys.blueprint(w), **reliable))
+        self._perturbed_pub = add(s.declare_publisher(keys.perturbed(w), **reliable))
+        self._timeout_pub = add(s.declare_publisher(keys.lockstep_timeouts(w), **reliable))
 
     # the loop --------------------------------------------------------------------------------
     def run(self, stop: threading.Event) -> WorldStatus:
@@ -160,6 +177,8 @@ class WorldServer:
                     if self.mode == "lockstep":
                         late = sorted(set(live) - self._answered)
                         log.debug("tick %d: no command from %s in time", self.world.tick, ", ".join(late))
+                        self._timeout_pub.put(encode(LockstepTimeout(self.world.world_id, self.world.tick,
+                                                                     tuple(late))))
                     return True
                 timeout = min(last_tick + period - now, 0.05)
             try:
@@ -225,8 +244,11 @@ class WorldServer:
             query.drop()
             return
         welcome = self.world.attach(hello.agent_id, hello.pid)
-        query.reply(query.key_expr, encode(welcome))
+        data = encode(welcome)
+        query.reply(query.key_expr, data)
         query.drop()
+        self.session.put(keys.welcome(self.world.world_id, hello.agent_id), data,
+                         congestion_control=zenoh.CongestionControl.BLOCK)
         log.info("agent %s (pid %d) attached to body %d%s", hello.agent_id, hello.pid, welcome.body,
                  f", restart {welcome.restarts}" if welcome.restarts else "")
         self._publish_frame(self.world.frame(hello.agent_id))
@@ -248,6 +270,7 @@ class WorldServer:
             self._blueprint_pub.put(self._blueprint_bytes)
         query.reply(query.key_expr, encode(result))
         query.drop()
+        self._perturbed_pub.put(encode(Perturbed.of(p, result)))
 
     def _publish_frame(self, frame) -> None:
         pub = self._publishers.get(frame.agent_id)

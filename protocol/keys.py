@@ -50,6 +50,18 @@ def agent_state(world: str, agent: str) -> str:
     return f"{world_root(world)}/agent/{check_id(agent, 'agent id')}/state"
 
 
+def perturbed(world: str) -> str:
+    """Perturbed publications (reliable): each perturbation the world was asked for, with its
+    tick and outcome (the perturb query itself is seen by the world only; this is what a
+    recorder keeps)."""
+    return f"{world_root(world)}/perturbed"
+
+
+def lockstep_timeouts(world: str) -> str:
+    """LockstepTimeout publications (reliable): the world stepped without some agents' commands."""
+    return f"{world_root(world)}/lockstep_timeout"
+
+
 def run_control(world: str) -> str:
     """Queryable of a running `conag run`: a RunControl in, a RunControlResult back."""
     return f"{world_root(world)}/run/control"
@@ -58,6 +70,12 @@ def run_control(world: str) -> str:
 def attach(world: str, agent: str) -> str:
     """Queryable: a Hello in, a Welcome back."""
     return f"{world_root(world)}/agent/{check_id(agent, 'agent id')}/attach"
+
+
+def welcome(world: str, agent: str) -> str:
+    """Welcome publications (reliable): the world's answer to each attach, for whoever
+    listens besides the agent (a recorder keeps who attached at which tick, and how)."""
+    return f"{world_root(world)}/agent/{check_id(agent, 'agent id')}/welcome"
 
 
 def sensors(world: str, agent: str) -> str:
@@ -116,6 +134,12 @@ def all_agent_tokens(world: str) -> str:
 def teacher_token(world: str, teacher: str) -> str:
     """A teacher's liveliness token (a student publishes decisions once it sees one)."""
     return f"{world_root(world)}/alive/teacher/{check_id(teacher, 'teacher id')}"
+
+
+def recorder_token(world: str, recorder: str) -> str:
+    """A recorder's liveliness token, declared once it hears the world (`conag run --record`
+    starts the agents only then, so the recording holds the run from its first tick)."""
+    return f"{world_root(world)}/alive/recorder/{check_id(recorder, 'recorder id')}"
 
 
 def all_teacher_tokens(world: str) -> str:

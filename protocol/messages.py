@@ -248,6 +248,64 @@ class PerturbResult:
 
 
 @dataclass(frozen=True)
+class Perturbed:
+    """World -> anyone (published, reliable): a perturbation it was asked for at `tick`, the
+    Perturbation's fields and the PerturbResult's `ok` and `message`.
+
+    The perturb query reaches the world alone; this publication is how a recorder (and a
+    replay that reproduces the run) learns what changed and when: it was applied between
+    the frames of `tick` and the step that follows them.
+    """
+
+    tick: int
+    op: str
+    x: float
+    y: float
+    kind: str
+    to_x: float
+    to_y: float
+    ok: bool
+    message: str
+
+    def __post_init__(self) -> None:
+        _finite(self)
+        _require(self.tick >= 0, "Perturbed.tick must be >= 0")
+        _require(self.op in PERTURB_OPS, f"Perturbed.op must be one of {PERTURB_OPS}")
+        _require(self.kind in DISC_KINDS, f"Perturbed.kind must be one of {DISC_KINDS}")
+        _require(len(self.message) <= MAX_STRING, "Perturbed.message too long")
+
+    @classmethod
+    def of(cls, p: Perturbation, result: PerturbResult) -> Perturbed:
+        """The publication of Perturbation `p` answered by `result`."""
+        return cls(result.tick, p.op, p.x, p.y, p.kind, p.to_x, p.to_y, result.ok, result.message)
+
+    def perturbation(self) -> Perturbation:
+        """The Perturbation that was asked for."""
+        return Perturbation(self.op, self.x, self.y, self.kind, self.to_x, self.to_y)
+
+
+@dataclass(frozen=True)
+class LockstepTimeout:
+    """World -> anyone (published, reliable, only when it happens): in lockstep, the world
+    stepped from `tick` without the commands of `agent_ids` (its lockstep timeout passed).
+
+    Their commands for `tick` take effect at a later step, when they come: a replay of the
+    run must send them then (`recording.replay`).
+    """
+
+    world_id: str
+    tick: int
+    agent_ids: tuple[str, ...]
+
+    def __post_init__(self) -> None:
+        check_id(self.world_id, "world id")
+        _require(self.tick >= 0, "LockstepTimeout.tick must be >= 0")
+        _require(len(self.agent_ids) <= MAX_AGENTS_IN_STATUS, "LockstepTimeout lists too many agents")
+        for a in self.agent_ids:
+            check_id(a, "agent id")
+
+
+@dataclass(frozen=True)
 class Decision:
     """Student -> teacher, once per step: its internal state nodes and what it chose.
 
@@ -374,5 +432,5 @@ class RunControlResult:
 MESSAGE_TYPES: tuple[type, ...] = (
     Hello, Welcome, SensorFrame, AgentCommand, WorldStatus,
     Perturbation, PerturbResult, Decision, Reinforcement, RunControl, RunControlResult,
-    Blueprint, AgentState,
+    Blueprint, AgentState, Perturbed, LockstepTimeout,
 )

@@ -28,7 +28,9 @@ from protocol import (
     Blueprint,
     Decision,
     Hello,
+    LockstepTimeout,
     Perturbation,
+    Perturbed,
     PerturbResult,
     ProtocolError,
     Reinforcement,
@@ -76,6 +78,9 @@ EXAMPLES: dict[type, object] = {
     ),
     Perturbation: Perturbation(op="move", x=1.0, y=2.0, kind="brick", to_x=3.5, to_y=-1.0),
     PerturbResult: PerturbResult(ok=True, message="moved brick", tick=501),
+    LockstepTimeout: LockstepTimeout(world_id="w", tick=7, agent_ids=("a2", "a3")),
+    Perturbed: Perturbed(tick=501, op="move", x=1.0, y=2.0, kind="brick", to_x=3.5, to_y=-1.0, ok=True,
+                         message="moved brick"),
     Decision: Decision(
         agent_id="a1", tick=121, state=(1.0, 0.0, 0.0, 0.5, 0.25, 0.0),
         outputs=(0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7), arm="drop", motor="go-to-site",
@@ -616,8 +621,8 @@ def test_constructible_string_fields_decode(cls):
 
 W, A = "w1", "a1"
 
-PER_AGENT = [keys.attach, keys.sensors, keys.command, keys.decision, keys.reinforcement]
-PER_WORLD = [keys.status, keys.perturb, keys.world_token, keys.all_agent_tokens,
+PER_AGENT = [keys.attach, keys.welcome, keys.sensors, keys.command, keys.decision, keys.reinforcement]
+PER_WORLD = [keys.status, keys.perturb, keys.perturbed, keys.lockstep_timeouts, keys.world_token, keys.all_agent_tokens,
              keys.all_teacher_tokens, keys.world_root]
 
 
@@ -646,7 +651,8 @@ def test_agent_keys_under_root_and_contain_agent(fn):
 
 
 def test_agent_keys_are_distinct():
-    all_keys = [fn(W, A) for fn in PER_AGENT] + [keys.agent_token(W, A), keys.teacher_token(W, A)]
+    all_keys = [fn(W, A) for fn in PER_AGENT] + [keys.agent_token(W, A), keys.teacher_token(W, A),
+                                                 keys.recorder_token(W, A)]
     all_keys += [fn(W) for fn in PER_WORLD]
     assert len(set(all_keys)) == len(all_keys)
 

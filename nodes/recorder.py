@@ -1,0 +1,102 @@
+"""The recorder process (`conag record OUT.mcap`): the zenoh shell around `recording.mcap_log.McapRecorder`.
+
+It subscribes to everything published under one world's root (`<root>/world/<id>/**`:
+frames, commands, decisions, reinforcements, statuses, blueprints, agent states, the
+world's welcomes and perturbations). zenoh's callback only stamps each sample with the
+clock and queues it; the loop thread writes them, ends a chunk every `flush_every`
+seconds (what a SIGKILL can lose) and, once stopped, writes what is still queued, the
+summary and the footer, and renames the file into place.
+
+Once the world's first status arrives (the world then routes its publications here too)
+the recorder declares its liveliness token: `conag run --record` starts the agents only
+then, so the recording holds the run from its first tick. The newest status goes into
+the file's closing metadata (scenario name, seed, tick mode, ticks, completed).
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import zenoh
+
+from bus import Declarations
+from protocol import keys
+from protocol.codec import ProtocolError, decode
+from protocol.messages import WorldStatus
+from recording.mcap_log import DEFAULT_TICK_NS, McapRecorder
+
+log = logging.getLogger("conag.record")
+
+
+@dataclass
+class RecordReport:
+    """What a recorder wrote (filled in as it goes)."""
+
+    path: Path | None = None
+    messages: int = 0
+    last_tick: int = 0
+    status: WorldStatus | None = None   # the newest status heard
+    heard_world: threading.Event = field(default_factory=threading.Event)
+
+
+def run_recorder(session: zenoh.Session, world_id: str, out: str | Path, stop: threading.Event, *,
+                 metadata: Mapping[str, str] | None = None, tick_ns: int = DEFAULT_TICK_NS,
+                 recorder_id: str = "recorder", flush_every: float = 1.0,
+                 clock: Callable[[], int] = time.time_ns, report: RecordReport | None = None) -> RecordReport:
+    """Record world `world_id` into `out` until `stop` is set; returns (and fills in) `report`."""
+    report = report if report is not None else RecordReport()
+    samples: queue.SimpleQueue = queue.SimpleQueue()
+    status_key = keys.status(world_id)
+
+    def on_sample(sample: zenoh.Sample) -> None:
+        samples.put((str(sample.key_expr), sample.payload.to_bytes(), clock()))
+
+    recorder = McapRecorder(out, metadata, tick_ns=tick_ns)
+    try:
+        with Declarations() as declared:
+            declared.add(session.declare_subscriber(f"{keys.world_root(world_id)}/**", on_sample))
+            last_flush = time.monotonic()
+            while not stop.is_set():
+                try:
+                    item = samples.get(timeout=0.1)
+                except queue.Empty:
+                    item = None
+                if item is not None:
+                    _write(recorder, item, status_key, report)
+                    if not report.heard_world.is_set() and item[0] == status_key:
+                        report.heard_world.set()
+                        declared.add(session.liveliness().declare_token(keys.recorder_token(world_id, recorder_id)))
+                        log.info("recorder %s: heard world %s", recorder_id, world_id)
+                if time.monotonic() - last_flush >= flush_every:
+                    recorder.flush()
+                    last_flush = time.monotonic()
+        # Undeclared: nothing more arrives; write what is queued.
+        while True:
+            try:
+                _write(recorder, samples.get_nowait(), status_key, report)
+            except queue.Empty:
+                break
+    finally:
+        st = report.status
+        end = {} if st is None else {"scenario_name": st.scenario, "seed": st.seed, "mode": st.mode,
+                                     "ticks": st.tick, "completed": st.completed}
+        report.path = recorder.close(end)
+        report.messages, report.last_tick = recorder.messages, recorder.tick
+    return report
+
+
+def _write(recorder: McapRecorder, item: tuple[str, bytes, int], status_key: str, report: RecordReport) -> None:
+    key, data, t = item
+    recorder.add(key, data, t)
+    if key == status_key:
+        try:
+            report.status = decode(data, WorldStatus)
+        except ProtocolError:
+            pass  # recorded as it came; it just says nothing about the world
+    report.messages = recorder.messages

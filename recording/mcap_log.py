@@ -1,0 +1,253 @@
+"""Bus recordings as MCAP files: what `conag record` writes and `conag replay` reads.
+
+A recording holds every message published under one world's keys, as the bytes that
+travelled (the one msgpack codec of `protocol`), so a replay re-publishes them unchanged:
+
+* one MCAP channel per key expression, message encoding `msgpack`, no schema (the
+  envelope names its type; the channel's metadata says which type it carried first);
+* per message: `log_time` is when the recorder received it (ns since the epoch, from
+  the clock it is given), `publish_time` the world tick the message belongs to, as
+  simulated time (`tick * tick_ns`, `tick_ns` in the metadata; 20 ms at the default
+  50 ticks per second), and `sequence` counts the messages of its channel from 1. Every
+  key of the ConAg bus has one publisher (the world for frames, status, blueprints,
+  welcomes and perturbations; an agent for its commands, decisions and states; the
+  teacher for reinforcements), so that count is the per-publisher sequence MCAP asks a
+  recorder to fill in when the publisher does not. The tick is the message's own `tick`
+  field; a message without one (none is published today) gets the newest tick seen;
+* a metadata record `conag` (scenario text, seed, configs, project and schema versions,
+  whatever the recorder was told) written first, and `conag.end` (message counts, last
+  tick) written on close.
+
+`McapRecorder` writes to `OUT.part` and renames it to `OUT` once the summary and footer
+are written, so `OUT` is always a complete file. A recorder killed outright (SIGKILL)
+leaves `OUT.part`: a chunk is written whole when it fills (`chunk_size`) or when the
+recorder's `flush` ends it (the recorder process does so every second), so
+`read_recording` reads such a file up to its last complete chunk and says it is
+incomplete; only the messages of the chunk in progress are lost.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import os
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO
+
+import msgpack
+from mcap.exceptions import McapError
+from mcap.reader import make_reader
+from mcap.records import Channel, Message, Metadata
+from mcap.stream_reader import StreamReader
+from mcap.writer import CompressionType, Writer
+
+from protocol.messages import MESSAGE_TYPES, SCHEMA_VERSION
+
+MESSAGE_ENCODING = "msgpack"
+PROFILE = "conag"
+METADATA = "conag"          # the metadata record written first
+END_METADATA = "conag.end"  # the one written on close
+DEFAULT_TICK_NS = 20_000_000  # one tick of simulated time at the default 50 ticks per second
+CHUNK_SIZE = 256 * 1024       # bytes of messages per chunk: what a SIGKILL can lose at most
+
+
+@functools.cache
+def _tick_index() -> dict[str, int]:
+    """Type name -> position of its `tick` field in the wire envelope's field list."""
+    out = {}
+    for cls in MESSAGE_TYPES:
+        names = [f.name for f in dataclasses.fields(cls)]
+        if "tick" in names:
+            out[cls.__name__] = names.index("tick")
+    return out
+
+
+def peek(data: bytes) -> tuple[str, int | None]:
+    """(type name, tick) of an encoded ConAg message without decoding it fully; ("", None)
+    for bytes that are not one. Cheap: the recorder calls it on every message."""
+    try:
+        raw = msgpack.unpackb(data, raw=False)
+        name = raw["t"]
+        i = _tick_index().get(name)
+        tick = raw["f"][i] if i is not None else None
+        return (name, tick) if tick is None or (type(tick) is int and tick >= 0) else (name, None)
+    except Exception:  # noqa: BLE001 -- anything malformed is simply not a message we can read
+        return "", None
+
+
+class McapRecorder:
+    """Writes bus messages to an MCAP file (see the module): `add` each, then `close`.
+
+    `metadata` goes into the file's `conag` metadata record. Not thread-safe: one thread
+    adds (the recorder process's loop).
+    """
+
+    def __init__(self, out: str | Path, metadata: Mapping[str, str] | None = None, *,
+                 tick_ns: int = DEFAULT_TICK_NS, chunk_size: int = CHUNK_SIZE,
+                 compression: CompressionType = CompressionType.ZSTD):
+        self.path = Path(out)
+        self.part = self.path.with_name(self.path.name + ".part")
+        self.tick_ns = tick_ns
+        self.tick = 0                       # the newest tick seen
+        self.counts: dict[str, int] = {}    # messages per key (their sequence numbers so far)
+        self._channels: dict[str, int] = {}
+        self._file: IO[bytes] = open(self.part, "wb")  # noqa: SIM115 -- closed by close()
+        self._writer = Writer(self._file, chunk_size=chunk_size, compression=compression)
+        self._writer.start(profile=PROFILE, library=f"conag via {_mcap_library()}")
+        meta = {"schema_version": str(SCHEMA_VERSION), "tick_ns": str(tick_ns)}
+        meta.update({k: str(v) for k, v in (metadata or {}).items()})
+        self._writer.add_metadata(METADATA, meta)
+        self._closed = False
+
+    @property
+    def messages(self) -> int:
+        """Messages written so far."""
+        return sum(self.counts.values())
+
+    def add(self, key: str, data: bytes, log_time_ns: int) -> None:
+        """Write one message published on `key`, received at `log_time_ns`."""
+        name, tick = peek(data)
+        if tick is None:
+            tick = self.tick
+        elif tick > self.tick:
+            self.tick = tick
+        channel = self._channels.get(key)
+        if channel is None:
+            channel = self._writer.register_channel(key, MESSAGE_ENCODING, 0, {"type": name})
+            self._channels[key] = channel
+        seq = self.counts.get(key, 0) + 1
+        self.counts[key] = seq
+        self._writer.add_message(channel, log_time=log_time_ns, data=data, publish_time=tick * self.tick_ns,
+                                 sequence=seq & 0xFFFFFFFF)
+
+    def flush(self) -> None:
+        """End the chunk in progress and flush the file: what was added so far survives
+        the recorder being killed outright (the shell calls this every second or so)."""
+        self._writer.flush()
+
+    def close(self, end: Mapping[str, str] | None = None) -> Path:
+        """Write the `conag.end` metadata, the summary and the footer; rename `OUT.part` to
+        `OUT`. Returns the path of the finished file. A second call does nothing."""
+        if self._closed:
+            return self.path
+        self._closed = True
+        try:
+            meta = {"messages": str(self.messages), "last_tick": str(self.tick), "channels": str(len(self.counts))}
+            meta.update({k: str(v) for k, v in (end or {}).items()})
+            self._writer.add_metadata(END_METADATA, meta)
+            self._writer.finish()
+        finally:
+            self._file.close()
+        os.replace(self.part, self.path)
+        return self.path
+
+    def __enter__(self) -> McapRecorder:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def _mcap_library() -> str:
+    from importlib.metadata import version
+
+    return f"mcap-python {version('mcap')}"
+
+
+# --- reading ----------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Entry:
+    """One recorded message: its key, tick, sequence number in its channel, receive time
+    (ns) and the bytes that travelled."""
+
+    key: str
+    tick: int
+    seq: int
+    log_time: int
+    data: bytes
+
+
+@dataclass
+class Recording:
+    """What `read_recording` found: metadata records by name, the messages in the order
+    they were received, and whether the file was complete (else `problem` says why)."""
+
+    metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+    entries: list[Entry] = field(default_factory=list)
+    complete: bool = True
+    problem: str = ""
+
+    @property
+    def info(self) -> dict[str, str]:
+        """The `conag` metadata record (scenario, seed, configs, versions)."""
+        return self.metadata.get(METADATA, {})
+
+    @property
+    def last_tick(self) -> int:
+        """The newest tick of any message (0 for an empty recording)."""
+        return max((e.tick for e in self.entries), default=0)
+
+    def keys(self) -> list[str]:
+        """Every key recorded, in the order each first appeared."""
+        return list(dict.fromkeys(e.key for e in self.entries))
+
+
+def read_recording(path: str | Path, keep: Callable[[str], bool] | None = None) -> Recording:
+    """Read a recording (a finished file, or the `.part` a killed recorder left: up to its
+    last complete chunk). `keep(key)` selects channels; None keeps all."""
+    with open(path, "rb") as f:
+        try:
+            return _read_indexed(f, keep)
+        except Exception:  # noqa: BLE001 -- no summary or footer (McapError), or damage mcap reports otherwise
+            pass  # a recording cut short: read it as a stream
+        f.seek(0)
+        return _read_stream(f, keep)
+
+
+def _entry(channel: Channel, message: Message, tick_ns: int) -> Entry:
+    return Entry(channel.topic, message.publish_time // tick_ns, message.sequence, message.log_time,
+                 bytes(message.data))
+
+
+def _read_indexed(f: IO[bytes], keep: Callable[[str], bool] | None) -> Recording:
+    reader = make_reader(f)
+    summary = reader.get_summary()
+    if summary is None:
+        raise McapError("no summary section")
+    rec = Recording()
+    rec.metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+    tick_ns = int(rec.info.get("tick_ns", DEFAULT_TICK_NS))
+    topics = None if keep is None else [c.topic for c in summary.channels.values() if keep(c.topic)]
+    rec.entries = [_entry(channel, message, tick_ns)
+                   for _, channel, message in reader.iter_messages(topics=topics, log_time_order=False)]
+    return rec
+
+
+def _read_stream(f: IO[bytes], keep: Callable[[str], bool] | None) -> Recording:
+    rec = Recording(complete=False, problem="no summary or footer: the recorder did not finish; "
+                                            "read up to the last complete chunk")
+    channels: dict[int, Channel] = {}
+    tick_ns = DEFAULT_TICK_NS
+    try:
+        for record in StreamReader(f, skip_magic=False).records:
+            if isinstance(record, Channel):
+                channels[record.id] = record
+            elif isinstance(record, Metadata):
+                rec.metadata[record.name] = dict(record.metadata)
+                if record.name == METADATA:
+                    tick_ns = int(record.metadata.get("tick_ns", DEFAULT_TICK_NS))
+            elif isinstance(record, Message):
+                channel = channels[record.channel_id]
+                if keep is None or keep(channel.topic):
+                    rec.entries.append(_entry(channel, record, tick_ns))
+    except Exception as exc:  # noqa: BLE001 -- a truncated record ends the readable part, whatever mcap raises
+        rec.problem += f" ({type(exc).__name__}: {exc})"
+    return rec
+
+
+def iter_entries(entries: list[Entry], from_tick: int = 0) -> Iterator[Entry]:
+    """The entries of tick >= `from_tick`, in recorded order."""
+    return (e for e in entries if e.tick >= from_tick)

@@ -1,0 +1,280 @@
+"""Record, replay, echo (issue 13): what a user relies on.
+
+* a recording holds every message of the world's keys, one MCAP channel per key, with its
+  tick, a per-key sequence number and the run's metadata; it is complete once closed and
+  readable up to its last chunk when the recorder was killed;
+* a world in lockstep fed a recording's commands sends the recorded frames, byte for byte
+  (three agents, a perturbation mid-run);
+* `conag replay` publishes a recording again, paced by --rate, from --from;
+* `conag echo` prints decoded messages (text, JSON) and rates.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import threading
+from collections import Counter
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+
+from agent_runtime.config import AgentConfig
+from nodes.agent import AgentOptions, run_agent
+from nodes.echo import run_echo
+from nodes.recorder import RecordReport, run_recorder
+from nodes.replayer import drive_world, publish_recording
+from protocol import keys
+from protocol.codec import decode, encode
+from protocol.messages import (
+    AgentCommand,
+    LockstepTimeout,
+    Perturbation,
+    PerturbResult,
+    SensorFrame,
+    Welcome,
+    WorldStatus,
+)
+from recording.echo import RateMeter, describe
+from recording.mcap_log import McapRecorder, read_recording
+from recording.replay import LockstepScript, paced
+from tests.conftest import SCENARIOS, Bus, Process, RunningWorld, conag, free_port, wait_until
+from world_server.scenario import load_scenario
+from world_server.world import World
+
+W = "w0"
+
+
+def _cmd(tick, agent="a1", speed=1.0):
+    return encode(AgentCommand(agent, tick, speed, 0.0))
+
+
+def _frame(tick, agent="a1"):
+    return encode(SensorFrame(agent, tick, 0.0, 0.0, 0.0, 1, (-1.0,) * 5, False))
+
+
+# --- the file -------------------------------------------------------------------------------------
+
+def test_a_recording_has_a_channel_per_key_with_ticks_sequences_and_metadata(tmp_path):
+    out = tmp_path / "r.mcap"
+    with McapRecorder(out, {"scenario": "name = 'x'", "seed": "6"}) as rec:
+        for t in range(5):
+            rec.add(keys.sensors(W, "a1"), _frame(t), 1000 + 10 * t)
+            rec.add(keys.command(W, "a1"), _cmd(t), 1001 + 10 * t)
+        rec.add(keys.command(W, "a2"), _cmd(7, "a2"), 2000)
+        assert not out.exists() and rec.part.exists()   # only a finished file takes the name
+    assert out.exists() and not rec.part.exists()
+    with open(out, "rb") as f:   # a plain MCAP file, as any MCAP tool reads it
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        assert sorted(c.topic for c in summary.channels.values()) == sorted(
+            [keys.sensors(W, "a1"), keys.command(W, "a1"), keys.command(W, "a2")])
+        assert {c.message_encoding for c in summary.channels.values()} == {"msgpack"}
+        assert summary.statistics.message_count == 11
+    recording = read_recording(out)
+    assert recording.complete
+    assert recording.info["scenario"] == "name = 'x'" and recording.info["seed"] == "6"
+    assert recording.metadata["conag.end"]["messages"] == "11"
+    commands = [e for e in recording.entries if e.key == keys.command(W, "a1")]
+    assert [(e.tick, e.seq) for e in commands] == [(t, t + 1) for t in range(5)]
+    assert [decode(e.data) for e in commands] == [decode(_cmd(t)) for t in range(5)]   # the bytes that travelled
+    assert recording.entries[-1].tick == 7 and recording.entries[-1].seq == 1
+
+
+def test_a_recording_cut_by_sigkill_reads_up_to_its_last_flushed_chunk(tmp_path):
+    rec = McapRecorder(tmp_path / "r.mcap")
+    for t in range(50):
+        rec.add(keys.command(W, "a1"), _cmd(t), t)
+    rec.flush()                                   # the recorder process does this every second
+    for t in range(50, 60):
+        rec.add(keys.command(W, "a1"), _cmd(t), t)
+    cut = tmp_path / "cut.mcap.part"
+    shutil.copy(rec.part, cut)                    # what a SIGKILL now would leave
+    rec.close()
+    recording = read_recording(cut)
+    assert not recording.complete and "did not finish" in recording.problem
+    assert [e.tick for e in recording.entries] == list(range(50))
+    assert read_recording(tmp_path / "r.mcap").complete
+
+
+# --- pure replay and echo parts -----------------------------------------------------------------
+
+def test_paced_scales_the_recorded_gaps_and_starts_from_a_tick(tmp_path):
+    with McapRecorder(tmp_path / "r.mcap") as rec:
+        for t in range(6):
+            rec.add(keys.command(W, "a1"), _cmd(t), 1_000_000_000 + t * 100_000_000)   # 10 Hz
+    entries = read_recording(tmp_path / "r.mcap").entries
+    assert [round(d, 3) for d, _ in paced(entries, rate=2.0)] == [0.0, 0.05, 0.1, 0.15, 0.2, 0.25]
+    assert [(round(d, 3), e.tick) for d, e in paced(entries, rate=1.0, from_tick=4)] == [(0.0, 4), (0.1, 5)]
+    assert [d for d, _ in paced(entries, rate=0)] == [0.0] * 6
+    with pytest.raises(ValueError):
+        list(paced(entries, rate=-1))
+
+
+def test_a_late_command_is_sent_at_the_tick_the_world_got_it(tmp_path):
+    with McapRecorder(tmp_path / "r.mcap") as rec:
+        rec.add(keys.welcome(W, "a1"), encode(Welcome(W, "a1", 0, 0, 1.0, 1.0, 0.0, False, 0, 1, 6.0, 1.0, (), ())),
+                1)
+        for t in range(4):        # the world stepped on without the agent (a lockstep timeout) ...
+            rec.add(keys.sensors(W, "a1"), _frame(t), 10 + t)
+            if t < 3:
+                rec.add(keys.lockstep_timeouts(W), encode(LockstepTimeout(W, t, ("a1",))), 10 + t)
+        rec.add(keys.command(W, "a1"), _cmd(0), 20)          # ... whose answer to frame 0 came at tick 3
+        rec.add(keys.command(W, "a1"), _cmd(3), 21)
+        rec.add(keys.command(W, "a2"), _cmd(3, "a2"), 22)
+        rec.add(keys.sensors(W, "a1"), _frame(4), 23)
+        rec.add(keys.command(W, "a2"), _cmd(3, "a2"), 24)    # on time, though recorded after the next frame
+        rec.add(keys.command(W, "a1"), _cmd(4), 25)
+    script = LockstepScript.from_entries(read_recording(tmp_path / "r.mcap").entries)
+    # Stand-ins for the steps taken without a1: what the world then had (speed 0 after the
+    # attach, no turn, no action), tick 2 without anything from it.
+    stand_in = [AgentCommand("a1", t, 0.0, 0.0, "none") for t in range(3)]
+    assert script.commands[0] == [stand_in[0]] and script.commands[1] == [stand_in[1]]
+    assert script.commands[2] == [stand_in[2]]
+    assert [(c.agent_id, c.tick) for c in script.commands[3]] == [("a1", 0), ("a1", 3), ("a2", 3), ("a2", 3)]
+    assert [(c.agent_id, c.tick) for c in script.commands[4]] == [("a1", 4)]
+    assert script.agents() == ["a1"] and script.last_tick == 4
+
+
+def test_describe_prints_a_message_as_text_or_json_and_never_raises():
+    line = describe(keys.command(W, "a1"), _cmd(3, speed=1.5))
+    assert line == f"{keys.command(W, 'a1')}: AgentCommand(agent_id='a1', tick=3, speed=1.5, turn=0, action='none')"
+    assert "... 80 values" in describe("k", encode(SensorFrame("a1", 1, 0.0, 0.0, 0.0, 16, (1.0,) * 80, False)))
+    doc = json.loads(describe("k", _cmd(3), as_json=True))
+    assert doc == {"key": "k", "type": "AgentCommand",
+                   "message": {"agent_id": "a1", "tick": 3, "speed": 1.0, "turn": 0.0, "action": "none"}}
+    assert "not a ConAg message" in describe("k", b"\x00garbage")
+    assert "error" in json.loads(describe("k", b"\x00garbage", as_json=True))
+
+
+def test_rate_meter_reports_rate_and_spread_of_the_gaps():
+    meter = RateMeter(window=10)
+    assert meter.rate() is None
+    for t in (0.0, 0.1, 0.2, 0.3, 0.5):
+        meter.add(t)
+    rate = meter.rate()
+    assert rate.hz == pytest.approx(8.0) and rate.min_gap == pytest.approx(0.1)
+    assert rate.max_gap == pytest.approx(0.2) and rate.window == 4
+    assert rate.line().startswith("average rate: 8.000 Hz")
+
+
+# --- over the bus ---------------------------------------------------------------------------------
+
+def test_a_recorded_run_of_three_agents_is_reproduced_frame_for_frame_by_a_fresh_world(bus, start_world, tmp_path):
+    scenario = load_scenario(SCENARIOS / "fig6.toml")
+    # The agents compile their kernels on their first step: no lockstep timeout meanwhile, so
+    # that the test is quick (a replay waits through every timeout the recording had).
+    scenario = replace(scenario, world=replace(scenario.world, lockstep_timeout=60.0))
+    ticks = 120
+    rw = start_world(scenario, wait_agents=3, max_ticks=ticks)
+    stop_rec, report = threading.Event(), RecordReport()
+    recorder = threading.Thread(target=run_recorder, args=(bus.client_session(), W, tmp_path / "run.mcap", stop_rec),
+                                kwargs=dict(metadata={"seed": str(scenario.seed)}, report=report), daemon=True)
+    recorder.start()
+    wait_until(report.heard_world.is_set, what="the recorder to hear the world")
+    stop_agents = threading.Event()
+    agents = [threading.Thread(target=run_agent, daemon=True, kwargs=dict(
+        session=bus.client_session(), opts=AgentOptions(W, f"a{i}", AgentConfig(), seed=i), stop=stop_agents))
+        for i in (1, 2, 3)]
+    for a in agents:
+        a.start()
+    perturber = bus.client_session()
+    wait_until(lambda: rw.world.tick >= 40, 60, what="tick 40")
+    # A perturbation mid-run: the query reaches the world alone; its Perturbed publication is recorded.
+    reply = next(iter(perturber.get(keys.perturb(W), payload=encode(Perturbation("remove", 9.5, 8.5, "food")),
+                                    timeout=5)))
+    assert decode(reply.ok.payload.to_bytes(), PerturbResult).ok
+    rw.thread.join(60)
+    assert rw.world.tick == ticks
+    stop_agents.set()
+    for a in agents:
+        a.join(10)
+    wait_until(lambda: report.status is not None and report.status.tick == ticks, what="the last status recorded")
+    stop_rec.set()
+    recorder.join(10)
+
+    recording = read_recording(tmp_path / "run.mcap")
+    assert recording.complete
+    leaves = Counter(e.key.removeprefix(keys.world_root(W) + "/").split("/")[-1] for e in recording.entries)
+    assert leaves["welcome"] == 3 and leaves["perturbed"] == 1
+    assert leaves["sensors"] >= 3 * ticks and leaves["command"] >= 3 * ticks and leaves["decision"] >= 3 * ticks
+    assert leaves["status"] >= 1 and leaves["state"] >= 3
+
+    # A fresh world from the same scenario and seed, fed the recorded attaches, perturbation and commands.
+    script = LockstepScript.from_entries(recording.entries)
+    assert script.agents() == ["a1", "a2", "a3"] or sorted(script.agents()) == ["a1", "a2", "a3"]
+    assert sum(len(p) for p in script.perturbations.values()) == 1 and not script.limits
+    other = Bus(f"tcp/127.0.0.1:{free_port()}")   # a bus of its own: the recorded world still holds its endpoint
+    try:
+        replayed = RunningWorld(World(scenario, np.random.default_rng(int(recording.info["seed"]))),
+                                other.server_session(), wait_agents=3, max_ticks=ticks)
+        result = drive_world(other.client_session(), script, W, to_tick=ticks - 1)
+        replayed.close()
+    finally:
+        other.close()
+    assert result.first_difference == ""
+    assert result.identical and result.matched == sum(len(f) for f in script.frames.values())
+    assert replayed.world.tick == ticks
+    assert replayed.world.status().sites_filled == rw.world.status().sites_filled
+    assert np.array_equal(replayed.world.agent_poses(), rw.world.agent_poses())
+
+
+def test_replay_publishes_a_recording_from_a_tick_and_echo_prints_it(bus, tmp_path):
+    with McapRecorder(tmp_path / "r.mcap") as rec:
+        for t in range(10):
+            rec.add(keys.command(W, "a1"), _cmd(t), 1_000_000 * t)
+            rec.add(keys.status(W), encode(WorldStatus(W, "s", 1, "lockstep", t, 0, 1, 1, 1, 0, False)),
+                    1_000_000 * t + 1)
+    entries = read_recording(tmp_path / "r.mcap").entries
+    lines: list[str] = []
+    stop = threading.Event()
+    echo = threading.Thread(target=run_echo, args=(bus.server_session(), keys.all_agents(W, "command"), stop),
+                            kwargs=dict(out=lines.append), daemon=True)
+    echo.start()
+    sent = publish_recording(bus.client_session(), entries, threading.Event(), rate=0, from_tick=4, wait=10)
+    assert sent == 12
+    wait_until(lambda: len(lines) == 6, what="six commands echoed")
+    stop.set()
+    echo.join(5)
+    assert [line.split("tick=")[1].split(",")[0] for line in lines] == ["4", "5", "6", "7", "8", "9"]
+
+
+def test_echo_once_prints_one_message_as_json(bus):
+    lines: list[str] = []
+    echo = threading.Thread(target=run_echo, args=(bus.server_session(), keys.command(W, "a1"), threading.Event()),
+                            kwargs=dict(once=True, as_json=True, out=lines.append), daemon=True)
+    echo.start()
+    pub = bus.client_session().declare_publisher(keys.command(W, "a1"))
+    wait_until(lambda: pub.put(_cmd(5)) or not echo.is_alive(), what="echo --once to print and stop")
+    assert json.loads(lines[0])["message"]["tick"] == 5 and len(lines) == 1
+
+
+# --- the commands -----------------------------------------------------------------------------------
+
+@pytest.mark.slow
+def test_conag_run_record_then_replay_verify_reproduces_fig6(tmp_path, endpoint):
+    out = tmp_path / "fig6.mcap"
+    run = conag("run", SCENARIOS / "fig6.toml", "--headless", "--quiet", "--max-ticks", "300", "--record", out,
+                "--listen", endpoint, timeout=120)
+    assert run.returncode in (0, 3), run.stderr
+    recording = read_recording(out)
+    assert recording.complete and recording.info["scenario_name"] == "fig6" and recording.info["seed"] == "6"
+    verify = conag("replay", out, "--verify", "--quiet", timeout=120)
+    assert verify.returncode == 0, verify.stdout + verify.stderr
+    assert "identical" in verify.stdout
+
+
+@pytest.mark.slow
+def test_conag_record_finishes_its_file_on_sigterm(tmp_path, endpoint):
+    out = tmp_path / "r.mcap"
+    rec = Process("record", str(out), "--connect", endpoint, "--scenario", str(SCENARIOS / "quick_wall.toml"))
+    try:
+        rec.wait_for("recording world")
+        assert rec.stop() == 0
+        recording = read_recording(out)
+        assert recording.complete and recording.info["scenario_name"] == "quick_wall"
+        assert not out.with_name(out.name + ".part").exists()
+    finally:
+        rec.kill()
