@@ -199,7 +199,10 @@ def test_a_recorded_run_of_three_agents_is_reproduced_frame_for_frame_by_a_fresh
     assert recording.complete
     leaves = Counter(e.key.removeprefix(keys.world_root(W) + "/").split("/")[-1] for e in recording.entries)
     assert leaves["welcome"] == 3 and leaves["perturbed"] == 1
-    assert leaves["sensors"] >= 3 * ticks and leaves["command"] >= 3 * ticks and leaves["decision"] >= 3 * ticks
+    assert leaves["command"] >= 3 * ticks and leaves["decision"] >= 3 * ticks
+    # Frames are latest-wins (congestion control DROP): on a loaded machine a few never reach
+    # the recorder. Those are not compared below; nearly all must be there.
+    assert leaves["sensors"] >= 0.9 * 3 * ticks
     assert leaves["status"] >= 1 and leaves["state"] >= 3
 
     # A fresh world from the same scenario and seed, fed the recorded attaches, perturbation and commands.
