@@ -15,7 +15,9 @@ from dataclasses import dataclass, fields
 from protocol.keys import check_id
 
 # 2: the obstacle channel in sensor frames, site perturbations, Blueprint and AgentState.
-SCHEMA_VERSION = 2
+# 3: the world's constants in Welcome.
+# An incompatible change raises this and keys.ROOT together (see docs/protocol.md, Versioning).
+SCHEMA_VERSION = 3
 
 # Sensor channels, in the order of SensorFrame.ranges (channel-major).
 # Disc-like channels first (food, water, brick, obstacle: fixed `#` cells and the world's
@@ -74,13 +76,22 @@ class Hello:
         _require(self.pid >= 0, "Hello.pid must be >= 0")
 
 
+# The Welcome fields that state the world's constants: named as in the world's WorldConfig,
+# except drop_tolerance (half a cell), which the world works out.
+WELCOME_CONSTANTS = ("dt", "max_speed", "max_turn", "inertia", "agent_radius", "disc_radius", "grab_reach",
+                     "grab_cone", "drop_tolerance", "touch_margin", "sensor_noise", "odometry_noise")
+
+
 @dataclass(frozen=True)
 class Welcome:
-    """World -> agent: the body it got, its pose now, the blueprint, the world's extent and
-    the sensor layout.
+    """World -> agent: the body it got, its pose now, the blueprint, the world's extent,
+    the sensor layout and the world's constants.
 
     Site coordinates are world coordinates (x east, y north, one unit = one cell).
-    The agent seeds its configuration map from them and its pose, once, at attach.
+    The agent seeds its configuration map from them and its pose, once, at attach. The pose
+    is the body's after tick `tick`: it already includes the odometry of the frame of that
+    tick (the world publishes one right after the Welcome). `sensor_range` is measured from
+    the agent's centre to the sensed object's centre (a disc's, a body's, an obstacle cell's).
     """
 
     world_id: str
@@ -100,6 +111,21 @@ class Welcome:
     blueprint_version: int = 0   # the Blueprint version these sites are (see Blueprint)
     world_width: float = 0.0     # the world's extent (x from 0 to width, y from 0 to height),
     world_height: float = 0.0    # in world units; 0 when not told. Its edge is a wall.
+    # The world's constants (its WorldConfig). The world always sends them; the defaults (0,
+    # "not told") only spare local code that builds a Welcome by hand from spelling them out.
+    dt: float = 0.0              # simulated seconds per tick
+    max_speed: float = 0.0       # AgentCommand.speed is clipped to [0, max_speed], world units per second
+    max_turn: float = 0.0        # AgentCommand.turn is clipped to [-max_turn, max_turn], radians per tick
+    inertia: float = 0.0         # fraction of the gap to the commanded speed closed per tick
+    agent_radius: float = 0.0    # the agent body's radius
+    disc_radius: float = 0.0     # every disc's (food, water, brick) radius
+    grab_reach: float = 0.0      # grab: agent centre to brick centre at most this ...
+    grab_cone: float = 0.0       # ... and the brick's bearing within this many radians of the heading
+    drop_tolerance: float = 0.0  # a drop fills a site if the brick's centre (the agent's) is within this
+                                 # of the site cell's centre along x and along y (half a cell)
+    touch_margin: float = 0.0    # eat / drink: surfaces (body to disc) at most this far apart
+    sensor_noise: float = 0.0    # reading error: uniform, zero mean, std sensor_noise x distance
+    odometry_noise: float = 0.0  # odometry error: normal, std odometry_noise x distance moved
 
     def __post_init__(self) -> None:
         check_id(self.world_id, "world id")
@@ -112,6 +138,7 @@ class Welcome:
         _require(1 <= self.sectors <= MAX_SECTORS, "Welcome.sectors out of range")
         _require(self.sensor_range > 0 and self.cell_size > 0, "Welcome ranges must be > 0")
         _require(self.body >= 0 and self.tick >= 0 and self.restarts >= 0, "Welcome counts must be >= 0")
+        _require(min(getattr(self, name) for name in WELCOME_CONSTANTS) >= 0, "Welcome constants must be >= 0")
 
 
 @dataclass(frozen=True)

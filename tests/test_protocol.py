@@ -60,7 +60,10 @@ EXAMPLES: dict[type, object] = {
     Welcome: Welcome(
         world_id="w", agent_id="a1", body=3, tick=120, x=4.5, y=-2.25, heading=1.5707963,
         holding=True, restarts=1, sectors=8, sensor_range=6.0, cell_size=1.0,
-        site_xs=(0.0, 1.0, 2.0), site_ys=(5.0, 5.0, 5.0),
+        site_xs=(0.0, 1.0, 2.0), site_ys=(5.0, 5.0, 5.0), blueprint_version=2, world_width=12.0,
+        world_height=8.0, dt=0.1, max_speed=3.0, max_turn=1.5707963, inertia=0.5, agent_radius=0.3,
+        disc_radius=0.5, grab_reach=1.2, grab_cone=1.0471976, drop_tolerance=0.5, touch_margin=0.25,
+        sensor_noise=0.02, odometry_noise=0.01,
     ),
     SensorFrame: SensorFrame(
         agent_id="a1", tick=121, heading=3.14, odom_dx=0.1, odom_dy=-0.05, sectors=8,
@@ -287,7 +290,7 @@ def test_protocol_error_is_a_value_error():
     assert issubclass(ProtocolError, ValueError)
 
 
-@pytest.mark.parametrize("version", [0, 1, 3, -1, 2**40, "2", b"\x02", None, True, [2], {"v": 2}])
+@pytest.mark.parametrize("version", [0, 1, 2, 4, -1, 2**40, "3", b"\x03", None, True, [3], {"v": 3}])
 def test_wrong_schema_version(version):
     _bad(_pack("Hello", ["a1", 1], version=version))
 

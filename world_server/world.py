@@ -18,6 +18,7 @@ from protocol.messages import (
     CHANNELS,
     DISC_KINDS,
     SITE_OPS,
+    WELCOME_CONSTANTS,
     Blueprint,
     Perturbation,
     PerturbResult,
@@ -135,7 +136,8 @@ class World:
             sensor_range=self.cfg.sensor_range, cell_size=self.cfg.cell_size,
             site_xs=tuple(self.sites_xy[:, 0].tolist()), site_ys=tuple(self.sites_xy[:, 1].tolist()),
             world_width=float(self.size[0]), world_height=float(self.size[1]),
-            blueprint_version=self.blueprint_version)
+            blueprint_version=self.blueprint_version,
+            **{name: float(getattr(self.cfg, name)) for name in WELCOME_CONSTANTS})
 
     def detach(self, agent_id: str) -> None:
         """The agent's process is gone: its body stops and drops what it held, where it stands."""
