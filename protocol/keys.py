@@ -70,6 +70,11 @@ def command(world: str, agent: str) -> str:
     return f"{world_root(world)}/agent/{check_id(agent, 'agent id')}/command"
 
 
+def command_error(world: str, agent: str) -> str:
+    """CommandRejected publications: why the world did not take a command on `command`."""
+    return f"{world_root(world)}/agent/{check_id(agent, 'agent id')}/error"
+
+
 def decision(world: str, agent: str) -> str:
     """Decision publications (state nodes and chosen outputs) for the teacher."""
     return f"{world_root(world)}/agent/{check_id(agent, 'agent id')}/decision"

@@ -15,7 +15,7 @@ from dataclasses import dataclass, fields
 from protocol.keys import check_id
 
 # 2: the obstacle channel in sensor frames, site perturbations, Blueprint and AgentState.
-# 3: the world's constants in Welcome.
+# 3: the world's constants in Welcome; CommandRejected; WorldStatus.seq; Perturbation.force.
 # An incompatible change raises this and keys.ROOT together (see docs/protocol.md, Versioning).
 SCHEMA_VERSION = 3
 
@@ -197,6 +197,26 @@ class AgentCommand:
 
 
 @dataclass(frozen=True)
+class CommandRejected:
+    """World -> agent: the world did not take a command on this agent's command key, and why.
+
+    Sent for every command it rejects (undecodable, wrong types, unknown action, another
+    agent's id, an agent not attached, or in lockstep a tick other than `tick`), each also
+    counted in WorldStatus.bad_messages. `tick` is the world's tick when it rejected the
+    command: in lockstep, the tick it is waiting for a command for.
+    """
+
+    agent_id: str
+    tick: int
+    reason: str
+
+    def __post_init__(self) -> None:
+        check_id(self.agent_id, "agent id")
+        _require(self.tick >= 0, "CommandRejected.tick must be >= 0")
+        _require(len(self.reason) <= MAX_STRING, "CommandRejected.reason too long")
+
+
+@dataclass(frozen=True)
 class WorldStatus:
     """World -> anyone, periodically: progress of the build and per-agent counters."""
 
@@ -219,13 +239,15 @@ class WorldStatus:
     agent_restarts: tuple[int, ...] = ()
     agent_x: tuple[float, ...] = ()   # where each body is now (world coordinates)
     agent_y: tuple[float, ...] = ()
+    seq: int = 0  # +1 per status the world publishes: of two readings the higher seq is the newer
+
 
     def __post_init__(self) -> None:
         check_id(self.world_id, "world id")
         _finite(self)
         _require(self.mode in TICK_MODES, f"WorldStatus.mode must be one of {TICK_MODES}")
         _require(0 <= self.sites_filled <= self.sites_total, "WorldStatus sites out of range")
-        _require(min(self.tick, self.bricks_total, self.agents_alive, self.bad_messages) >= 0,
+        _require(min(self.tick, self.bricks_total, self.agents_alive, self.bad_messages, self.seq) >= 0,
                  "WorldStatus counts must be >= 0")
         n = len(self.agent_ids)
         _require(n <= MAX_AGENTS_IN_STATUS, "WorldStatus lists too many agents")
@@ -242,10 +264,11 @@ class Perturbation:
     """Anyone -> world (as a query): change a disc or the blueprint while the world runs.
 
     `remove` and `move` act on the disc nearest (x, y) within 0.75 cell; `add` puts a
-    disc of `kind` at (x, y); `move` puts the removed disc at (to_x, to_y). `add_site`
-    makes the cell holding (x, y) a drop site; `remove_site` takes the drop site of that
-    cell out of the blueprint (a brick on it becomes a free brick). `kind` is ignored by
-    the site operations.
+    disc of `kind` at (x, y), refused in a drop site's cell (a brick there would fill it)
+    or where the disc would overlap an agent's body, unless `force`; `move` puts the
+    removed disc at (to_x, to_y). `add_site` makes the cell holding (x, y) a drop site;
+    `remove_site` takes the drop site of that cell out of the blueprint (a brick on it
+    becomes a free brick). `kind` and `force` are ignored by the site operations.
     """
 
     op: str
@@ -254,6 +277,7 @@ class Perturbation:
     kind: str = "brick"
     to_x: float = 0.0
     to_y: float = 0.0
+    force: bool = False
 
     def __post_init__(self) -> None:
         _finite(self)
@@ -399,7 +423,7 @@ class RunControlResult:
 
 
 MESSAGE_TYPES: tuple[type, ...] = (
-    Hello, Welcome, SensorFrame, AgentCommand, WorldStatus,
+    Hello, Welcome, SensorFrame, AgentCommand, CommandRejected, WorldStatus,
     Perturbation, PerturbResult, Decision, Reinforcement, RunControl, RunControlResult,
     Blueprint, AgentState,
 )

@@ -26,6 +26,7 @@ from protocol import (
     AgentCommand,
     AgentState,
     Blueprint,
+    CommandRejected,
     Decision,
     Hello,
     Perturbation,
@@ -70,14 +71,15 @@ EXAMPLES: dict[type, object] = {
         ranges=_ranges(8), holding=False, grabbed=True, dropped=False, ate=True, drank=False,
     ),
     AgentCommand: AgentCommand(agent_id="a1", tick=121, speed=0.5, turn=-0.2, action="grab"),
+    CommandRejected: CommandRejected(agent_id="a1", tick=122, reason="command for tick 121, the world is at 122"),
     WorldStatus: WorldStatus(
         world_id="w", scenario="wall-5", seed=7, mode="lockstep", tick=500, sites_filled=2,
         sites_total=5, bricks_total=9, agents_alive=2, bad_messages=1, completed=False,
         agent_ids=("a1", "a2"), agent_alive=(True, False), agent_distance=(12.5, 3.0),
         agent_grabs=(2, 0), agent_drops=(1, 0), agent_restarts=(0, 3),
-        agent_x=(2.5, 7.25), agent_y=(1.5, 0.5),
+        agent_x=(2.5, 7.25), agent_y=(1.5, 0.5), seq=41,
     ),
-    Perturbation: Perturbation(op="move", x=1.0, y=2.0, kind="brick", to_x=3.5, to_y=-1.0),
+    Perturbation: Perturbation(op="move", x=1.0, y=2.0, kind="brick", to_x=3.5, to_y=-1.0, force=True),
     PerturbResult: PerturbResult(ok=True, message="moved brick", tick=501),
     Decision: Decision(
         agent_id="a1", tick=121, state=(1.0, 0.0, 0.0, 0.5, 0.25, 0.0),
@@ -619,7 +621,7 @@ def test_constructible_string_fields_decode(cls):
 
 W, A = "w1", "a1"
 
-PER_AGENT = [keys.attach, keys.sensors, keys.command, keys.decision, keys.reinforcement]
+PER_AGENT = [keys.attach, keys.sensors, keys.command, keys.command_error, keys.decision, keys.reinforcement]
 PER_WORLD = [keys.status, keys.perturb, keys.world_token, keys.all_agent_tokens,
              keys.all_teacher_tokens, keys.world_root]
 

@@ -730,13 +730,27 @@ def test_removing_a_brick_from_a_site_unfills_it_and_adding_one_fills_it():
     assert (s.sites_total, s.sites_filled, s.completed) == (3, 2, False)
     assert w.perturb(Perturbation("remove", 0.5, 1.5)).ok
     assert w.status().sites_filled == 1 and w.status().bricks_total == 1
-    assert w.perturb(Perturbation("add", 0.4, 1.6)).ok
-    assert w.perturb(Perturbation("add", 2.5, 1.5)).ok
+    refused = w.perturb(Perturbation("add", 0.4, 1.6))  # a brick here would fill the site: only when forced
+    assert not refused.ok and "drop site" in refused.message and "force" in refused.message
+    assert w.status().sites_filled == 1 and w.status().bricks_total == 1
+    assert w.perturb(Perturbation("add", 0.4, 1.6, force=True)).ok
+    assert w.perturb(Perturbation("add", 2.5, 1.5, force=True)).ok
     s = w.status()
     assert (s.sites_filled, s.completed, s.bricks_total) == (3, True, 3)
     assert w.perturb(Perturbation("move", 1.5, 1.5, to_x=1.5, to_y=0.5)).ok
     s = w.status()
     assert (s.sites_filled, s.completed) == (2, False)
+
+
+def test_add_refuses_a_disc_on_an_agent_body_unless_forced():
+    w = make("......\n.A....\n......", sensor_noise=0.0)
+    w.attach("a")
+    x, y, _ = pose(w, "a")
+    near = x + w.cfg.disc_radius + w.cfg.agent_radius - 0.05  # would overlap the body
+    refused = w.perturb(Perturbation("add", near, y, kind="food"))
+    assert not refused.ok and "agent a" in refused.message and w.discs.present().size == 0
+    assert w.perturb(Perturbation("add", x + 1.0, y, kind="food")).ok  # next cell: clear of the body
+    assert w.perturb(Perturbation("add", near, y, kind="food", force=True)).ok
 
 
 # ---------------------------------------------------------------- status
