@@ -287,9 +287,12 @@ def test_a_command_from_an_agent_that_has_not_attached_is_answered(bus, start_wo
     start_world(SCRIPT_WORLD)
     session = bus.client_session()
     got, _sub = _rejections(session, "ghost")
-    session.put(keys.command("w0", "ghost"), encode(AgentCommand("ghost", 0, 1.0, 0.0)),
-                congestion_control=zenoh.CongestionControl.BLOCK)
-    answer = wait_until(lambda: got and got[0], timeout=5.0, what="the world's answer")
+    def answered():
+        # Put again each time: the first puts may go out before this session has met the world.
+        session.put(keys.command("w0", "ghost"), encode(AgentCommand("ghost", 0, 1.0, 0.0)))
+        return got and got[0]
+
+    answer = wait_until(answered, timeout=10.0, interval=0.05, what="the world's answer")
     assert "not attached" in answer.reason and "attach" in answer.reason
 
 
@@ -301,7 +304,8 @@ def test_status_carries_a_sequence_number_newest_highest_even_at_the_same_tick(b
     seqs = [s.seq for s in statuses[:4]]
     assert rw.world.tick == 0 and all(s.tick == 0 for s in statuses[:4])  # no agent: the tick stands still
     assert seqs == list(range(seqs[0], seqs[0] + 4))  # yet each reading is numbered, one up each time
-    replies = list(bus.client_session().get(keys.status("w0"), timeout=10.0))
+    asker = bus.client_session()
+    replies = wait_until(lambda: list(asker.get(keys.status("w0"), timeout=2.0)), what="the status query's answer")
     answered = decode(replies[0].ok.payload.to_bytes(), WorldStatus)
     assert answered.seq >= seqs[-1]  # the query answers the latest
     older, newer = statuses[1], statuses[2]
