@@ -68,7 +68,7 @@ class WorldServer:
     def __init__(self, world: World, session: zenoh.Session, *, mode: str | None = None,
                  max_ticks: int | None = None, stop_when_complete: bool = False, wait_agents: int = 1,
                  clock: Callable[[], float] = time.monotonic,
-                 on_status: Callable[[WorldStatus], None] | None = None):
+                 on_status: Callable[[WorldStatus], None] | None = None, block_frames: bool = False):
         self.world = world
         self.session = session
         self.mode = mode or world.scenario.tick_mode
@@ -77,6 +77,8 @@ class WorldServer:
         self.wait_agents = wait_agents
         self.clock = clock
         self.on_status = on_status
+        # Frames are "latest wins" (DROP); a driver that must see every frame (conag.env) asks for BLOCK.
+        self._frame_congestion = zenoh.CongestionControl.BLOCK if block_frames else zenoh.CongestionControl.DROP
         self.cfg = world.cfg
         self._events: queue.SimpleQueue = queue.SimpleQueue()
         self._tokens: set[str] = set()
@@ -281,7 +283,7 @@ class WorldServer:
         if pub is None:
             # Sensor frames are "latest wins": drop rather than queue behind a slow agent.
             pub = self._declared.add(self.session.declare_publisher(
-                keys.sensors(self.world.world_id, frame.agent_id), congestion_control=zenoh.CongestionControl.DROP,
+                keys.sensors(self.world.world_id, frame.agent_id), congestion_control=self._frame_congestion,
                 express=True))
             self._publishers[frame.agent_id] = pub
         pub.put(encode(frame))
