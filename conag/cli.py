@@ -47,7 +47,7 @@ AGENT_MAP_SIZE = 41  # AgentConfig's default, without importing the agent for --
 
 def _status_line(st) -> str:
     return (f"tick {st.tick:>7}  sites {st.sites_filled}/{st.sites_total}  bricks {st.bricks_total}  "
-            f"agents alive {st.agents_alive}/{len(st.agent_ids)}  bad {st.bad_messages}"
+            f"agents alive {st.agents_alive}/{len(st.agent_ids)}  bad {st.bad_messages}  seq {st.seq}"
             + ("  COMPLETE" if st.completed else ""))
 
 
@@ -96,8 +96,17 @@ def cmd_status(args) -> int:
     from protocol.codec import ProtocolError, decode
     from protocol.messages import WorldStatus
 
+    shown = [None]  # the last status printed
+    lock = threading.Lock()
+
     def show(st):
-        print(json.dumps(asdict(st)) if args.json else _status_line(st), flush=True)
+        # The query's answer and the subscription's samples can arrive in either order:
+        # print a status only if it is newer than the last one printed (WorldStatus.seq).
+        with lock:
+            if not is_newer_status(st, shown[0]):
+                return
+            shown[0] = st
+            print(json.dumps(asdict(st)) if args.json else _status_line(st), flush=True)
 
     session = open_session(_bus(args))
     try:
@@ -129,6 +138,13 @@ def cmd_status(args) -> int:
         session.close()
 
 
+def is_newer_status(st, last) -> bool:
+    """Whether status `st` is newer than `last` (None: nothing seen yet). Within one world's
+    run `seq` grows by one per publication; a lower tick as well means the world was started
+    again, whose statuses count from 1 anew."""
+    return last is None or st.seq > last.seq or st.tick < last.tick
+
+
 def _non_negative(text: str) -> int:
     try:
         value = int(text)
@@ -156,7 +172,7 @@ def cmd_perturb(args) -> int:
         print("error: move needs --to X,Y", file=sys.stderr)
         return EXIT_USAGE
     to = args.to or (0.0, 0.0)
-    msg = Perturbation(args.op.replace("-", "_"), args.at[0], args.at[1], args.kind, to[0], to[1])
+    msg = Perturbation(args.op.replace("-", "_"), args.at[0], args.at[1], args.kind, to[0], to[1], args.force)
     session = open_session(_bus(args))
     try:
         deadline = time.monotonic() + args.timeout
@@ -348,6 +364,9 @@ def build_parser() -> argparse.ArgumentParser:
     for add in (_add_world, _add_status, _add_perturb, _add_agent, _add_teacher, _add_run, _add_control,
                 _add_render, add_layout_commands, add_recording_commands, _add_router):
         add(sub)  # add_layout_commands: generate, check; add_recording_commands: record, replay, echo
+    for command in sub.choices.values():  # -v also after the subcommand: `conag world X -v`
+        command.add_argument("-v", "--verbose", dest="verbose_after", action="count", default=0,
+                             help="more log output (-vv for debug); also accepted before the subcommand")
     return p
 
 
@@ -384,6 +403,8 @@ def _add_perturb(sub) -> None:
     q.add_argument("--at", type=_point, required=True, metavar="X,Y", help="world position (cell centres are at .5)")
     q.add_argument("--to", type=_point, metavar="X,Y", help="target position for move")
     q.add_argument("--kind", choices=("food", "water", "brick"), default="brick", help="kind for add")
+    q.add_argument("--force", action="store_true",
+                   help="add even in a drop site's cell (a brick there fills the site) or onto an agent's body")
     q.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the world")
     _bus_args(q)
     q.set_defaults(func=cmd_perturb)
@@ -476,9 +497,15 @@ def _add_router(sub) -> None:
     z.set_defaults(func=cmd_router)
 
 
+def log_level(args) -> int:
+    """WARNING; INFO with one -v (rejected input, lockstep waits); DEBUG with two. The -v's
+    before and after the subcommand add up."""
+    return [logging.WARNING, logging.INFO, logging.DEBUG][min(args.verbose + args.verbose_after, 2)]
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    level = [logging.WARNING, logging.INFO, logging.DEBUG][min(args.verbose, 2)]
+    level = log_level(args)
     logging.basicConfig(level=level, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     from world_server.scenario import ScenarioError
 

@@ -32,14 +32,19 @@ class WorldLink:
     A context manager; see the module for the frame channel ("latest wins").
     """
 
-    def __init__(self, session: zenoh.Session, world_id: str, agent_id: str):
+    def __init__(self, session: zenoh.Session, world_id: str, agent_id: str, *, block: bool = False):
+        """`block`: commands are published with congestion control BLOCK instead of DROP, so a
+        busy machine delays them rather than losing one (which costs a lockstep timeout)."""
         self.session, self.world_id, self.agent_id = session, world_id, agent_id
         self.bad_frames = 0
         self._declared = Declarations()  # undeclared in reverse: the token goes last
         self._declared.add(session.liveliness().declare_token(keys.agent_token(world_id, agent_id)))
         self._sub = self._declared.add(session.declare_subscriber(keys.sensors(world_id, agent_id),
                                                                   zenoh.handlers.RingChannel(1)))
-        self._pub = self._declared.add(session.declare_publisher(keys.command(world_id, agent_id), express=True))
+        qos = dict(congestion_control=zenoh.CongestionControl.BLOCK, reliability=zenoh.Reliability.RELIABLE) \
+            if block else {}
+        self._pub = self._declared.add(session.declare_publisher(keys.command(world_id, agent_id), express=True,
+                                                                 **qos))
 
     def _decode(self, sample: zenoh.Sample | None) -> SensorFrame | None:
         if sample is None:

@@ -13,7 +13,10 @@ world itself is never touched concurrently. The loop:
 Agents come and go: an agent is waited for only while its liveliness token exists.
 When the token disappears (process killed), its body stops and drops any brick where it
 stands; when a process with the same id attaches again, it gets the same body back.
-Bad input of any kind is counted in `WorldStatus.bad_messages` and otherwise ignored.
+Bad input of any kind is counted in `WorldStatus.bad_messages`, logged at INFO (`-v`) and
+otherwise ignored; a rejected command (undecodable, another agent's id, an agent not
+attached, in lockstep a tick other than the world's) is also answered with a
+CommandRejected on the agent's `command_error` key, saying why.
 
 For whoever listens besides the asker (a recorder, `conag echo`), every Welcome is also
 published on the agent's `welcome` key and every perturbation, with its tick and outcome,
@@ -41,9 +44,11 @@ from bus import Declarations, watch_tokens
 from protocol import keys
 from protocol.codec import ProtocolError, decode, encode
 from protocol.messages import (
+    MAX_STRING,
     SITE_OPS,
     AgentCommand,
     AgentState,
+    CommandRejected,
     Hello,
     LockstepTimeout,
     Perturbation,
@@ -71,7 +76,7 @@ class WorldServer:
     def __init__(self, world: World, session: zenoh.Session, *, mode: str | None = None,
                  max_ticks: int | None = None, stop_when_complete: bool = False, wait_agents: int = 1,
                  clock: Callable[[], float] = time.monotonic,
-                 on_status: Callable[[WorldStatus], None] | None = None):
+                 on_status: Callable[[WorldStatus], None] | None = None, block_frames: bool = False):
         self.world = world
         self.session = session
         self.mode = mode or world.scenario.tick_mode
@@ -80,6 +85,8 @@ class WorldServer:
         self.wait_agents = wait_agents
         self.clock = clock
         self.on_status = on_status
+        # Frames are "latest wins" (DROP); a driver that must see every frame (conag.env) asks for BLOCK.
+        self._frame_congestion = zenoh.CongestionControl.BLOCK if block_frames else zenoh.CongestionControl.DROP
         self.cfg = world.cfg
         self._events: queue.SimpleQueue = queue.SimpleQueue()
         self._tokens: set[str] = set()
@@ -90,16 +97,18 @@ class WorldServer:
         self.agent_states: dict[str, AgentState] = {}  # the last report of each agent (for summaries)
         self._declared = Declarations()
         self._last_status = float("-inf")
+        self._status_seq = 0  # WorldStatus.seq of the last status published
 
     # zenoh callbacks: decode if cheap, then hand over to the loop thread ------------------
     def _on_command(self, sample: zenoh.Sample) -> None:
+        key = str(sample.key_expr)
         try:
             cmd = decode(sample.payload.to_bytes(), AgentCommand)
-            if cmd.agent_id != keys.agent_of(str(sample.key_expr)):
-                raise ProtocolError("command agent_id does not match its key")
+            if cmd.agent_id != keys.agent_of(key):
+                raise ProtocolError(f"command agent_id {cmd.agent_id!r} does not match its key")
             self._events.put(("cmd", cmd))
         except ProtocolError as exc:
-            self._events.put(("bad", f"command on {sample.key_expr}: {exc}"))
+            self._events.put(("bad", f"command on {key}: {exc}", keys.agent_of(key)))
 
     def _on_token(self, agent: str, alive: bool) -> None:
         self._events.put(("live", agent, alive))
@@ -176,7 +185,7 @@ class WorldServer:
                 if now >= last_tick + period:
                     if self.mode == "lockstep":
                         late = sorted(set(live) - self._answered)
-                        log.debug("tick %d: no command from %s in time", self.world.tick, ", ".join(late))
+                        log.info("tick %d: no command from %s in time", self.world.tick, ", ".join(late))
                         self._timeout_pub.put(encode(LockstepTimeout(self.world.world_id, self.world.tick,
                                                                      tuple(late))))
                     return True
@@ -192,11 +201,18 @@ class WorldServer:
         kind = event[0]
         if kind == "cmd":
             cmd: AgentCommand = event[1]
-            if cmd.agent_id not in self._tokens or not self.world.set_command(
-                    cmd.agent_id, cmd.speed, cmd.turn, cmd.action):
-                self._bad(f"command from unattached agent {cmd.agent_id!r}")
-            elif cmd.tick == self.world.tick:
-                self._answered.add(cmd.agent_id)
+            rec = self.world.agents.get(cmd.agent_id)
+            if cmd.agent_id not in self._tokens or rec is None or not rec.alive:
+                self._bad(f"command from agent {cmd.agent_id!r}, which is not attached (declare its liveliness "
+                          "token, then attach)", cmd.agent_id)
+            elif self.mode == "lockstep" and cmd.tick != self.world.tick:
+                # Not taken: lockstep applies a command to the tick it answers, and only to that one.
+                self._bad(f"command from {cmd.agent_id!r} for tick {cmd.tick}, but the world is at tick "
+                          f"{self.world.tick} (answer the newest frame's tick)", cmd.agent_id)
+            else:
+                self.world.set_command(cmd.agent_id, cmd.speed, cmd.turn, cmd.action)
+                if cmd.tick == self.world.tick:
+                    self._answered.add(cmd.agent_id)
         elif kind == "live":
             _, agent, alive = event
             if alive:
@@ -211,7 +227,7 @@ class WorldServer:
         elif kind == "perturb":
             self._perturb(event[1])
         elif kind == "bad":
-            self._bad(event[1])
+            self._bad(*event[1:])
 
     def _token_exists(self, agent: str) -> bool:
         """Whether some process still holds `agent`'s liveliness token.
@@ -223,9 +239,15 @@ class WorldServer:
         key = keys.agent_token(self.world.world_id, agent)
         return any(r.ok is not None for r in self.session.liveliness().get(key, timeout=0.5))
 
-    def _bad(self, detail: str) -> None:
+    def _bad(self, detail: str, agent: str | None = None) -> None:
+        """Count and log bad input; a command for `agent` is also answered on its error key."""
         self.world.bad_messages += 1
-        log.debug("ignored bad message: %s", detail)
+        log.info("tick %d: ignored bad message: %s", self.world.tick, detail)
+        if agent is not None:
+            reply = CommandRejected(agent, self.world.tick, detail[:MAX_STRING])
+            # DROP: a flood of bad commands must not hold the world's loop back.
+            self.session.put(keys.command_error(self.world.world_id, agent), encode(reply),
+                             congestion_control=zenoh.CongestionControl.DROP)
 
     def _attach(self, query: zenoh.Query) -> None:
         try:
@@ -277,7 +299,7 @@ class WorldServer:
         if pub is None:
             # Sensor frames are "latest wins": drop rather than queue behind a slow agent.
             pub = self._declared.add(self.session.declare_publisher(
-                keys.sensors(self.world.world_id, frame.agent_id), congestion_control=zenoh.CongestionControl.DROP,
+                keys.sensors(self.world.world_id, frame.agent_id), congestion_control=self._frame_congestion,
                 express=True))
             self._publishers[frame.agent_id] = pub
         pub.put(encode(frame))
@@ -292,7 +314,8 @@ class WorldServer:
             self._publish_status()
 
     def _publish_status(self) -> WorldStatus:
-        status = self.world.status()
+        self._status_seq += 1
+        status = self.world.status(seq=self._status_seq)
         self._last_status = self.clock()
         self._status_bytes = encode(status)
         self._status_pub.put(self._status_bytes)

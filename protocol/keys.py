@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import re
 
-ROOT = "conag/v2"
+ROOT = "conag/v3"  # v + messages.SCHEMA_VERSION: incompatible versions never meet
 
 # \Z, not $: `$` also matches before a trailing newline, which would let "a1\n" through.
 _ID = re.compile(r"^[A-Za-z0-9_.\-]{1,64}\Z")
@@ -86,6 +86,11 @@ def sensors(world: str, agent: str) -> str:
 def command(world: str, agent: str) -> str:
     """AgentCommand publications from one agent."""
     return f"{world_root(world)}/agent/{check_id(agent, 'agent id')}/command"
+
+
+def command_error(world: str, agent: str) -> str:
+    """CommandRejected publications: why the world did not take a command on `command`."""
+    return f"{world_root(world)}/agent/{check_id(agent, 'agent id')}/error"
 
 
 def decision(world: str, agent: str) -> str:

@@ -15,7 +15,9 @@ from dataclasses import dataclass, fields
 from protocol.keys import check_id
 
 # 2: the obstacle channel in sensor frames, site perturbations, Blueprint and AgentState.
-SCHEMA_VERSION = 2
+# 3: the world's constants in Welcome; CommandRejected; WorldStatus.seq; Perturbation.force.
+# An incompatible change raises this and keys.ROOT together (see docs/protocol.md, Versioning).
+SCHEMA_VERSION = 3
 
 # Sensor channels, in the order of SensorFrame.ranges (channel-major).
 # Disc-like channels first (food, water, brick, obstacle: fixed `#` cells and the world's
@@ -74,13 +76,22 @@ class Hello:
         _require(self.pid >= 0, "Hello.pid must be >= 0")
 
 
+# The Welcome fields that state the world's constants: named as in the world's WorldConfig,
+# except drop_tolerance (half a cell), which the world works out.
+WELCOME_CONSTANTS = ("dt", "max_speed", "max_turn", "inertia", "agent_radius", "disc_radius", "grab_reach",
+                     "grab_cone", "drop_tolerance", "touch_margin", "sensor_noise", "odometry_noise")
+
+
 @dataclass(frozen=True)
 class Welcome:
-    """World -> agent: the body it got, its pose now, the blueprint, the world's extent and
-    the sensor layout.
+    """World -> agent: the body it got, its pose now, the blueprint, the world's extent,
+    the sensor layout and the world's constants.
 
     Site coordinates are world coordinates (x east, y north, one unit = one cell).
-    The agent seeds its configuration map from them and its pose, once, at attach.
+    The agent seeds its configuration map from them and its pose, once, at attach. The pose
+    is the body's after tick `tick`: it already includes the odometry of the frame of that
+    tick (the world publishes one right after the Welcome). `sensor_range` is measured from
+    the agent's centre to the sensed object's centre (a disc's, a body's, an obstacle cell's).
     """
 
     world_id: str
@@ -100,6 +111,21 @@ class Welcome:
     blueprint_version: int = 0   # the Blueprint version these sites are (see Blueprint)
     world_width: float = 0.0     # the world's extent (x from 0 to width, y from 0 to height),
     world_height: float = 0.0    # in world units; 0 when not told. Its edge is a wall.
+    # The world's constants (its WorldConfig). The world always sends them; the defaults (0,
+    # "not told") only spare local code that builds a Welcome by hand from spelling them out.
+    dt: float = 0.0              # simulated seconds per tick
+    max_speed: float = 0.0       # AgentCommand.speed is clipped to [0, max_speed], world units per second
+    max_turn: float = 0.0        # AgentCommand.turn is clipped to [-max_turn, max_turn], radians per tick
+    inertia: float = 0.0         # fraction of the gap to the commanded speed closed per tick
+    agent_radius: float = 0.0    # the agent body's radius
+    disc_radius: float = 0.0     # every disc's (food, water, brick) radius
+    grab_reach: float = 0.0      # grab: agent centre to brick centre at most this ...
+    grab_cone: float = 0.0       # ... and the brick's bearing within this many radians of the heading
+    drop_tolerance: float = 0.0  # a drop fills a site if the brick's centre (the agent's) is within this
+                                 # of the site cell's centre along x and along y (half a cell)
+    touch_margin: float = 0.0    # eat / drink: surfaces (body to disc) at most this far apart
+    sensor_noise: float = 0.0    # reading error: uniform, zero mean, std sensor_noise x distance
+    odometry_noise: float = 0.0  # odometry error: normal, std odometry_noise x distance moved
 
     def __post_init__(self) -> None:
         check_id(self.world_id, "world id")
@@ -112,6 +138,7 @@ class Welcome:
         _require(1 <= self.sectors <= MAX_SECTORS, "Welcome.sectors out of range")
         _require(self.sensor_range > 0 and self.cell_size > 0, "Welcome ranges must be > 0")
         _require(self.body >= 0 and self.tick >= 0 and self.restarts >= 0, "Welcome counts must be >= 0")
+        _require(min(getattr(self, name) for name in WELCOME_CONSTANTS) >= 0, "Welcome constants must be >= 0")
 
 
 @dataclass(frozen=True)
@@ -170,6 +197,26 @@ class AgentCommand:
 
 
 @dataclass(frozen=True)
+class CommandRejected:
+    """World -> agent: the world did not take a command on this agent's command key, and why.
+
+    Sent for every command it rejects (undecodable, wrong types, unknown action, another
+    agent's id, an agent not attached, or in lockstep a tick other than `tick`), each also
+    counted in WorldStatus.bad_messages. `tick` is the world's tick when it rejected the
+    command: in lockstep, the tick it is waiting for a command for.
+    """
+
+    agent_id: str
+    tick: int
+    reason: str
+
+    def __post_init__(self) -> None:
+        check_id(self.agent_id, "agent id")
+        _require(self.tick >= 0, "CommandRejected.tick must be >= 0")
+        _require(len(self.reason) <= MAX_STRING, "CommandRejected.reason too long")
+
+
+@dataclass(frozen=True)
 class WorldStatus:
     """World -> anyone, periodically: progress of the build and per-agent counters."""
 
@@ -192,13 +239,15 @@ class WorldStatus:
     agent_restarts: tuple[int, ...] = ()
     agent_x: tuple[float, ...] = ()   # where each body is now (world coordinates)
     agent_y: tuple[float, ...] = ()
+    seq: int = 0  # +1 per status the world publishes: of two readings the higher seq is the newer
+
 
     def __post_init__(self) -> None:
         check_id(self.world_id, "world id")
         _finite(self)
         _require(self.mode in TICK_MODES, f"WorldStatus.mode must be one of {TICK_MODES}")
         _require(0 <= self.sites_filled <= self.sites_total, "WorldStatus sites out of range")
-        _require(min(self.tick, self.bricks_total, self.agents_alive, self.bad_messages) >= 0,
+        _require(min(self.tick, self.bricks_total, self.agents_alive, self.bad_messages, self.seq) >= 0,
                  "WorldStatus counts must be >= 0")
         n = len(self.agent_ids)
         _require(n <= MAX_AGENTS_IN_STATUS, "WorldStatus lists too many agents")
@@ -215,10 +264,11 @@ class Perturbation:
     """Anyone -> world (as a query): change a disc or the blueprint while the world runs.
 
     `remove` and `move` act on the disc nearest (x, y) within 0.75 cell; `add` puts a
-    disc of `kind` at (x, y); `move` puts the removed disc at (to_x, to_y). `add_site`
-    makes the cell holding (x, y) a drop site; `remove_site` takes the drop site of that
-    cell out of the blueprint (a brick on it becomes a free brick). `kind` is ignored by
-    the site operations.
+    disc of `kind` at (x, y), refused in a drop site's cell (a brick there would fill it)
+    or where the disc would overlap an agent's body, unless `force`; `move` puts the
+    removed disc at (to_x, to_y). `add_site` makes the cell holding (x, y) a drop site;
+    `remove_site` takes the drop site of that cell out of the blueprint (a brick on it
+    becomes a free brick). `kind` and `force` are ignored by the site operations.
     """
 
     op: str
@@ -227,6 +277,7 @@ class Perturbation:
     kind: str = "brick"
     to_x: float = 0.0
     to_y: float = 0.0
+    force: bool = False
 
     def __post_init__(self) -> None:
         _finite(self)
@@ -280,8 +331,9 @@ class Perturbed:
         return cls(result.tick, p.op, p.x, p.y, p.kind, p.to_x, p.to_y, result.ok, result.message)
 
     def perturbation(self) -> Perturbation:
-        """The Perturbation that was asked for."""
-        return Perturbation(self.op, self.x, self.y, self.kind, self.to_x, self.to_y)
+        """The Perturbation that was asked for, forced: it was applied (a replay must apply it
+        too, even where the world would refuse it unforced)."""
+        return Perturbation(self.op, self.x, self.y, self.kind, self.to_x, self.to_y, force=True)
 
 
 @dataclass(frozen=True)
@@ -430,7 +482,7 @@ class RunControlResult:
 
 
 MESSAGE_TYPES: tuple[type, ...] = (
-    Hello, Welcome, SensorFrame, AgentCommand, WorldStatus,
+    Hello, Welcome, SensorFrame, AgentCommand, CommandRejected, WorldStatus,
     Perturbation, PerturbResult, Decision, Reinforcement, RunControl, RunControlResult,
     Blueprint, AgentState, Perturbed, LockstepTimeout,
 )

@@ -128,3 +128,33 @@ def test_render_writes_a_png(tmp_path):
     assert r.returncode == 0, r.stderr
     assert out.read_bytes()[:8] == PNG_SIGNATURE
     assert str(out) in r.stdout
+
+
+def test_world_logs_rejections_at_v_after_the_subcommand_and_perturb_add_needs_force_on_a_site():
+    from bus import BusOptions, open_session
+    from protocol import keys
+
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    world = Process("world", str(QUICK_WALL), "--ticks", "100000000", "--listen", ep, "-v")
+    try:
+        world.wait_for("world w0: quick_wall")
+        session = open_session(BusOptions(connect=(ep,)))
+        try:
+            def rejected() -> bool:
+                # Put again each time: the first puts may go out before the session has met the world.
+                session.put(keys.command("w0", "a9"), b"not a command")
+                return "ignored bad message" in world.err and "a9" in world.err
+
+            wait_until(rejected, interval=0.2, what="the rejection logged")
+        finally:
+            session.close()
+        s = load_scenario(QUICK_WALL)
+        x, y = s.to_world(s.cells_col_row("+"))[0]
+        r = conag("perturb", "add", "--at", f"{x},{y}", "--connect", ep)
+        assert r.returncode == 1 and "drop site" in r.stdout and "force" in r.stdout
+        assert _status(ep)["bricks_total"] == 4
+        r = conag("perturb", "add", "--at", f"{x},{y}", "--force", "--connect", ep)
+        assert r.returncode == 0 and "added brick" in r.stdout, r.stdout + r.stderr
+        wait_until(lambda: _status(ep)["sites_filled"] == 1, interval=0.2, what="the forced brick to fill the site")
+    finally:
+        world.kill()

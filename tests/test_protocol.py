@@ -26,6 +26,7 @@ from protocol import (
     AgentCommand,
     AgentState,
     Blueprint,
+    CommandRejected,
     Decision,
     Hello,
     LockstepTimeout,
@@ -62,21 +63,25 @@ EXAMPLES: dict[type, object] = {
     Welcome: Welcome(
         world_id="w", agent_id="a1", body=3, tick=120, x=4.5, y=-2.25, heading=1.5707963,
         holding=True, restarts=1, sectors=8, sensor_range=6.0, cell_size=1.0,
-        site_xs=(0.0, 1.0, 2.0), site_ys=(5.0, 5.0, 5.0),
+        site_xs=(0.0, 1.0, 2.0), site_ys=(5.0, 5.0, 5.0), blueprint_version=2, world_width=12.0,
+        world_height=8.0, dt=0.1, max_speed=3.0, max_turn=1.5707963, inertia=0.5, agent_radius=0.3,
+        disc_radius=0.5, grab_reach=1.2, grab_cone=1.0471976, drop_tolerance=0.5, touch_margin=0.25,
+        sensor_noise=0.02, odometry_noise=0.01,
     ),
     SensorFrame: SensorFrame(
         agent_id="a1", tick=121, heading=3.14, odom_dx=0.1, odom_dy=-0.05, sectors=8,
         ranges=_ranges(8), holding=False, grabbed=True, dropped=False, ate=True, drank=False,
     ),
     AgentCommand: AgentCommand(agent_id="a1", tick=121, speed=0.5, turn=-0.2, action="grab"),
+    CommandRejected: CommandRejected(agent_id="a1", tick=122, reason="command for tick 121, the world is at 122"),
     WorldStatus: WorldStatus(
         world_id="w", scenario="wall-5", seed=7, mode="lockstep", tick=500, sites_filled=2,
         sites_total=5, bricks_total=9, agents_alive=2, bad_messages=1, completed=False,
         agent_ids=("a1", "a2"), agent_alive=(True, False), agent_distance=(12.5, 3.0),
         agent_grabs=(2, 0), agent_drops=(1, 0), agent_restarts=(0, 3),
-        agent_x=(2.5, 7.25), agent_y=(1.5, 0.5),
+        agent_x=(2.5, 7.25), agent_y=(1.5, 0.5), seq=41,
     ),
-    Perturbation: Perturbation(op="move", x=1.0, y=2.0, kind="brick", to_x=3.5, to_y=-1.0),
+    Perturbation: Perturbation(op="move", x=1.0, y=2.0, kind="brick", to_x=3.5, to_y=-1.0, force=True),
     PerturbResult: PerturbResult(ok=True, message="moved brick", tick=501),
     LockstepTimeout: LockstepTimeout(world_id="w", tick=7, agent_ids=("a2", "a3")),
     Perturbed: Perturbed(tick=501, op="move", x=1.0, y=2.0, kind="brick", to_x=3.5, to_y=-1.0, ok=True,
@@ -292,7 +297,7 @@ def test_protocol_error_is_a_value_error():
     assert issubclass(ProtocolError, ValueError)
 
 
-@pytest.mark.parametrize("version", [0, 1, 3, -1, 2**40, "2", b"\x02", None, True, [2], {"v": 2}])
+@pytest.mark.parametrize("version", [0, 1, 2, 4, -1, 2**40, "3", b"\x03", None, True, [3], {"v": 3}])
 def test_wrong_schema_version(version):
     _bad(_pack("Hello", ["a1", 1], version=version))
 
@@ -621,7 +626,8 @@ def test_constructible_string_fields_decode(cls):
 
 W, A = "w1", "a1"
 
-PER_AGENT = [keys.attach, keys.welcome, keys.sensors, keys.command, keys.decision, keys.reinforcement]
+PER_AGENT = [keys.attach, keys.welcome, keys.sensors, keys.command, keys.command_error, keys.decision,
+             keys.reinforcement]
 PER_WORLD = [keys.status, keys.perturb, keys.perturbed, keys.lockstep_timeouts, keys.world_token, keys.all_agent_tokens,
              keys.all_teacher_tokens, keys.world_root]
 

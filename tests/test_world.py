@@ -730,13 +730,27 @@ def test_removing_a_brick_from_a_site_unfills_it_and_adding_one_fills_it():
     assert (s.sites_total, s.sites_filled, s.completed) == (3, 2, False)
     assert w.perturb(Perturbation("remove", 0.5, 1.5)).ok
     assert w.status().sites_filled == 1 and w.status().bricks_total == 1
-    assert w.perturb(Perturbation("add", 0.4, 1.6)).ok
-    assert w.perturb(Perturbation("add", 2.5, 1.5)).ok
+    refused = w.perturb(Perturbation("add", 0.4, 1.6))  # a brick here would fill the site: only when forced
+    assert not refused.ok and "drop site" in refused.message and "force" in refused.message
+    assert w.status().sites_filled == 1 and w.status().bricks_total == 1
+    assert w.perturb(Perturbation("add", 0.4, 1.6, force=True)).ok
+    assert w.perturb(Perturbation("add", 2.5, 1.5, force=True)).ok
     s = w.status()
     assert (s.sites_filled, s.completed, s.bricks_total) == (3, True, 3)
     assert w.perturb(Perturbation("move", 1.5, 1.5, to_x=1.5, to_y=0.5)).ok
     s = w.status()
     assert (s.sites_filled, s.completed) == (2, False)
+
+
+def test_add_refuses_a_disc_on_an_agent_body_unless_forced():
+    w = make("......\n.A....\n......", sensor_noise=0.0)
+    w.attach("a")
+    x, y, _ = pose(w, "a")
+    near = x + w.cfg.disc_radius + w.cfg.agent_radius - 0.05  # would overlap the body
+    refused = w.perturb(Perturbation("add", near, y, kind="food"))
+    assert not refused.ok and "agent a" in refused.message and w.discs.present().size == 0
+    assert w.perturb(Perturbation("add", x + 1.0, y, kind="food")).ok  # next cell: clear of the body
+    assert w.perturb(Perturbation("add", near, y, kind="food", force=True)).ok
 
 
 # ---------------------------------------------------------------- status
@@ -790,3 +804,51 @@ def test_same_seed_and_commands_give_identical_frames():
 
 def test_a_different_seed_gives_different_noisy_frames():
     assert _run(11, 30) != _run(12, 30)
+
+
+# ---------------------------------------------------------------- what the Welcome tells an agent
+
+
+def test_the_welcome_states_the_constants_of_the_world_config_in_use():
+    from protocol.messages import WELCOME_CONSTANTS
+
+    w = make("A....\n.....", max_speed=2.0, dt=0.125, max_turn=0.4, inertia=0.7, grab_reach=1.1,
+             grab_cone=0.9, sensor_range=4.5, sensor_noise=0.05, odometry_noise=0.01, touch_margin=0.2)
+    welcome = w.attach("a")
+    for name in WELCOME_CONSTANTS:
+        assert getattr(welcome, name) == pytest.approx(getattr(w.cfg, name)), name
+    assert (welcome.max_speed, welcome.dt, welcome.max_turn, welcome.grab_cone) == (2.0, 0.125, 0.4, 0.9)
+    assert welcome.sensor_range == 4.5 and welcome.drop_tolerance == 0.5 * welcome.cell_size
+    d = make("A.\n..").attach("a")  # the defaults come from WorldConfig, not from the message
+    assert (d.max_speed, d.dt, d.agent_radius, d.disc_radius) == (3.0, 0.1, 0.3, 0.5)
+
+
+@pytest.mark.parametrize("speed", [1.0, 2.0, 5.0])
+def test_speed_moves_speed_times_dt_per_tick_up_to_max_speed(speed):
+    # What an external agent works out from the Welcome: speed 1.0 moves 0.1 units per
+    # tick once inertia has caught up, and 5.0 is clipped to max_speed (0.3 per tick).
+    w = make("A" + "." * 59)
+    welcome = w.attach("a")
+    tick(w, {"a": (speed, 0.0, "none")}, 20)
+    x0 = pose(w, "a")[0]
+    tick(w, {"a": (speed, 0.0, "none")})
+    per_tick = min(speed, welcome.max_speed) * welcome.dt
+    assert pose(w, "a")[0] - x0 == pytest.approx(per_tick, rel=1e-3)
+    assert w.frame("a").odom_dx == pytest.approx(per_tick, rel=1e-3)  # odometry: world axes, no noise here
+
+
+def test_heading_zero_is_east_a_positive_turn_is_counter_clockwise_and_motion_follows_a_tick_later():
+    w = make("." * 9 + "\n" + "....A...." + "\n" + "." * 9, inertia=1.0)
+    welcome = w.attach("a")
+    assert welcome.heading == 0.0
+    tick(w, {"a": (1.0, 0.0, "none")})  # command for tick 0: frame 1 shows no motion yet ...
+    assert (w.frame("a").odom_dx, w.frame("a").odom_dy) == (0.0, 0.0)
+    tick(w, {"a": (1.0, 0.0, "none")})  # ... frame 2 does: east
+    f = w.frame("a")
+    assert f.odom_dx == pytest.approx(0.1) and f.odom_dy == pytest.approx(0.0, abs=1e-9)
+    tick(w, {"a": (1.0, math.pi / 2, "none")})  # the turn shows at once, the motion along it a tick later
+    f = w.frame("a")
+    assert f.heading == pytest.approx(math.pi / 2) and f.odom_dx == pytest.approx(0.1)
+    tick(w, {"a": (1.0, 0.0, "none")})
+    f = w.frame("a")
+    assert f.odom_dy == pytest.approx(0.1) and abs(f.odom_dx) < 1e-6  # north

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 import zenoh
 
+from conag.cli import is_newer_status
 from nodes.world_link import WorldLink
 from protocol import keys
 from protocol.codec import decode, encode
@@ -22,10 +23,12 @@ from protocol.messages import (
     NO_READING,
     SCHEMA_VERSION,
     AgentCommand,
+    CommandRejected,
     Hello,
     Perturbation,
     PerturbResult,
     SensorFrame,
+    WorldStatus,
 )
 from tests.conftest import ROOT, Bus, RunningWorld, free_port, wait_until
 from tests.scripted import ScriptedBody
@@ -241,3 +244,70 @@ def test_lockstep_is_driven_by_agents_not_by_the_clock(bus, start_world):
         first.act(1.0, 0.0)
         second.frame = second.link.next_frame(second.frame.tick)
     assert rw.world.tick == 5
+
+
+def _rejections(session, agent="a1"):
+    got = []
+    sub = session.declare_subscriber(keys.command_error("w0", agent),
+                                     lambda s: got.append(decode(s.payload.to_bytes(), CommandRejected)))
+    return got, sub
+
+
+def test_a_rejected_command_is_answered_with_a_reason_counted_and_not_applied(bus, start_world):
+    rw = start_world(SCRIPT_WORLD)
+    session = bus.client_session()
+    got, _sub = _rejections(session)
+    body = ScriptedBody(WorldLink(session, "w0", "a1"))
+    t = body.frame.tick
+    cmd_key = keys.command("w0", "a1")
+    envelope = lambda f: msgpack.packb({"v": SCHEMA_VERSION, "t": "AgentCommand", "f": f})  # noqa: E731
+    block = zenoh.CongestionControl.BLOCK
+    rejected = [
+        (envelope(["a1", t, 1.0, 0.0]), "expected 5 fields"),                     # a field left out
+        (envelope(["a1", float(t), 1.0, 0.0, "none"]), "tick: expected int"),     # tick sent as 1.0
+        (envelope(["a1", t, 1.0, 0.0, "jump"]), "action must be one of"),         # unknown action
+        (encode(AgentCommand("a1", t + 1, 3.0, 0.0)), f"for tick {t + 1}"),        # one ahead
+    ]
+    if t > 0:
+        rejected.append((encode(AgentCommand("a1", t - 1, 3.0, 0.0)), f"for tick {t - 1}"))  # one behind
+    for payload, _ in rejected:
+        session.put(cmd_key, payload, congestion_control=block)
+    # Each is answered at once, in order, on the agent's error key (no lockstep timeout to sit out).
+    wait_until(lambda: len(got) >= len(rejected), timeout=5.0, what="an answer to every rejected command")
+    for answer, (_, reason) in zip(got, rejected):
+        assert answer.agent_id == "a1" and answer.tick == t and reason in answer.reason, answer
+    assert rw.world.bad_messages == len(rejected)
+    assert rw.world.tick == t and rw.world.speed[0] == 0.0  # none was taken, none stepped the world
+    frame = body.act(1.0, 0.0)  # the right tick is taken as always
+    assert frame.tick == t + 1 and rw.world.speed[0] == 1.0
+    assert len(got) == len(rejected) and rw.world.bad_messages == len(rejected)
+
+
+def test_a_command_from_an_agent_that_has_not_attached_is_answered(bus, start_world):
+    start_world(SCRIPT_WORLD)
+    session = bus.client_session()
+    got, _sub = _rejections(session, "ghost")
+    def answered():
+        # Put again each time: the first puts may go out before this session has met the world.
+        session.put(keys.command("w0", "ghost"), encode(AgentCommand("ghost", 0, 1.0, 0.0)))
+        return got and got[0]
+
+    answer = wait_until(answered, timeout=10.0, interval=0.05, what="the world's answer")
+    assert "not attached" in answer.reason and "attach" in answer.reason
+
+
+def test_status_carries_a_sequence_number_newest_highest_even_at_the_same_tick(bus, start_world):
+    statuses = []
+    rw = start_world(SCRIPT_WORLD.replace("[world]\n", "[world]\nstatus_period = 0.05\n"),
+                     on_status=statuses.append)
+    wait_until(lambda: len(statuses) >= 4, what="four status publications")
+    seqs = [s.seq for s in statuses[:4]]
+    assert rw.world.tick == 0 and all(s.tick == 0 for s in statuses[:4])  # no agent: the tick stands still
+    assert seqs == list(range(seqs[0], seqs[0] + 4))  # yet each reading is numbered, one up each time
+    asker = bus.client_session()
+    replies = wait_until(lambda: list(asker.get(keys.status("w0"), timeout=2.0)), what="the status query's answer")
+    answered = decode(replies[0].ok.payload.to_bytes(), WorldStatus)
+    assert answered.seq >= seqs[-1]  # the query answers the latest
+    older, newer = statuses[1], statuses[2]
+    assert is_newer_status(newer, older) and not is_newer_status(older, newer)  # `conag status` skips the older
+    assert not is_newer_status(newer, newer)

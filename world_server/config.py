@@ -35,6 +35,13 @@ class WorldConfig:
     tick_rate: float = 50.0         # ticks per wall second in realtime mode
     status_period: float = 0.5      # wall seconds between status publications
 
+    @property
+    def drop_tolerance(self) -> float:
+        """How far from a site cell's centre (along x and along y) a dropped brick still fills
+        the site: the brick lands at the agent's centre, and a site is filled by a brick whose
+        centre lies in its cell."""
+        return self.cell_size / 2
+
     def __post_init__(self) -> None:
         positive = ("cell_size", "disc_radius", "agent_radius", "agent_mass", "dt", "max_speed",
                     "max_turn", "sensor_range", "grab_reach", "grab_cone", "lockstep_timeout", "tick_rate",

@@ -18,6 +18,7 @@ from protocol.messages import (
     CHANNELS,
     DISC_KINDS,
     SITE_OPS,
+    WELCOME_CONSTANTS,
     Blueprint,
     Perturbation,
     PerturbResult,
@@ -135,7 +136,8 @@ class World:
             sensor_range=self.cfg.sensor_range, cell_size=self.cfg.cell_size,
             site_xs=tuple(self.sites_xy[:, 0].tolist()), site_ys=tuple(self.sites_xy[:, 1].tolist()),
             world_width=float(self.size[0]), world_height=float(self.size[1]),
-            blueprint_version=self.blueprint_version)
+            blueprint_version=self.blueprint_version,
+            **{name: float(getattr(self.cfg, name)) for name in WELCOME_CONSTANTS})
 
     def detach(self, agent_id: str) -> None:
         """The agent's process is gone: its body stops and drops what it held, where it stands."""
@@ -301,8 +303,9 @@ class World:
         return Blueprint(world_id=self.world_id, tick=self.tick, version=self.blueprint_version,
                          site_xs=tuple(self.sites_xy[:, 0].tolist()), site_ys=tuple(self.sites_xy[:, 1].tolist()))
 
-    def status(self) -> WorldStatus:
-        """The build's progress and per-agent counters, as the server publishes them."""
+    def status(self, seq: int = 0) -> WorldStatus:
+        """The build's progress and per-agent counters, as the server publishes them (`seq`:
+        the server's count of publications)."""
         filled = int(self.sites_filled().sum())
         total = len(self.sites_xy)
         pos = self._positions
@@ -316,7 +319,7 @@ class World:
             agent_grabs=tuple(r.grabs for r in self._order), agent_drops=tuple(r.drops for r in self._order),
             agent_restarts=tuple(r.restarts for r in self._order),
             agent_x=tuple(float(pos[r.index, 0]) for r in self._order),
-            agent_y=tuple(float(pos[r.index, 1]) for r in self._order))
+            agent_y=tuple(float(pos[r.index, 1]) for r in self._order), seq=seq)
 
     def agent_poses(self) -> np.ndarray:
         """(n, 3) x, y, heading of every body, in attach order (for pictures and tests)."""
@@ -334,6 +337,9 @@ class World:
         if p.op == "add":
             if not inside(p.x, p.y):
                 return PerturbResult(False, f"({p.x:g}, {p.y:g}) is outside the world", self.tick)
+            refusal = None if p.force else self._add_refusal(p.x, p.y)
+            if refusal:
+                return PerturbResult(False, f"{refusal}; force to add it anyway", self.tick)
             i = self.discs.add((p.x, p.y), DISC_KINDS.index(p.kind))
             self.physics.add_disc(i, self.discs.xy[i])
             return PerturbResult(True, f"added {p.kind} #{i} at ({p.x:g}, {p.y:g})", self.tick)
@@ -352,6 +358,20 @@ class World:
         self.discs.place(i, (p.to_x, p.to_y))
         self.physics.add_disc(i, self.discs.xy[i])
         return PerturbResult(True, f"moved {kind} #{i} to ({p.to_x:g}, {p.to_y:g})", self.tick)
+
+    def _add_refusal(self, x: float, y: float) -> str | None:
+        """Why a disc should not be added at (x, y) (None: nothing against it): the point is in
+        a drop site's cell (a brick would fill the site), or a disc there would overlap a body."""
+        if np.any(self._site_codes == self._cell_code(np.array([[x, y]]))[0]):
+            col, row = (int(v) for v in self.scenario.to_cell((x, y))[0])
+            return f"({x:g}, {y:g}) is in the drop site of cell ({col}, {row})"
+        pos, _ = self.physics.state()
+        if len(pos):
+            d = np.hypot(pos[:, 0] - x, pos[:, 1] - y)
+            i = int(np.argmin(d))
+            if d[i] < self.cfg.disc_radius + self.cfg.agent_radius:
+                return f"a disc at ({x:g}, {y:g}) would overlap the body of agent {self._order[i].agent_id}"
+        return None
 
     def _perturb_site(self, p: Perturbation) -> PerturbResult:
         """add_site / remove_site: the cell holding (x, y) joins or leaves the blueprint.

@@ -1,0 +1,73 @@
+"""ConAg as a PettingZoo ParallelEnv and a Gymnasium env over the real bus (conag/env.py): the
+PettingZoo conformance tests, determinism, the reward, and a short training run."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("pettingzoo")  # the optional extra: pip install -e '.[env]'
+
+from pettingzoo.test import parallel_api_test, parallel_seed_test
+
+from conag.env import ConAgGymEnv, ConAgParallelEnv
+from protocol.messages import ACTIONS, Perturbation
+from tests.conftest import ROOT, SCENARIOS
+
+
+def test_passes_pettingzoos_parallel_api_test():
+    env = ConAgParallelEnv(SCENARIOS / "quick_wall.toml")
+    try:
+        parallel_api_test(env, num_cycles=60)
+    finally:
+        env.close()
+
+
+@pytest.mark.slow  # two worlds at once, reset twice each
+def test_passes_pettingzoos_parallel_seed_test_with_three_agents():
+    parallel_seed_test(lambda: ConAgParallelEnv(SCENARIOS / "fig6.toml", max_cycles=60), num_cycles=60)
+
+
+def test_a_step_moves_the_body_and_filling_a_site_is_rewarded():
+    env = ConAgParallelEnv(SCENARIOS / "quick_wall.toml")
+    try:
+        obs, infos = env.reset(seed=5)
+        assert env.agents == ["a1"] and infos["a1"]["tick"] == 0
+        go = {"a1": {"speed": np.array([1.0], np.float32), "turn": np.array([0.0], np.float32), "action": 0}}
+        for _ in range(10):
+            obs, rewards, term, trunc, infos = env.step(go)
+        # speed 1.0 is 0.1 units per tick, once inertia has caught up (docs/protocol.md)
+        assert infos["a1"]["tick"] == 10 and obs["a1"]["odometry"][0] == pytest.approx(0.1, rel=0.01)
+        assert rewards == {"a1": 0.0} and term == {"a1": False} and trunc == {"a1": False}
+        # A brick put on a site between two steps is a site filled during the next one.
+        x, y = env.world.sites_xy[0]
+        assert env.world.perturb(Perturbation("add", float(x), float(y), force=True)).ok
+        _, rewards, *_ = env.step({"a1": {"speed": [0.0], "turn": [0.0], "action": ACTIONS.index("none")}})
+        assert rewards == {"a1": 1.0}
+    finally:
+        env.close()
+
+
+def test_the_gymnasium_env_drives_one_agent_among_conag_agents():
+    env = ConAgGymEnv(SCENARIOS / "fig6.toml", max_cycles=50)
+    try:
+        obs, info = env.reset(seed=1)
+        assert env.observation_space.contains(obs) and set(env.brains) == {"a2", "a3"}
+        env.action_space.seed(0)
+        for _ in range(50):
+            obs, _reward, terminated, truncated, info = env.step(env.action_space.sample())
+            if terminated or truncated:
+                break
+        assert truncated and info["tick"] == 50
+        moved = env.env.world.status().agent_distance
+        assert moved[1] > 1.0 and moved[2] > 1.0  # the ConAg agents went about their work
+    finally:
+        env.close()
+
+
+def test_the_tabular_example_trains_for_a_few_hundred_steps():
+    import runpy
+
+    train = runpy.run_path(str(ROOT / "examples" / "train_tabular.py"))["train"]
+    result = train(steps=300, seed=0)
+    assert result["steps"] == 300 and np.count_nonzero(result["q"]) > 0  # every step cost a little
