@@ -25,6 +25,7 @@ import json
 import logging
 import signal
 import sys
+import threading
 import time
 from dataclasses import asdict
 
