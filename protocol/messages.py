@@ -341,8 +341,9 @@ class LockstepTimeout:
     """World -> anyone (published, reliable, only when it happens): in lockstep, the world
     stepped from `tick` without the commands of `agent_ids` (its lockstep timeout passed).
 
-    Their commands for `tick` take effect at a later step, when they come: a replay of the
-    run must send them then (`recording.replay`).
+    Their commands for `tick`, when they come, are refused (a lockstep command counts for
+    the tick it names only): the bodies kept their speed set points, with no turn and no
+    action, for that step, and a replay must step them the same way (`recording.replay`).
     """
 
     world_id: str

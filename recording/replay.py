@@ -17,12 +17,14 @@ agent's newest command and steps once every live agent has answered the current 
 when its lockstep timeout passes (an agent compiling its kernels on a first run answers
 its first frames seconds late). A command answers a frame, so it arrives at the tick it
 names, unless the world stepped on without it: then the world published a
-LockstepTimeout naming the agent, and the command took effect at the tick of the newest
-frame recorded before it (at least one later). (The recorder's order alone cannot tell:
+LockstepTimeout naming the agent, and the command reached the world at the tick of the
+newest frame recorded before it (at least one later), where the world refused it (in
+lockstep a command counts for the tick it names only) and counted it bad; the replay
+sends it there too, to be refused the same way. (The recorder's order alone cannot tell:
 a command on time may reach it after the next frame.) For the step the world took
 without it, the script adds a stand-in command of that tick holding what the world then
-had: the speed set point of the agent's last command (0 after an attach), no turn and no
-action (those are one-shot), or the whole of a late command that came at that tick. So a
+had: the speed set point of the agent's last command taken (0 after an attach), no turn
+and no action (those are one-shot). So a
 replayed world never has to time out itself, and `conag replay --verify` runs it with
 the timeout off: a busy machine slows the replay down, it does not change it.
 What a recording cannot replay exactly, and `LockstepScript.limits` names:
@@ -124,16 +126,12 @@ class LockstepScript:
         for tick in range(self.last_tick + 1):
             for w in self.attaches.get(tick, ()):
                 speed[w.agent_id] = 0.0
-            came: dict[str, AgentCommand] = {}
             for c in self.commands.get(tick, ()):
-                came[c.agent_id] = c
-                speed[c.agent_id] = c.speed
+                if c.tick == tick:  # taken; a late one naming an earlier tick was refused
+                    speed[c.agent_id] = c.speed
             for t, a in sorted(self.missed):
                 if t == tick:
-                    last = came.get(a)
-                    stand_in = (AgentCommand(a, tick, last.speed, last.turn, last.action) if last is not None
-                                else AgentCommand(a, tick, speed.get(a, 0.0), 0.0, "none"))
-                    self.commands[tick].append(stand_in)
+                    self.commands[tick].append(AgentCommand(a, tick, speed.get(a, 0.0), 0.0, "none"))
 
     def agents(self) -> list[str]:
         """Every agent that attached, in the order it first did."""
