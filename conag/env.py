@@ -13,7 +13,15 @@ and returns the frames of the next one as observations.
 * Observation, per agent: `{"ranges": 5 x sectors readings (-1: nothing), "heading":
   radians, "odometry": the last tick's (dx, dy) on world axes, "holding": 0 or 1}`.
 * Reward: `reward(env, agent, filled_now)`, by default the number of drop sites filled
-  during the step (shared by every agent; negative when a brick leaves a site).
+  during the step (shared by every agent; negative when a brick leaves a site), plus,
+  with `teacher=True`, the teacher's reinforcement of the agent's arm action (below).
+* Teacher (`teacher=True`): the teacher's rule of §5.1 (`teacher.core`) judges each agent's
+  arm action (grab, drop or neither) against what the engineered network would choose on
+  the same six state nodes, +1 or -1, in `env.teacher_arm[agent]` and `infos[agent]
+  ["teacher_arm"]`. The state nodes come from a ConAg brain that perceives the agent's own
+  frames alongside it (the agent does not report them, as a ConAg student does in its
+  Decision). Only the arm is judged: the motor output of §5.1 is a navigation behaviour,
+  which an action of speed and turn has no counterpart for.
 * Episodes end (terminated) when the structure is complete, or are truncated after
   `max_cycles` steps.
 
@@ -40,16 +48,21 @@ from agent_runtime.brain import Brain
 from bus import BusOptions, open_session
 from nodes.world_link import WorldLink
 from nodes.world_server import WorldServer
-from protocol.messages import ACTIONS, CHANNELS, SensorFrame, Welcome
+from protocol.messages import ACTIONS, CHANNELS, Decision, SensorFrame, Welcome
+from teacher.core import Teacher
 from world_server.scenario import Scenario, load_scenario
 from world_server.world import World
 
 RewardFn = Callable[["ConAgParallelEnv", str, int], float]
 
 
-def sites_filled_reward(_env: ConAgParallelEnv, _agent: str, filled_now: int) -> float:
-    """The default reward: drop sites filled during the step (the same for every agent)."""
-    return float(filled_now)
+def sites_filled_reward(env: ConAgParallelEnv, agent: str, filled_now: int) -> float:
+    """The default reward: drop sites filled during the step (the same for every agent), plus
+    the teacher's +1 / -1 for the agent's arm action when the env runs the teacher."""
+    return float(filled_now) + float(env.teacher_arm.get(agent, 0))
+
+
+_NO_OUTPUTS = (0.0,) * 7  # a Decision's output activations: the teacher's rule does not read them
 
 
 def _free_port() -> int:
@@ -66,7 +79,8 @@ class ConAgParallelEnv(ParallelEnv):
     metadata: ClassVar[dict] = {"name": "conag_v0", "render_modes": []}
 
     def __init__(self, scenario: Scenario | str | Path = "scenarios/quick_wall.toml", *, agents: int | None = None,
-                 max_cycles: int = 1000, reward: RewardFn = sites_filled_reward, frame_timeout: float = 30.0):
+                 max_cycles: int = 1000, reward: RewardFn = sites_filled_reward, frame_timeout: float = 30.0,
+                 teacher: bool = False):
         sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
         # Lockstep, and the world never steps on its own: the env's commands drive every tick.
         self.scenario = dataclasses.replace(sc, tick_mode="lockstep",
@@ -78,6 +92,9 @@ class ConAgParallelEnv(ParallelEnv):
         self.reward_fn = reward
         self.frame_timeout = frame_timeout
         self.render_mode = None
+        self.teacher = Teacher() if teacher else None
+        self.teacher_arm: dict[str, int] = {}       # the last step's arm reinforcement per agent
+        self._observers: dict[str, Brain] = {}     # with the teacher: state nodes from each agent's frames
         self.frames: dict[str, SensorFrame] = {}
         self.welcomes: dict[str, Welcome] = {}
         self.world: World | None = None
@@ -142,6 +159,10 @@ class ConAgParallelEnv(ParallelEnv):
             self.welcomes[a] = link.attach(timeout=self.frame_timeout)
         for a in self.agents:
             self.frames[a] = self._next(a, self.welcomes[a].tick - 1)
+        self.teacher_arm = {}
+        if self.teacher is not None:
+            self.teacher = Teacher()
+            self._observers = {a: Brain(self.welcomes[a]) for a in self.agents}
         self._filled = int(self.world.sites_filled().sum())
         return {a: self._observe(a) for a in self.agents}, {a: self._info(a) for a in self.agents}
 
@@ -158,10 +179,25 @@ class ConAgParallelEnv(ParallelEnv):
 
     def _info(self, agent: str) -> dict:
         f = self.frames[agent]
-        return {"tick": f.tick, "grabbed": f.grabbed, "dropped": f.dropped}
+        info = {"tick": f.tick, "grabbed": f.grabbed, "dropped": f.dropped}
+        if self.teacher is not None:
+            info["teacher_arm"] = self.teacher_arm.get(agent, 0)
+        return info
+
+    def _judge(self, agent: str, action: str) -> None:
+        """The teacher's arm signal for `action` on the frame it answers (see the module)."""
+        assert self.teacher is not None
+        frame, brain = self.frames[agent], self._observers[agent]
+        brain.perceive(frame)
+        state = brain.state_nodes(frame, brain.plan())
+        arm = action if action in ("grab", "drop") else "none"
+        decision = Decision(agent, frame.tick, tuple(float(v) for v in state), _NO_OUTPUTS, arm, "none")
+        self.teacher_arm[agent] = self.teacher.reinforce(decision).arm
 
     def command(self, agent: str, speed: float, turn: float, action: str = "none") -> None:
         """Send one agent's command for the current tick (what `step` does with each action)."""
+        if self.teacher is not None:
+            self._judge(agent, action)
         self._links[agent].send(self.frames[agent].tick, float(speed), float(turn), action)
         self._sent.add(agent)
 
@@ -213,8 +249,9 @@ class ConAgGymEnv(gymnasium.Env):
     metadata: ClassVar[dict] = {"render_modes": []}
 
     def __init__(self, scenario: Scenario | str | Path = "scenarios/quick_wall.toml", *, agents: int | None = None,
-                 agent: str = "a1", max_cycles: int = 1000, reward: RewardFn = sites_filled_reward):
-        self.env = ConAgParallelEnv(scenario, agents=agents, max_cycles=max_cycles, reward=reward)
+                 agent: str = "a1", max_cycles: int = 1000, reward: RewardFn = sites_filled_reward,
+                 teacher: bool = False):
+        self.env = ConAgParallelEnv(scenario, agents=agents, max_cycles=max_cycles, reward=reward, teacher=teacher)
         if agent not in self.env.possible_agents:
             raise ValueError(f"{agent!r} is not one of {self.env.possible_agents}")
         self.agent = agent

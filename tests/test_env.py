@@ -71,3 +71,39 @@ def test_the_tabular_example_trains_for_a_few_hundred_steps():
     train = runpy.run_path(str(ROOT / "examples" / "train_tabular.py"))["train"]
     result = train(steps=300, seed=0)
     assert result["steps"] == 300 and np.count_nonzero(result["q"]) > 0  # every step cost a little
+
+
+def test_with_the_teacher_the_arm_action_is_reinforced_as_the_engineered_network_would_choose():
+    none, grab = ACTIONS.index("none"), ACTIONS.index("grab")
+    still = {"speed": [0.0], "turn": [0.0]}
+    env = ConAgParallelEnv(SCENARIOS / "quick_wall.toml", teacher=True)
+    try:
+        env.reset(seed=3)
+        # Nothing in reach: the teacher's arm output is none; grabbing at the air is an error.
+        _, rewards, _, _, infos = env.step({"a1": still | {"action": grab}})
+        assert infos["a1"]["teacher_arm"] == -1 and rewards == {"a1": -1.0}
+        _, rewards, _, _, infos = env.step({"a1": still | {"action": none}})
+        assert infos["a1"]["teacher_arm"] == 1 and rewards == {"a1": 1.0}
+        # A free brick put just in front of the body: now the teacher would grab it.
+        w = env.welcomes["a1"]
+        x, y, heading = *env.world.agent_poses()[0, :2], env.frames["a1"].heading
+        gap = w.agent_radius + w.disc_radius + 0.05
+        assert env.world.perturb(Perturbation("add", float(x + gap * np.cos(heading)),
+                                              float(y + gap * np.sin(heading)), "brick")).ok
+        env.step({"a1": still | {"action": none}})          # the frame that sees it
+        _, rewards, _, _, infos = env.step({"a1": still | {"action": none}})
+        assert infos["a1"]["teacher_arm"] == -1
+        _, rewards, _, _, infos = env.step({"a1": still | {"action": grab}})
+        assert infos["a1"]["teacher_arm"] == 1 and infos["a1"]["grabbed"] and env.frames["a1"].holding
+    finally:
+        env.close()
+
+
+def test_without_the_teacher_the_reward_is_sites_filled_only():
+    env = ConAgParallelEnv(SCENARIOS / "quick_wall.toml")
+    try:
+        env.reset(seed=3)
+        _, rewards, _, _, infos = env.step({"a1": {"speed": [0.0], "turn": [0.0], "action": ACTIONS.index("grab")}})
+        assert rewards == {"a1": 0.0} and "teacher_arm" not in infos["a1"]
+    finally:
+        env.close()
