@@ -249,9 +249,6 @@ class Brain:
                 # stay finite, or every site would count as "no deeper" than its neighbour.
                 depth = distance_field(supply_bricks, obstacles)
                 config_goals &= ~_mouth_side(held, config_goals, depth)
-            waiting = _deeper_first(config_goals, open_sites, obstacles, self.maps.known)
-            if (config_goals & ~waiting).any():
-                config_goals &= ~waiting
         if self.cfg.goal_sequencing:
             # Also when sequencing gives way (plan's fallback): no site that seals another.
             config_goals &= ~self.sealing(config_goals, open_sites, obstacles, supply_bricks)
@@ -606,31 +603,6 @@ def _mouth_side(held: np.ndarray, sites: np.ndarray, depth: np.ndarray) -> np.nd
         # A site no path reaches (depth inf) is on no side of a mouth.
         out[dst] |= held[src] & (depth[dst] <= depth[src] + 1e-9) & np.isfinite(depth[dst])
     return out & sites
-
-
-def _deeper_first(goals: np.ndarray, open_sites: np.ndarray, obstacles: np.ndarray,
-                  known: np.ndarray) -> np.ndarray:
-    """Goal sites reached only over other open sites (no free ground beside them) that
-    have an open site deeper than themselves beside them: inside a pocket or blob of
-    sites, those wait for the deeper one.
-
-    Depth is the path distance, over open sites, from the ground the agent has seen free
-    (`known`): a wall never seen is not a way in, so the far end of a corridor whose end
-    wall is out of sight is not taken for a second mouth. The Matching grid keeps one
-    path open to each deep site, and in a pocket two cells wide that path runs down one
-    side: the other side could be filled end to end first, leaving a corridor one body
-    wide and fifteen deep, where an agent going in meets one coming out (generated
-    pockets stalled this way). Filled deepest first, the pocket stays two wide to its
-    bottom row. A site with free ground beside it (a wall in the open, a ring's edge) is
-    never held back: agents reach it from that side."""
-    free = ~obstacles & ~open_sites
-    ground = known & free
-    depth = distance_field(ground, ~((ground | open_sites) & ~obstacles))
-    padded = np.pad(free, 1, constant_values=True)
-    beside_free = padded[:-2, 1:-1] | padded[2:, 1:-1] | padded[1:-1, :-2] | padded[1:-1, 2:]
-    deeper = np.pad(np.where(open_sites & np.isfinite(depth), depth, -np.inf), 1, constant_values=-np.inf)
-    deepest_beside = np.maximum.reduce([deeper[:-2, 1:-1], deeper[2:, 1:-1], deeper[1:-1, :-2], deeper[1:-1, 2:]])
-    return goals & ~beside_free & np.isfinite(depth) & (deepest_beside > depth + 0.5)
 
 
 def _nearest_reading(readings: np.ndarray) -> float:

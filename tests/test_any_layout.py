@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import sim
-from agent_runtime.brain import Brain, _deeper_first, _mouth_side
+from agent_runtime.brain import Brain, _mouth_side
 from agent_runtime.config import AgentConfig
 from agent_runtime.esm import BRICK, CONFIG, OBSTACLE
 from agent_runtime.far_memory import FarMemory, border_seed
@@ -403,44 +403,3 @@ def test_bricks_beyond_the_map_stand_in_the_matching_at_the_border():
     brain.far.bricks = np.array([[30, 0]])                   # a pile 30 cells east of the attach cell
     supply = brain._supply_beyond()
     assert supply.sum() == 1 and supply[brain.centre, -1]    # the east border cell on the agent's row
-
-
-def _pocket(rows: int, width: int, end_seen: bool = True):
-    """A pocket of open sites `width` wide and `rows` deep, walled on both sides (and at
-    the bottom if `end_seen`), its mouth at row 1 on ground seen free (row 0)."""
-    n = rows + 3
-    sites = np.zeros((n, width + 2), bool)
-    sites[1:rows + 1, 1:width + 1] = True
-    walls = np.zeros_like(sites)
-    walls[1:, 0] = walls[1:, width + 1] = True
-    walls[rows + 1:, :] = end_seen
-    known = np.zeros_like(sites)
-    known[0, :] = True
-    return sites, walls, known
-
-
-def test_a_pocket_two_wide_is_filled_from_its_bottom_row():
-    sites, walls, known = _pocket(6, 2)
-    waiting = _deeper_first(sites, sites, walls, known)
-    goals = sites & ~waiting
-    # The bottom row, both of its sites; and the mouth, beside free ground, which is the
-    # Matching grid's to hold open (it is on every path in).
-    assert np.flatnonzero(goals.any(axis=1)).tolist() == [1, 6]
-    assert goals[6, 1:3].all()
-    sites[6, 1:3] = False                                            # filled: the next row up
-    assert np.flatnonzero((sites & ~_deeper_first(sites, sites, walls, known)).any(axis=1)).tolist() == [1, 5]
-
-
-def test_a_corridor_whose_end_is_out_of_sight_has_no_second_mouth():
-    # Nothing seen beyond the last site: that is no way in, so it is still the deepest.
-    sites, walls, known = _pocket(6, 1, end_seen=False)
-    goals = sites & ~_deeper_first(sites, sites, walls, known)
-    assert np.flatnonzero(goals[2:6]).size == 0                     # no middle site is a goal
-    assert goals[6, 1] and goals[1, 1]
-
-
-def test_sites_with_free_ground_beside_them_never_wait():
-    sites = np.zeros((5, 7), bool)
-    sites[2, 1:6] = True                      # a wall of sites in the open
-    known = ~sites
-    assert not _deeper_first(sites, sites, np.zeros_like(sites), known).any()
