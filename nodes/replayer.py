@@ -10,7 +10,7 @@ the recorded scenario and seed): it declares each recorded agent's liveliness to
 attaches it at its recorded tick, applies the recorded perturbations before their tick's
 step, sends each recorded command at the tick the world was at when it first came
 (`recording.replay.LockstepScript`), and compares each frame the world sends with the recorded one, byte for byte
-(`recording.replay.Comparison`). It stops at the first difference.
+(`recording.replay.Comparison`): a frame the recorder missed is not a difference.
 """
 
 from __future__ import annotations
@@ -88,24 +88,35 @@ def drive_world(session: zenoh.Session, script: LockstepScript, world_id: str, s
                 break
             if tick > last:
                 break
-            for welcome in script.attaches.get(tick, ()):
-                a = welcome.agent_id
-                if a not in commands:
-                    declared.add(session.liveliness().declare_token(keys.agent_token(world_id, a)))
-                    commands[a] = declared.add(session.declare_publisher(
-                        keys.command(world_id, a), reliability=zenoh.Reliability.RELIABLE,
-                        congestion_control=zenoh.CongestionControl.BLOCK))
-                _attach(session, world_id, a, timeout)
-                if not _collect(frames, script, {a: tick}, result, timeout, stop):
-                    return result
-            for p in script.perturbations.get(tick, ()):
-                _perturb(session, world_id, p, timeout)
-            for cmd in script.commands.get(tick, ()):
-                if cmd.agent_id in commands:
-                    commands[cmd.agent_id].put(encode(cmd))
+            if not _feed_tick(session, script, world_id, tick, commands, declared, frames, result, timeout, stop):
+                break
             if on_tick is not None:
                 on_tick(tick)
+    result.settle()
     return result
+
+
+def _feed_tick(session: zenoh.Session, script: LockstepScript, world_id: str, tick: int,
+               commands: dict[str, zenoh.Publisher], declared: Declarations, frames: Inbox, result: Comparison,
+               timeout: float, stop: threading.Event) -> bool:
+    """The attaches, perturbations and commands of `tick`, as the world met them; False if an
+    attach's frame did not come (stopped, or a bad frame)."""
+    for welcome in script.attaches.get(tick, ()):
+        a = welcome.agent_id
+        if a not in commands:
+            declared.add(session.liveliness().declare_token(keys.agent_token(world_id, a)))
+            commands[a] = declared.add(session.declare_publisher(
+                keys.command(world_id, a), reliability=zenoh.Reliability.RELIABLE,
+                congestion_control=zenoh.CongestionControl.BLOCK))
+        _attach(session, world_id, a, timeout)
+        if not _collect(frames, script, {a: tick}, result, timeout, stop):
+            return False
+    for p in script.perturbations.get(tick, ()):
+        _perturb(session, world_id, p, timeout)
+    for cmd in script.commands.get(tick, ()):
+        if cmd.agent_id in commands:
+            commands[cmd.agent_id].put(encode(cmd))
+    return True
 
 
 def _timed_out(timeouts: Inbox, script: LockstepScript, result: Comparison) -> bool:

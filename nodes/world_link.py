@@ -32,9 +32,10 @@ class WorldLink:
     A context manager; see the module for the frame channel ("latest wins").
     """
 
-    def __init__(self, session: zenoh.Session, world_id: str, agent_id: str, *, block: bool = False):
-        """`block`: commands are published with congestion control BLOCK instead of DROP, so a
-        busy machine delays them rather than losing one (which costs a lockstep timeout)."""
+    def __init__(self, session: zenoh.Session, world_id: str, agent_id: str, *, block: bool = True):
+        """`block` (the default): commands are published RELIABLE with congestion control
+        BLOCK, so a busy machine delays one (a few bytes a tick) rather than losing it: a lost
+        command costs a lockstep timeout, and a recording that lacks one cannot be replayed."""
         self.session, self.world_id, self.agent_id = session, world_id, agent_id
         self.bad_frames = 0
         self._declared = Declarations()  # undeclared in reverse: the token goes last

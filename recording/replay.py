@@ -117,6 +117,11 @@ class LockstepScript:
                     world_tick = max(world_tick, f.tick)
             except ProtocolError:
                 continue  # what the world did not understand either changed nothing
+        for welcomes in script.attaches.values():
+            # The world numbers bodies in the order it attached them; the recorder may hear the
+            # Welcomes of one tick in another order (they are published on different keys), and
+            # an agent attached later sees the bodies attached before it.
+            welcomes.sort(key=lambda w: w.body)
         script._add_stand_ins()
         return script
 
@@ -151,7 +156,8 @@ class Comparison:
     missing: int = 0          # frames the world sent that the recording lacks (its recorder missed them)
     dropped: int = 0          # frames the world sent that the bus dropped on the way to the replay
     first_difference: str = ""
-    _seen: dict[tuple[int, str], int] = field(default_factory=dict)
+    _left: dict[tuple[int, str], list[bytes]] = field(default_factory=dict)    # recorded, not matched yet
+    _unmatched: dict[tuple[int, str], bytes] = field(default_factory=dict)     # sent, matching none
 
     @property
     def identical(self) -> bool:
@@ -159,19 +165,29 @@ class Comparison:
         return self.matched > 0 and not self.first_difference
 
     def check(self, tick: int, agent: str, got: bytes, recorded: list[bytes]) -> bool:
-        """Compare one frame the world sent with the next of those recorded for (tick, agent)
-        (an agent that attaches gets a frame of the tick it attached at besides the step's)."""
-        i = self._seen.get((tick, agent), 0)
-        self._seen[tick, agent] = i + 1
-        if i >= len(recorded):
-            self.missing += 1
-            return True
-        if got == recorded[i]:
+        """Compare one frame the world sent with those recorded for (tick, agent): an agent
+        that attaches gets a frame of the tick it attached at besides the step's, and the
+        recorder may have missed either (frames are latest-wins). A frame equal to one not
+        matched yet matches it; one equal to none is put aside as one the recording lacks,
+        and is a difference only if a recorded frame of the same tick and agent is still
+        unmatched when the replay ends (`settle`)."""
+        left = self._left.setdefault((tick, agent), list(recorded))
+        if got in left:
+            left.remove(got)
             self.matched += 1
-            return True
-        if not self.first_difference:
-            self.first_difference = f"tick {tick}, agent {agent}: {_difference(got, recorded[i])}"
-        return False
+        else:
+            self.missing += 1
+            self._unmatched.setdefault((tick, agent), got)
+        return True
+
+    def settle(self) -> bool:
+        """After the last frame: a frame the world sent that matched nothing, where a recorded
+        frame of the same tick and agent matched nothing either, is a difference (the first,
+        by tick, is reported). False if there is one."""
+        for (tick, agent), got in sorted(self._unmatched.items()):
+            if self._left.get((tick, agent)) and not self.first_difference:
+                self.first_difference = f"tick {tick}, agent {agent}: {_difference(got, self._left[tick, agent][0])}"
+        return not self.first_difference
 
 
 def _difference(got: bytes, want: bytes) -> str:

@@ -39,7 +39,7 @@ from protocol.messages import (
 )
 from recording.echo import RateMeter, describe
 from recording.mcap_log import McapRecorder, read_recording
-from recording.replay import LockstepScript, paced
+from recording.replay import Comparison, LockstepScript, paced
 from tests.conftest import SCENARIOS, Bus, Process, RunningWorld, conag, free_port, wait_until
 from world_server.scenario import load_scenario
 from world_server.world import World
@@ -111,6 +111,34 @@ def test_paced_scales_the_recorded_gaps_and_starts_from_a_tick(tmp_path):
     assert [d for d, _ in paced(entries, rate=0)] == [0.0] * 6
     with pytest.raises(ValueError):
         list(paced(entries, rate=-1))
+
+
+def test_welcomes_heard_out_of_order_are_replayed_in_the_order_the_world_attached_them(tmp_path):
+    # An agent attached later sees the bodies attached before it: the order matters, and the
+    # recorder can hear one tick's Welcomes (on different keys) in another order.
+    with McapRecorder(tmp_path / "r.mcap") as rec:
+        for t, (agent, body) in enumerate((("a3", 2), ("a1", 0), ("a2", 1))):
+            rec.add(keys.welcome(W, agent), encode(Welcome(W, agent, body, 0, 1.0, 1.0, 0.0, False, 0, 1, 6.0, 1.0,
+                                                           (), ())), 1 + t)
+    script = LockstepScript.from_entries(read_recording(tmp_path / "r.mcap").entries)
+    assert [w.agent_id for w in script.attaches[0]] == ["a1", "a2", "a3"]
+
+
+def test_a_frame_the_recorder_missed_is_no_difference_but_a_changed_one_is():
+    def frame(holding=False, heading=0.0):
+        return encode(SensorFrame("a1", 0, heading, 0.0, 0.0, 1, (-1.0,) * 5, holding))
+
+    attach, step, other = frame(), frame(holding=True), frame(holding=True, heading=1.0)
+    # The attach frame of tick 0 was lost on the way to the recorder; the step's was kept.
+    c = Comparison()
+    c.check(0, "a1", attach, [step])
+    c.check(0, "a1", step, [step])
+    assert c.settle() and c.identical and (c.matched, c.missing) == (1, 1)
+    # The world sent something else where the recording holds the step's frame.
+    c = Comparison()
+    c.check(0, "a1", attach, [step])
+    c.check(0, "a1", other, [step])
+    assert not c.settle() and "tick 0, agent a1" in c.first_difference
 
 
 def test_a_late_command_is_sent_at_the_tick_the_world_got_it(tmp_path):
