@@ -29,6 +29,7 @@ from protocol.messages import (
     SensorFrame,
     Welcome,
     WorldStatus,
+    WorldView,
 )
 
 __all__ = [
@@ -57,6 +58,7 @@ __all__ = [
     "SensorFrame",
     "Welcome",
     "WorldStatus",
+    "WorldView",
     "decode",
     "encode",
 ]

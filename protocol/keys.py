@@ -45,6 +45,12 @@ def blueprint(world: str) -> str:
     return f"{world_root(world)}/blueprint"
 
 
+def view(world: str) -> str:
+    """WorldView publications (every few ticks while someone subscribes) and a queryable
+    answering the current one: what a viewer draws."""
+    return f"{world_root(world)}/view"
+
+
 def agent_state(world: str, agent: str) -> str:
     """AgentState publications from one agent (what it does, what blocks it)."""
     return f"{world_root(world)}/agent/{check_id(agent, 'agent id')}/state"

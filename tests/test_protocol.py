@@ -40,6 +40,7 @@ from protocol import (
     SensorFrame,
     Welcome,
     WorldStatus,
+    WorldView,
     decode,
     encode,
     keys,
@@ -84,6 +85,10 @@ EXAMPLES: dict[type, object] = {
     Perturbation: Perturbation(op="move", x=1.0, y=2.0, kind="brick", to_x=3.5, to_y=-1.0, force=True),
     PerturbResult: PerturbResult(ok=True, message="moved brick", tick=501),
     LockstepTimeout: LockstepTimeout(world_id="w", tick=7, agent_ids=("a2", "a3")),
+    WorldView: WorldView(world_id="w", tick=40, width=12.0, height=8.0, disc_xs=(1.5, 2.5), disc_ys=(0.5, 0.5),
+                         disc_kinds=("brick", "food"), site_xs=(4.5,), site_ys=(3.5,), site_filled=(True,),
+                         agent_ids=("a1",), agent_alive=(True,), agent_x=(6.0,), agent_y=(2.0,),
+                         agent_heading=(0.5,), agent_holding=(False,), wall_xs=(0.5,), wall_ys=(7.5,)),
     Perturbed: Perturbed(tick=501, op="move", x=1.0, y=2.0, kind="brick", to_x=3.5, to_y=-1.0, ok=True,
                          message="moved brick"),
     Decision: Decision(
