@@ -331,7 +331,7 @@ def cmd_run(args) -> int:
                       extra_agent_args=("--map-size", str(args.map_size), *learn_args,
                                         *(("--nearest-first",) if args.nearest_first else ())),
                       teacher=args.teacher, weights_dir=args.weights_dir, stall_ticks=args.stall_ticks,
-                      record=args.record, view=args.view)
+                      record=args.record, view=args.view, maps_every=args.maps_every)
     with _stop_on_signals() as stop:
         summary = run(opts, stop)
     state = "complete" if summary["completed"] else "STALLED" if summary["stalled"] else "NOT complete"
@@ -460,6 +460,9 @@ def _add_run(sub) -> None:
                    help="record every message of the run to an MCAP file (conag record; see conag replay)")
     u.add_argument("--view", nargs="?", type=int, const=8765, metavar="PORT",
                    help="watch the run in the browser: starts `conag view` on PORT (default 8765)")
+    u.add_argument("--maps-every", type=_non_negative, default=0, metavar="N",
+                   help="the agents publish their maps every N ticks for --record (default 0: off) and --view "
+                        "(default: conag view's)")
     u.add_argument("--map-size", type=int, default=AGENT_MAP_SIZE, metavar="N",
                    help=f"cells per side of every agent's maps, odd (default {AGENT_MAP_SIZE})")
     u.add_argument("--nearest-first", action="store_true",

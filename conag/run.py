@@ -53,6 +53,7 @@ class RunOptions:
     stall_ticks: int = DEFAULT_STALL_TICKS  # stop when no site is filled for this many ticks; 0: never
     record: str | None = None         # record the run to this MCAP file (`conag record`)
     view: int | None = None           # serve the browser viewer on this port (`conag view`)
+    maps_every: int = 0               # the recorder and viewer ask for the agents' maps every N ticks
 
 
 @dataclass
@@ -229,7 +230,7 @@ def _start_recorder(opts: RunOptions) -> subprocess.Popen:
     cmd = [sys.executable, "-m", "conag", "record", opts.record, "--world-id", opts.world_id,
            "--connect", opts.endpoint, "--scenario", opts.scenario_path, "--seed", str(seed),
            "--note", f"agents={opts.agents if opts.agents is not None else opts.scenario.agents}",
-           "--note", "agent_args=" + " ".join(opts.extra_agent_args)]
+           "--note", "agent_args=" + " ".join(opts.extra_agent_args), "--maps-every", str(opts.maps_every)]
     return subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
 
 
@@ -237,6 +238,8 @@ def _start_viewer(opts: RunOptions) -> subprocess.Popen:
     """`conag view` on the run's bus; it prints the page's address (stdout is the run's)."""
     cmd = [sys.executable, "-m", "conag", "view", "--world-id", opts.world_id, "--connect", opts.endpoint,
            "--port", str(opts.view)]
+    if opts.maps_every:
+        cmd += ["--maps-every", str(opts.maps_every)]  # else the viewer's default
     if not opts.headless and sys.stdout.isatty():
         cmd.append("--open")
     return subprocess.Popen(cmd, stdin=subprocess.DEVNULL)

@@ -23,6 +23,8 @@ def add_commands(sub) -> None:
     v.add_argument("--port", type=int, default=DEFAULT_PORT, help=f"HTTP port (default {DEFAULT_PORT}; 0: any free)")
     v.add_argument("--host", default="127.0.0.1", help="address to serve on (default 127.0.0.1: this machine only)")
     v.add_argument("--open", action="store_true", help="open the page in the default browser")
+    v.add_argument("--maps-every", type=int, default=10, metavar="N",
+                   help="live: ask the agents for their maps every N ticks, for the agent panel (default 10; 0: off)")
     bus_args(v)
     v.set_defaults(func=cmd_view)
 
@@ -49,7 +51,8 @@ def cmd_view(args) -> int:
 
         session = open_session(bus_options(args))
         try:
-            serve_live(session, args.world_id, stop, host=args.host, port=args.port, on_ready=ready)
+            serve_live(session, args.world_id, stop, host=args.host, port=args.port, on_ready=ready,
+                       maps_every=max(args.maps_every, 0))
         finally:
             session.close()
     return 0

@@ -5,12 +5,16 @@ JSON API; the picture itself is built by the pure `viewer.scene`:
 
 * `GET /api/info`: `{"mode": "live" | "recording", ...}`;
 * live (`LiveFeed`): zenoh subscriptions to the world's WorldView, status, agent states and
-  decisions fold into one `Scene` under a lock; `GET /api/scene` is the picture now and
+  decisions fold into one `Scene` under a lock (decisions, one per agent per tick, are kept
+  undecoded and decoded only when a picture is built); `GET /api/scene` is the picture now and
   `GET /api/events` a Server-Sent Events stream sending it at `display_hz` (10 a second),
   only when something changed: a run of any speed costs the page ten pictures a second,
   and the world nothing but a WorldView every `view_every` ticks;
 * recording (`Timeline`): `GET /api/timeline` (ticks, progress, metadata) and
   `GET /api/frame?tick=T`, the picture of the newest view at or before T;
+* `GET /api/maps?agent=ID[&tick=T]`: that agent's newest map snapshot (at or before T in a
+  recording), `{"tick", "size", "layers": {name: cells}}` (agents publish them while a
+  viewer or recorder asks, `--maps-every`);
 * `POST /api/perturb` with `{"op", "x", "y", "to_x", "to_y", "kind"}`: the world's perturb
   query (remove or move a disc from the page), answered with the PerturbResult as JSON.
 """
@@ -20,6 +24,7 @@ from __future__ import annotations
 import json
 import logging
 import mimetypes
+import os
 import threading
 from collections.abc import Callable
 from http import HTTPStatus
@@ -33,7 +38,7 @@ from bus import Declarations
 from protocol import keys
 from protocol.codec import decode, encode
 from protocol.messages import Perturbation, PerturbResult
-from viewer.scene import LEAVES, Scene, Timeline, static_dir
+from viewer.scene import LEAVES, Scene, Timeline, decode_maps, maps_picture, static_dir
 
 log = logging.getLogger("conag.view")
 
@@ -49,6 +54,8 @@ class LiveFeed:
         self.scene = Scene()
         self._lock = threading.Lock()
         self._cache: tuple[int, str] = (-1, "")
+        self._decisions: dict[str, bytes] = {}  # the newest Decision of each agent, undecoded
+        self._maps: dict[str, list[bytes]] = {}  # the newest AgentMaps of each agent, undecoded
         self._declared = Declarations()
 
     def start(self) -> LiveFeed:
@@ -69,7 +76,16 @@ class LiveFeed:
                     self._apply(reply.ok.payload.to_bytes())
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
-        self._apply(sample.payload.to_bytes())
+        key = str(sample.key_expr)
+        if key.endswith("/maps"):
+            with self._lock:
+                self._maps.setdefault(keys.agent_of(key) or "", []).append(sample.payload.to_bytes())
+                del self._maps[keys.agent_of(key) or ""][:-16]  # a snapshot has at most 9 layers
+        elif key.endswith("/decision"):
+            # One per agent per tick: kept as bytes, decoded only when a picture is built.
+            self._decisions[key] = sample.payload.to_bytes()
+        else:
+            self._apply(sample.payload.to_bytes())
 
     def _apply(self, data: bytes) -> None:
         with self._lock:
@@ -80,8 +96,17 @@ class LiveFeed:
         with self._lock:
             version = self.scene.version
             if self._cache[0] != version:
+                for data in list(self._decisions.values()):
+                    self.scene.apply_bytes(data)
+                version = self.scene.version
                 self._cache = (version, json.dumps(self.scene.picture()))
             return self._cache
+
+    def maps(self, agent: str) -> dict[str, Any]:
+        """`agent`'s newest map snapshot (see `viewer.scene.maps_picture`)."""
+        with self._lock:
+            raw = list(self._maps.get(agent, ()))
+        return maps_picture(decode_maps(raw))
 
     def perturb(self, p: Perturbation, timeout: float = 5.0) -> PerturbResult:
         """Ask the world for `p`; a PerturbResult either way (not ok when no world answers)."""
@@ -180,6 +205,12 @@ def _handler(server: ViewerServer) -> type[BaseHTTPRequestHandler]:
                 self._send(source.picture()[1])
             elif path == "/api/events" and isinstance(source, LiveFeed):
                 self._events(source)
+            elif path == "/api/maps":
+                agent = query.get("agent", [""])[0]
+                if isinstance(source, LiveFeed):
+                    self._json(source.maps(agent))
+                else:
+                    self._json(source.maps_at(agent, int(query.get("tick", ["0"])[0] or 0)))
             elif path == "/api/timeline" and isinstance(source, Timeline):
                 self._json(source.summary())
             elif path == "/api/frame" and isinstance(source, Timeline):
@@ -244,9 +275,14 @@ def _handler(server: ViewerServer) -> type[BaseHTTPRequestHandler]:
 
 
 def serve_live(session: zenoh.Session, world_id: str, stop: threading.Event, *, host: str = "127.0.0.1",
-               port: int = 0, on_ready: Callable[[str], None] | None = None) -> None:
-    """Serve the live page for world `world_id` until `stop` is set."""
+               port: int = 0, on_ready: Callable[[str], None] | None = None, maps_every: int = 0) -> None:
+    """Serve the live page for world `world_id` until `stop` is set; with `maps_every` N, ask
+    the agents for their maps every N ticks while serving."""
     feed = LiveFeed(session, world_id).start()
+    token = None
+    if maps_every:
+        token = session.liveliness().declare_token(keys.maps_request_token(world_id, f"viewer-{os.getpid()}",
+                                                                            maps_every))
     try:
         with ViewerServer(feed, host, port).serve_in_thread() as server:
             if on_ready:
@@ -254,6 +290,8 @@ def serve_live(session: zenoh.Session, world_id: str, stop: threading.Event, *, 
             while not stop.wait(0.5):
                 pass
     finally:
+        if token is not None:
+            token.undeclare()
         feed.close()
 
 

@@ -51,6 +51,25 @@ def view(world: str) -> str:
     return f"{world_root(world)}/view"
 
 
+def agent_maps(world: str, agent: str) -> str:
+    """AgentMap publications (a debug key): one agent's map snapshots, while someone asks
+    for them with a `maps_request_token`."""
+    return f"{world_root(world)}/agent/{check_id(agent, 'agent id')}/maps"
+
+
+def maps_request_token(world: str, requester: str, every: int) -> str:
+    """A liveliness token asking every agent for its map snapshot each `every` ticks (at
+    ticks that are multiples of it); agents follow the smallest `every` among the tokens up."""
+    if not (isinstance(every, int) and every >= 1):
+        raise ValueError("maps every must be an int >= 1 (ticks)")
+    return f"{world_root(world)}/alive/maps/{check_id(requester, 'requester id')}/{every}"
+
+
+def all_maps_requests(world: str) -> str:
+    """Every maps request token, to watch."""
+    return f"{world_root(world)}/alive/maps/*/*"
+
+
 def agent_state(world: str, agent: str) -> str:
     """AgentState publications from one agent (what it does, what blocks it)."""
     return f"{world_root(world)}/agent/{check_id(agent, 'agent id')}/state"

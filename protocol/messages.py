@@ -534,8 +534,41 @@ class WorldView:
             check_id(a, "agent id")
 
 
+# The layers of an agent's map snapshot (AgentMap.layer): its six ESMs, both navigation maps
+# and the Matching grid.
+MAP_LAYERS = ("food", "water", "brick", "obstacle", "config", "agent", "config_nm", "brick_nm", "matching")
+MAP_LEVEL = 127  # cell values are 0..MAP_LEVEL (one msgpack byte each)
+NM_UNREACHABLE = MAP_LEVEL  # a navigation map cell from which no goal can be reached
+
+
+@dataclass(frozen=True)
+class AgentMap:
+    """Agent -> anyone (a viewer, a recorder), on request: one layer of its maps at `tick`.
+
+    `cells` is the size x size grid row by row, row 0 north, columns growing east, the
+    agent in the centre cell. ESM layers (food ... agent) and `matching` hold their value in
+    [0, 1] times MAP_LEVEL, rounded; the navigation maps (`config_nm`, `brick_nm`) hold the
+    path distance to the nearest goal in cells, rounded and capped at MAP_LEVEL - 1, and
+    NM_UNREACHABLE where no goal can be reached.
+    """
+
+    agent_id: str
+    tick: int
+    layer: str
+    size: int
+    cells: tuple[int, ...]
+
+    def __post_init__(self) -> None:
+        check_id(self.agent_id, "agent id")
+        _require(self.tick >= 0, "AgentMap.tick must be >= 0")
+        _require(self.layer in MAP_LAYERS, f"AgentMap.layer must be one of {MAP_LAYERS}")
+        _require(1 <= self.size <= 89 and self.size % 2 == 1, "AgentMap.size must be odd, 1 to 89")
+        _require(len(self.cells) == self.size * self.size, "AgentMap.cells must hold size x size values")
+        _require(all(0 <= c <= MAP_LEVEL for c in self.cells), f"AgentMap.cells must be 0 to {MAP_LEVEL}")
+
+
 MESSAGE_TYPES: tuple[type, ...] = (
     Hello, Welcome, SensorFrame, AgentCommand, CommandRejected, WorldStatus,
     Perturbation, PerturbResult, Decision, Reinforcement, RunControl, RunControlResult,
-    Blueprint, AgentState, Perturbed, LockstepTimeout, WorldView,
+    Blueprint, AgentState, Perturbed, LockstepTimeout, WorldView, AgentMap,
 )

@@ -146,3 +146,70 @@ def test_a_ticking_world_publishes_views_every_few_ticks_while_watched(bus, star
         assert v.tick % 5 == 0 and v.agent_x[0] > 0.5 + 0.3  # it moved off its start
     finally:
         feed.close()
+
+
+# --- the agents' maps (AgentMap, on request) ----------------------------------------------------
+
+def _brain_after_one_step():
+    from agent_runtime.brain import Brain
+
+    world = make(LAYOUT)
+    brain = Brain(world.attach("a1"))
+    brain.step(world.frame("a1"))
+    return brain
+
+
+def test_a_map_snapshot_holds_the_esms_both_nms_and_the_matching_grid():
+    from agent_runtime.snapshot import map_snapshot
+    from protocol.messages import MAP_LAYERS, NM_UNREACHABLE
+
+    brain = _brain_after_one_step()
+    maps = {m.layer: m for m in map_snapshot(brain, 7)}
+    assert set(maps) == set(MAP_LAYERS) and {m.tick for m in maps.values()} == {7}
+    n = brain.maps.size
+    c = n // 2
+    brick = maps["brick"].cells
+    assert brick[c * n + c + 2] > 0  # the free brick two cells east of the agent (row 0 north)
+    assert maps["brick_nm"].cells[c * n + c] not in (0, NM_UNREACHABLE)  # some way to it, not there yet
+    for m in maps.values():
+        assert len(encode(m)) < 4 * n * n  # about a byte a cell
+
+
+def test_agents_publish_their_maps_only_while_someone_asks(bus):
+    from nodes.agent_feeds import AgentFeeds
+    from protocol import keys
+    from protocol.messages import AgentMap
+
+    feeds_session, asker = bus.server_session(), bus.client_session()
+    feeds = AgentFeeds(feeds_session, "w0", "a1")
+    got = []
+    sub = asker.declare_subscriber(keys.agent_maps("w0", "a1"), lambda s: got.append(s.payload.to_bytes()))
+    brain = _brain_after_one_step()
+    try:
+        feeds.after_step(brain, 10)
+        assert feeds.maps_every == 0
+        token = asker.liveliness().declare_token(keys.maps_request_token("w0", "viewer", 5))
+        wait_until(lambda: feeds.maps_every == 5, what="the agent to hear the maps request")
+        feeds.after_step(brain, 11)  # not a multiple of 5
+        feeds.after_step(brain, 15)
+        wait_until(lambda: len(got) >= 9, what="one snapshot")
+        from protocol import decode
+
+        assert {decode(d, AgentMap).tick for d in got} == {15}
+        token.undeclare()
+        wait_until(lambda: feeds.maps_every == 0, what="the request to go")
+    finally:
+        sub.undeclare()
+        feeds.close()
+
+
+def test_the_timeline_gives_an_agents_maps_at_a_tick():
+    from agent_runtime.snapshot import map_snapshot
+
+    brain = _brain_after_one_step()
+    entries = [type("E", (), dict(key="conag/v3/world/w0/agent/a1/maps", tick=t, data=encode(m)))()
+               for t in (10, 20) for m in map_snapshot(brain, t)]
+    timeline = Timeline.from_entries(entries)
+    assert timeline.maps_at("a1", 15)["tick"] == 10 and timeline.maps_at("a1", 99)["tick"] == 20
+    assert timeline.maps_at("a1", 5)["layers"] == {} and timeline.maps_at("a2", 20)["size"] == 0
+    assert len(timeline.maps_at("a1", 20)["layers"]["config_nm"]) == brain.maps.size ** 2

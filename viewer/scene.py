@@ -16,7 +16,8 @@ page draws:
 
 A `Timeline` replays a recording's entries through a Scene and keeps one picture per
 recorded WorldView, so a page can scrub: `at(tick)` is the picture of the newest view at
-or before `tick`.
+or before `tick`; `maps_at(agent, tick)` the agent's newest map snapshot (AgentMap
+messages, recorded with `--maps-every`), as `maps_picture` gives it.
 """
 
 from __future__ import annotations
@@ -28,17 +29,41 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from protocol.codec import ProtocolError, decode
-from protocol.messages import BEHAVIOURS, AgentState, Decision, WorldStatus, WorldView
+from protocol.messages import BEHAVIOURS, AgentMap, AgentState, Decision, WorldStatus, WorldView
 
 STATE_NODES = ("holding_brick", "at_drop_site", "at_brick", "near_brick", "brick_available",
                "drop_site_available")  # Decision.state, in order
-LEAVES = ("view", "status", "state", "decision")  # the keys a viewer listens to (their last part)
+LEAVES = ("view", "status", "state", "decision", "maps")  # the keys a viewer listens to (their last part)
 _TYPES = (WorldView, WorldStatus, AgentState, Decision)
 
 
 def static_dir() -> Path:
     """The directory holding the page (index.html, viewer.js)."""
     return Path(__file__).resolve().parent / "static"
+
+
+def maps_picture(layers: Iterable[AgentMap]) -> dict[str, Any]:
+    """An agent's map snapshot as the page draws it: `{"tick", "size", "layers": {name: cells}}`
+    (the newest tick among `layers`, and only the layers of that tick)."""
+    layers = list(layers)
+    if not layers:
+        return {"tick": None, "size": 0, "layers": {}}
+    tick = max(m.tick for m in layers)
+    now = [m for m in layers if m.tick == tick]
+    return {"tick": tick, "size": now[0].size, "layers": {m.layer: list(m.cells) for m in now}}
+
+
+def decode_maps(raw: Iterable[bytes]) -> list[AgentMap]:
+    """The AgentMaps among `raw` encoded messages (others and bad ones left out)."""
+    out = []
+    for data in raw:
+        try:
+            msg = decode(data, AgentMap)
+        except ProtocolError:
+            continue
+        if isinstance(msg, AgentMap):
+            out.append(msg)
+    return out
 
 
 def wanted(key: str) -> bool:
@@ -158,11 +183,13 @@ class Timeline:
     chart over the whole recording; `info` whatever the recording's metadata said.
     """
 
-    def __init__(self, ticks: list[int], pictures: list[str], progress: list[list[int]], info: dict[str, Any]):
+    def __init__(self, ticks: list[int], pictures: list[str], progress: list[list[int]], info: dict[str, Any],
+                 maps: dict[str, tuple[list[int], list[list[bytes]]]] | None = None):
         self.ticks = ticks
         self.pictures = pictures
         self.progress = progress
         self.info = info
+        self.maps = maps or {}  # agent -> (ticks, the encoded AgentMaps of each tick)
 
     @classmethod
     def from_entries(cls, entries: Iterable[_Entry], info: dict[str, Any] | None = None,
@@ -171,7 +198,16 @@ class Timeline:
         scene = Scene(max_progress=10**9)
         ticks: list[int] = []
         pictures: list[str] = []
+        maps: dict[str, tuple[list[int], list[list[bytes]]]] = {}
         for e in entries:
+            if e.key.endswith("/maps"):
+                agent = e.key.rsplit("/", 2)[-2]
+                mt, layers = maps.setdefault(agent, ([], []))
+                if not mt or mt[-1] != e.tick:
+                    mt.append(e.tick)
+                    layers.append([])
+                layers[-1].append(e.data)
+                continue
             if not wanted(e.key) or not scene.apply_bytes(e.data):
                 continue
             if e.key.endswith("/view") and scene.view is not None and scene.view.tick == e.tick:
@@ -181,7 +217,7 @@ class Timeline:
                 else:
                     ticks.append(e.tick)
                     pictures.append(picture)
-        return cls(ticks, pictures, scene.progress, dict(info or {}))
+        return cls(ticks, pictures, scene.progress, dict(info or {}), maps)
 
     def __len__(self) -> int:
         return len(self.ticks)
@@ -197,8 +233,15 @@ class Timeline:
         i = self.index(tick)
         return None if i < 0 else self.pictures[i]
 
+    def maps_at(self, agent: str, tick: int) -> dict[str, Any]:
+        """`agent`'s newest map snapshot at or before `tick` (see `maps_picture`)."""
+        mt, layers = self.maps.get(agent, ([], []))
+        i = bisect.bisect_right(mt, tick) - 1
+        return maps_picture(decode_maps(layers[i]) if i >= 0 else [])
+
     def summary(self) -> dict[str, Any]:
         """What the page needs to draw the timeline: first and last tick, every picture's
         tick, the progress chart and the recording's metadata."""
         return {"first": self.ticks[0] if self.ticks else 0, "last": self.ticks[-1] if self.ticks else 0,
-                "ticks": self.ticks, "progress": self.progress, "info": self.info}
+                "ticks": self.ticks, "progress": self.progress, "info": self.info,
+                "maps_of": sorted(self.maps)}

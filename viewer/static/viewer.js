@@ -11,8 +11,11 @@ const viewer = window.viewer = { picture: null, mode: null, selectedAgent: null,
 viewer.toCanvas = (x, y) => [viewer.ox + x * viewer.scale, viewer.oy - y * viewer.scale];
 viewer.toWorld = (px, py) => [(px - viewer.ox) / viewer.scale, (viewer.oy - py) / viewer.scale];
 
-function fit(p) {
-  const s = Math.min((canvas.width - 2 * MARGIN) / p.width, (canvas.height - 2 * MARGIN) / p.height);
+const MAX_W = 820, MAX_H = 620;
+function fit(p) {  // the canvas takes the world's shape, at most MAX_W x MAX_H pixels
+  const s = Math.min((MAX_W - 2 * MARGIN) / p.width, (MAX_H - 2 * MARGIN) / p.height);
+  const w = Math.round(p.width * s + 2 * MARGIN), h = Math.round(p.height * s + 2 * MARGIN);
+  if (canvas.width !== w || canvas.height !== h) { canvas.width = w; canvas.height = h; }
   viewer.scale = s; viewer.ox = MARGIN; viewer.oy = MARGIN + p.height * s;
 }
 
@@ -28,9 +31,9 @@ function cell(x, y, fill, inset) {
 
 function draw(p) {
   viewer.picture = p;
-  ctx.clearRect(0, 0, canvas.width, canvas.height);
   if (!p.width) { document.getElementById("status").textContent = "waiting for the world's first view..."; return; }
   fit(p);
+  ctx.clearRect(0, 0, canvas.width, canvas.height);
   const [x0, y0] = viewer.toCanvas(0, p.height);
   ctx.strokeStyle = "#888"; ctx.lineWidth = 1; ctx.strokeRect(x0, y0, p.width * viewer.scale, p.height * viewer.scale);
   for (const [x, y] of p.walls) cell(x, y, COLOURS.wall, 0);
@@ -106,11 +109,41 @@ function drawAgents(p) {
     lines.push(`state nodes (tick ${a.decision_tick}): ` + Object.entries(a.state_nodes).map(([k, v]) => `${k} ${v}`).join(", "));
     lines.push(`arm ${a.arm}, motor ${a.motor}`);
   } else lines.push("state nodes: published by learning students only (Decision)");
-  lines.push("maps (ESMs, NMs, Matching): not published by agents yet");
   d.textContent = lines.join("\n");
 }
 
-function selectAgent(id) { viewer.selectedAgent = id; if (viewer.picture) draw(viewer.picture); }
+// the selected agent's maps: ESMs grey (dark = sure), NMs bright near a goal, dark far, black unreachable
+const MAP_ORDER = ["food", "water", "brick", "obstacle", "config", "agent", "config_nm", "brick_nm", "matching"];
+async function loadMaps() {
+  const id = viewer.selectedAgent, note = document.getElementById("mapsnote"), box = document.getElementById("maps");
+  if (!id) { box.innerHTML = ""; note.textContent = ""; return; }
+  const tick = viewer.picture ? viewer.picture.tick : 0;
+  const m = await (await fetch(`/api/maps?agent=${encodeURIComponent(id)}&tick=${tick}`)).json();
+  viewer.maps = m;
+  if (!m.size) { box.innerHTML = "";
+    note.textContent = "no maps from this agent (a viewer or recorder asks for them with --maps-every N)"; return; }
+  note.textContent = `maps of ${id} at tick ${m.tick}, ${m.size} x ${m.size} cells, the agent in the centre`;
+  box.innerHTML = "";
+  for (const name of MAP_ORDER) {
+    const cells = m.layers[name]; if (!cells) continue;
+    const fig = document.createElement("figure"), c = document.createElement("canvas");
+    c.width = c.height = m.size; c.style.width = c.style.height = `${m.size * 2}px`; c.dataset.layer = name;
+    const img = c.getContext("2d").createImageData(m.size, m.size), nm = name.endsWith("_nm");
+    cells.forEach((v, i) => {
+      let r, g, b;
+      if (nm) { if (v >= 127) { r = g = b = 0; } else { const k = Math.max(0, 1 - v / 40); r = 255 * k; g = 200 * k; b = 60 * k; } }
+      else { r = g = b = 255 - 2 * v; }
+      img.data.set([r, g, b, 255], 4 * i);
+    });
+    const mid = (m.size >> 1) * m.size + (m.size >> 1); img.data.set([200, 30, 90, 255], 4 * mid);
+    c.getContext("2d").putImageData(img, 0, 0);
+    fig.appendChild(c); const cap = document.createElement("figcaption"); cap.textContent = name; fig.appendChild(cap);
+    box.appendChild(fig);
+  }
+}
+setInterval(() => { if (viewer.selectedAgent && viewer.mode === "live") loadMaps(); }, 1000);
+
+function selectAgent(id) { viewer.selectedAgent = id; if (viewer.picture) draw(viewer.picture); loadMaps(); }
 
 function nearest(items, x, y, reach) {
   let best = null, bd = reach;
@@ -173,6 +206,7 @@ async function recording(info) {
       const t = wanted; wanted = null;
       const p = await (await fetch(`/api/frame?tick=${t}`)).json();
       draw(p);
+      if (viewer.selectedAgent) await loadMaps();
     }
     inflight = false;
   }
