@@ -24,7 +24,7 @@ def add_commands(sub) -> None:
     v.add_argument("--host", default="127.0.0.1", help="address to serve on (default 127.0.0.1: this machine only)")
     v.add_argument("--open", action="store_true", help="open the page in the default browser")
     v.add_argument("--maps-every", type=int, default=10, metavar="N",
-                   help="live: ask the agents for their maps every N ticks, for the agent panel (default 10; 0: off)")
+                   help="live: ask the agent shown in the page's panel for its maps every N ticks (default 10; 0: off)")
     bus_args(v)
     v.set_defaults(func=cmd_view)
 

@@ -11,8 +11,9 @@ Every `every` ticks, and once more on the way out, the agent publishes the brain
 AgentState (what it is doing, what blocks it): `conag run` prints the last one per agent
 when a build stalls, and the world keeps it for the run summary's behaviour counts.
 
-While some liveliness token `keys.maps_request_token(world, requester, N)` is up (a
-recorder or viewer started with `--maps-every N`), the agent also publishes its maps
+While some liveliness token `keys.maps_request_token(world, requester, N, agent)` for this
+agent or for all is up (a recorder with `--maps-every N` asks all agents, a viewer the one
+its page shows), the agent also publishes its maps
 (`agent_runtime.snapshot`: the ESMs, both NMs, the Matching grid; one AgentMap per layer)
 at every tick that is a multiple of the smallest such N; with none up it publishes nothing.
 """
@@ -52,7 +53,8 @@ class AgentFeeds:
         self._maps_requests: Counter[int] = Counter()
         self._maps = self._declared.add(session.declare_publisher(
             keys.agent_maps(world_id, agent_id), congestion_control=zenoh.CongestionControl.DROP))
-        self._declared.add(watch_tokens(session, keys.all_maps_requests(world_id), self._on_maps_request))
+        for key in keys.maps_requests_for(world_id, agent_id):
+            self._declared.add(watch_tokens(session, key, self._on_maps_request))
 
     def _on_maps_request(self, every: str, up: bool) -> None:
         if not every.isdigit() or int(every) < 1:

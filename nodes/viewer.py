@@ -4,9 +4,9 @@ The standard library's `ThreadingHTTPServer` serves the page (`viewer/static/`) 
 JSON API; the picture itself is built by the pure `viewer.scene`:
 
 * `GET /api/info`: `{"mode": "live" | "recording", ...}`;
-* live (`LiveFeed`): zenoh subscriptions to the world's WorldView, status, agent states and
-  decisions fold into one `Scene` under a lock (decisions, one per agent per tick, are kept
-  undecoded and decoded only when a picture is built); `GET /api/scene` is the picture now and
+* live (`LiveFeed`): zenoh subscriptions to the world's WorldView, status and agent states
+  fold into one `Scene` under a lock; the decisions and maps of the agent the page shows
+  only (decisions, one per tick, kept undecoded until a picture is built); `GET /api/scene` is the picture now and
   `GET /api/events` a Server-Sent Events stream sending it at `display_hz` (10 a second),
   only when something changed: a run of any speed costs the page ten pictures a second,
   and the world nothing but a WorldView every `view_every` ticks;
@@ -34,7 +34,7 @@ from urllib.parse import parse_qs, urlparse
 
 import zenoh
 
-from bus import Declarations
+from bus import Declarations, undeclare
 from protocol import keys
 from protocol.codec import decode, encode
 from protocol.messages import Perturbation, PerturbResult
@@ -46,11 +46,22 @@ DISPLAY_HZ = 10.0
 
 
 class LiveFeed:
-    """One world's messages folded into a Scene (thread-safe), and its perturb query."""
+    """One world's messages folded into a Scene (thread-safe), and its perturb query.
 
-    def __init__(self, session: zenoh.Session, world_id: str):
+    Everything costly to the run is asked for only for the agent the page shows (`select`):
+    its Decisions (one per tick) and, with `maps_every` N, its maps every N ticks (a maps
+    request token for that agent alone). With no agent selected the agents send the viewer
+    nothing but their AgentState reports (every 100 ticks).
+    """
+
+    def __init__(self, session: zenoh.Session, world_id: str, maps_every: int = 0, requester: str | None = None):
         self.session = session
         self.world_id = world_id
+        self.maps_every = maps_every
+        self.requester = requester or f"viewer-{os.getpid()}"
+        self.selected: str | None = None
+        self._selection: list[Any] = []   # the selected agent's decision subscriber and maps token
+        self._select_lock = threading.Lock()
         self.scene = Scene()
         self._lock = threading.Lock()
         self._cache: tuple[int, str] = (-1, "")
@@ -63,10 +74,27 @@ class LiveFeed:
         publishes no view until it does)."""
         root = keys.world_root(self.world_id)
         for leaf in LEAVES:
+            if leaf == "decision":
+                continue  # only the selected agent's (`select`)
             key = f"{root}/{leaf}" if leaf in ("view", "status") else keys.all_agents(self.world_id, leaf)
             self._declared.add(self.session.declare_subscriber(key, self._on_sample))
         self.refresh()
         return self
+
+    def select(self, agent: str) -> None:
+        """Follow `agent` in detail: its Decisions, and its maps every `maps_every` ticks."""
+        keys.check_id(agent, "agent id")
+        with self._select_lock:
+            if agent == self.selected:
+                return
+            undeclare(*self._selection)
+            self._selection = [self.session.declare_subscriber(keys.decision(self.world_id, agent), self._on_sample)]
+            if self.maps_every:
+                self._selection.append(self.session.liveliness().declare_token(
+                    keys.maps_request_token(self.world_id, self.requester, self.maps_every, agent)))
+            self.selected = agent
+            with self._lock:
+                self._decisions.clear()
 
     def refresh(self, timeout: float = 2.0) -> None:
         """Query the world's view and status now."""
@@ -103,7 +131,8 @@ class LiveFeed:
             return self._cache
 
     def maps(self, agent: str) -> dict[str, Any]:
-        """`agent`'s newest map snapshot (see `viewer.scene.maps_picture`)."""
+        """`agent`'s newest map snapshot (see `viewer.scene.maps_picture`); selects it."""
+        self.select(agent)
         with self._lock:
             raw = list(self._maps.get(agent, ()))
         return maps_picture(decode_maps(raw))
@@ -117,7 +146,10 @@ class LiveFeed:
         return PerturbResult(False, f"no world {self.world_id!r} answered within {timeout:g} s", 0)
 
     def close(self) -> None:
-        """Undeclare the subscriptions (the session is the caller's)."""
+        """Undeclare the subscriptions and the maps request (the session is the caller's)."""
+        with self._select_lock:
+            undeclare(*self._selection)
+            self._selection = []
         self._declared.close()
 
 
@@ -208,7 +240,10 @@ def _handler(server: ViewerServer) -> type[BaseHTTPRequestHandler]:
             elif path == "/api/maps":
                 agent = query.get("agent", [""])[0]
                 if isinstance(source, LiveFeed):
-                    self._json(source.maps(agent))
+                    try:
+                        self._json(source.maps(agent))
+                    except ValueError as exc:
+                        self._json({"error": str(exc)}, HTTPStatus.BAD_REQUEST)
                 else:
                     self._json(source.maps_at(agent, int(query.get("tick", ["0"])[0] or 0)))
             elif path == "/api/timeline" and isinstance(source, Timeline):
@@ -277,12 +312,8 @@ def _handler(server: ViewerServer) -> type[BaseHTTPRequestHandler]:
 def serve_live(session: zenoh.Session, world_id: str, stop: threading.Event, *, host: str = "127.0.0.1",
                port: int = 0, on_ready: Callable[[str], None] | None = None, maps_every: int = 0) -> None:
     """Serve the live page for world `world_id` until `stop` is set; with `maps_every` N, ask
-    the agents for their maps every N ticks while serving."""
-    feed = LiveFeed(session, world_id).start()
-    token = None
-    if maps_every:
-        token = session.liveliness().declare_token(keys.maps_request_token(world_id, f"viewer-{os.getpid()}",
-                                                                            maps_every))
+    the agent the page shows for its maps every N ticks."""
+    feed = LiveFeed(session, world_id, maps_every).start()
     try:
         with ViewerServer(feed, host, port).serve_in_thread() as server:
             if on_ready:
@@ -290,8 +321,6 @@ def serve_live(session: zenoh.Session, world_id: str, stop: threading.Event, *, 
             while not stop.wait(0.5):
                 pass
     finally:
-        if token is not None:
-            token.undeclare()
         feed.close()
 
 

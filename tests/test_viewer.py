@@ -121,6 +121,28 @@ def test_the_live_scene_is_the_world_and_a_click_removes_a_disc(live):
     wait_until(lambda: [4.5, 0.5, "food"] in get(server.url + "api/scene")["discs"], what="the moved food disc")
 
 
+def test_the_page_asks_for_the_maps_of_the_agent_it_shows_only(bus):
+    from protocol import keys
+
+    feed = LiveFeed(bus.server_session(), "w0", maps_every=10, requester="v1").start()
+    watcher = bus.client_session()
+
+    def requests(agent):
+        return sorted(str(r.ok.key_expr) for key in keys.maps_requests_for("w0", agent)
+                      for r in watcher.liveliness().get(key, timeout=1) if r.ok is not None)
+
+    try:
+        with ViewerServer(feed).serve_in_thread() as server:
+            assert requests("a1") == []  # nobody shown: nobody asked
+            assert get(server.url + "api/maps?agent=a1") == {"tick": None, "size": 0, "layers": {}}
+            assert feed.selected == "a1"
+            wait_until(lambda: requests("a1") == ["conag/v3/world/w0/alive/maps/v1/a1/10"], what="a1's request")
+            get(server.url + "api/maps?agent=a2")
+            wait_until(lambda: requests("a1") == [] and requests("a2"), what="the request to follow the page")
+    finally:
+        feed.close()
+
+
 def test_a_recording_cannot_be_perturbed_and_its_frames_are_served_by_tick():
     timeline = Timeline.from_entries([type("E", (), dict(key="conag/v3/world/w0/view", tick=t,
                                                          data=encode(view(t, 0.5 + t / 10))))() for t in (0, 10)])
@@ -188,8 +210,14 @@ def test_agents_publish_their_maps_only_while_someone_asks(bus):
     try:
         feeds.after_step(brain, 10)
         assert feeds.maps_every == 0
-        token = asker.liveliness().declare_token(keys.maps_request_token("w0", "viewer", 5))
+        other = asker.liveliness().declare_token(keys.maps_request_token("w0", "viewer", 2, agent="a2"))
+        token = asker.liveliness().declare_token(keys.maps_request_token("w0", "recorder", 5))  # all agents
         wait_until(lambda: feeds.maps_every == 5, what="the agent to hear the maps request")
+        mine = asker.liveliness().declare_token(keys.maps_request_token("w0", "viewer2", 3, agent="a1"))
+        wait_until(lambda: feeds.maps_every == 3, what="the agent to hear the request for it alone")
+        mine.undeclare()
+        wait_until(lambda: feeds.maps_every == 5, what="the request for it alone to go")
+        other.undeclare()
         feeds.after_step(brain, 11)  # not a multiple of 5
         feeds.after_step(brain, 15)
         wait_until(lambda: len(got) >= 9, what="one snapshot")

@@ -53,7 +53,7 @@ def browser():
     opts = webdriver.ChromeOptions()
     opts.binary_location = CHROMIUM
     for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
-                "--window-size=1240,900", "--force-device-scale-factor=1"):
+                "--window-size=1240,1000", "--force-device-scale-factor=1"):
         opts.add_argument(arg)
     driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=opts)
     driver.set_script_timeout(10)
@@ -134,7 +134,7 @@ def test_the_live_page_draws_the_world_and_a_click_removes_a_disc(bus, browser):
             wait_until(lambda: near(pixel(browser, 2.5, 0.5), "blank"), what="the brick to vanish from the canvas")
             after = rw.world.view()
             assert (2.5, 0.5) not in set(zip(after.disc_xs, after.disc_ys))  # gone from the world itself
-            assert "done" in browser.find_element(By.ID, "perturbed").text
+            wait_until(lambda: "done" in browser.find_element(By.ID, "perturbed").text, what="the page's 'done'")
     finally:
         feed.close()
         rw.close()
@@ -168,14 +168,15 @@ def test_the_recording_page_scrubs_the_timeline(tmp_path, browser):
 
 
 def test_a_recorded_fig19_build_opens_and_plays(tmp_path, browser):
-    """`conag run --record`, then `conag view FILE.mcap`: the final picture matches the
-    recording's last view, and playing the timeline moves through the ticks."""
+    """`conag run --record --maps-every 10`, then `conag view FILE.mcap`: the final picture
+    matches the recording's last view, the agent's maps show on a click, and playing the
+    timeline moves through the ticks."""
     from selenium.webdriver.common.by import By
 
     rec = tmp_path / "r.mcap"
     env = dict(os.environ)
     run = subprocess.run([sys.executable, "-m", "conag", "run", str(SCENARIOS / "fig19.toml"), "--record", str(rec),
-                          "--headless", "--quiet", "--listen", f"tcp/127.0.0.1:{_port()}"],
+                          "--headless", "--quiet", "--maps-every", "10", "--listen", f"tcp/127.0.0.1:{_port()}"],
                          cwd=ROOT, capture_output=True, text=True, timeout=600, env=env)
     assert run.returncode == 0, run.stdout + run.stderr
     proc = subprocess.Popen([sys.executable, "-m", "conag", "view", str(rec), "--port", "0"], cwd=ROOT,
@@ -198,10 +199,14 @@ def test_a_recorded_fig19_build_opens_and_plays(tmp_path, browser):
         check_drawn_where_the_world_says(browser, v)
         assert "COMPLETE" in browser.find_element(By.ID, "status").text or "21/21" in \
             browser.find_element(By.ID, "status").text
+        browser.find_element(By.CSS_SELECTOR, "#agents tr.agent").click()  # a1: its details and maps
+        wait_until(lambda: "behaviour" in browser.find_element(By.ID, "details").text, what="the details")
+        wait_until(lambda: len(browser.find_elements(By.CSS_SELECTOR, "#maps canvas")) == 9, what="a1's nine maps")
+        maps = browser.execute_script("return window.viewer.maps")
+        assert maps["tick"] <= timeline["last"] and maps["size"] == 41
+        assert max(maps["layers"]["config"]) > 0  # the blueprint's sites on its configuration ESM
         shot = os.environ.get("CONAG_SCREENSHOT")
         if shot:
-            browser.find_element(By.CSS_SELECTOR, "#agents tr.agent").click()  # its details in the picture
-            wait_until(lambda: "behaviour" in browser.find_element(By.ID, "details").text, what="the details")
             browser.find_element(By.TAG_NAME, "body").screenshot(shot)
         browser.execute_script(f"window.viewer.seek({timeline['first']})")
         wait_until(lambda: picture(browser)["tick"] == timeline["first"], what="back to the first picture")
@@ -231,3 +236,34 @@ def _get(url: str) -> str:
 
     with urllib.request.urlopen(url, timeout=10) as r:
         return r.read().decode()
+
+
+def test_conag_run_view_shows_the_build_live(browser):
+    """`conag run --view PORT`: the page follows the run as it builds (ticks go on, sites
+    fill) and draws each body and filled site where its pictures say."""
+    from types import SimpleNamespace
+
+    from tests.conftest import Process, free_port
+
+    port = free_port()
+    run = Process("run", str(SCENARIOS / "fig19.toml"), "--headless", "--view", str(port),
+                  "--listen", f"tcp/127.0.0.1:{free_port()}")
+    try:
+        run.wait_for("viewer at ", timeout=30)
+        browser.get(f"http://127.0.0.1:{port}/")
+        wait_until(lambda: browser.execute_script("return window.viewer && window.viewer.mode") == "live",
+                   what="the live page")
+        first = wait_until(lambda: (p := picture(browser)) and p["tick"] > 0 and p["agents"] and p,
+                           timeout=60, what="a ticking world on the page")
+        later = wait_until(lambda: (p := picture(browser)) and p["sites_filled"] > first["sites_filled"] and p,
+                           timeout=120, what="a site filled while watching")
+        assert later["tick"] > first["tick"]
+        browser.execute_script("window.viewer.frozen = true")  # nothing else to compare against meanwhile
+        p = picture(browser)
+        v = SimpleNamespace(site_xs=[s[0] for s in p["sites"]], site_ys=[s[1] for s in p["sites"]],
+                            site_filled=[s[2] for s in p["sites"]], agent_ids=[a["id"] for a in p["agents"]],
+                            agent_x=[a["x"] for a in p["agents"]], agent_y=[a["y"] for a in p["agents"]],
+                            agent_heading=[a["heading"] for a in p["agents"]])
+        check_drawn_where_the_world_says(browser, v)
+    finally:
+        run.stop(timeout=30)

@@ -185,7 +185,7 @@ document.getElementById("move").onclick = () => { viewer.moving = true;
 // live: pictures pushed at the display rate ---------------------------------------------------
 function live() {
   const es = new EventSource("/api/events");
-  es.onmessage = (ev) => draw(JSON.parse(ev.data));
+  es.onmessage = (ev) => { if (!viewer.frozen) draw(JSON.parse(ev.data)); };  // frozen: tests read one picture
   fetch("/api/scene").then(r => r.json()).then(p => { if (!viewer.frames) draw(p); });
 }
 
