@@ -1,18 +1,24 @@
-"""Viewer overhead: the same lockstep `conag run` with and without `--view` and a page following it.
+"""Viewer overhead: what watching a lockstep `conag run` costs it.
 
-    python3 -m bench.bench_view                          # fig6 with 10 agents, 1000 ticks, 2 repetitions
-    python3 -m bench.bench_view --agents 10 --ticks 2000 --reps 3
+    python3 -m bench.bench_view                          # fig6 with 10 agents, 800 ticks, 2 repetitions
+    python3 -m bench.bench_view --agents 10 --ticks 2000 --reps 3 --select a1
 
-As bench/bench_record.py, alternating without and with the viewer, timing the build's tick
-rate from its progress lines. With the viewer, `conag run --view PORT` serves the page and
-a headless Chromium (`/usr/bin/chromium`) keeps it open, receiving its pictures (Server-Sent
-Events at ten a second) for the whole run; the agents publish no maps (`--maps-every 0`
-is the run's default) unless `--maps-every N` is given.
+As bench/bench_record.py, alternating runs without and with a viewer, timing the build's
+tick rate from its progress lines. With the viewer, `conag view` (started here, connected
+to the run) serves the page and a headless Chromium (`/usr/bin/chromium`) keeps it open
+for the whole run, receiving its pictures (Server-Sent Events, ten a second); with
+`--select ID` the page shows that agent (its decisions and maps every 10 ticks).
+
+On a shared machine the tick rates swing with everyone else's load, so the CPU time the
+viewer and the page (Chromium and all its processes) used while the build went on (from the
+first progress line to the last, read from /proc) is printed too: that is what they take
+from the run on a machine whose cores the run fills.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import shutil
 import statistics
 import subprocess
@@ -22,56 +28,93 @@ import time
 from bench.bench_record import LINE, ROOT
 
 
-def one_run(scenario: str, agents: int, ticks: int, port: int, view_port: int | None, maps_every: int) -> float:
+def tree_cpu(pid: int) -> float:
+    """CPU seconds used so far by process `pid` and all its live descendants (Linux /proc)."""
+    stats = {}
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat") as f:
+                    fields = f.read().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            stats[int(entry)] = (int(fields[1]), (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK"))
+    total, todo = 0.0, [pid]
+    while todo:
+        p = todo.pop()
+        if p in stats:
+            total += stats[p][1]
+        todo += [c for c, (ppid, _) in stats.items() if ppid == p]
+    return total
+
+
+def one_run(scenario: str, agents: int, ticks: int, port: int, view_port: int | None,
+            select: str | None) -> tuple[float, float, float, float]:
+    """(ticks per second, wall seconds of the build, CPU seconds of the viewer, of the page)."""
     cmd = [sys.executable, "-m", "conag", "run", scenario, "--headless", "--agents", str(agents), "--max-ticks",
            str(ticks), "--stall-ticks", "0", "--listen", f"tcp/127.0.0.1:{port}"]
-    if view_port is not None:
-        cmd += ["--view", str(view_port), "--maps-every", str(maps_every)]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, text=True)
-    browser = None
+    viewer = browser = None
     first = last = None
+    cpu_view = cpu_page = 0.0
+    start_cpu = (0.0, 0.0)
     try:
         for line in proc.stdout:
-            if view_port is not None and browser is None and line.startswith("viewer at "):
+            if view_port is not None and viewer is None:
+                viewer = subprocess.Popen([sys.executable, "-m", "conag", "view", "--connect", f"tcp/127.0.0.1:{port}",
+                                           "--port", str(view_port)], cwd=ROOT, stdout=subprocess.PIPE, text=True)
+                url = viewer.stdout.readline().split()[-1]
+                if select:
+                    url += f"#select={select}"
                 browser = subprocess.Popen([shutil.which("chromium") or "/usr/bin/chromium", "--headless=new",
-                                            "--no-sandbox", "--disable-gpu", "--remote-debugging-port=0",
-                                            line.split()[-1]], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                                            "--no-sandbox", "--disable-gpu", "--remote-debugging-port=0", url],
+                                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
             m = LINE.match(line)
             if m and int(m.group(1)) >= 1:
                 now = time.monotonic()
+                if first is None and viewer is not None:
+                    start_cpu = (tree_cpu(viewer.pid), tree_cpu(browser.pid))
                 first = first or (int(m.group(1)), now)
                 last = (int(m.group(1)), now)
+                if viewer is not None:  # the CPU they used while the build went on
+                    cpu_view, cpu_page = tree_cpu(viewer.pid) - start_cpu[0], tree_cpu(browser.pid) - start_cpu[1]
         proc.wait()
     finally:
-        if browser is not None:
-            browser.terminate()
-            browser.wait(10)
+        for p in (browser, viewer):
+            if p is not None:
+                p.terminate()
+                p.wait(10)
     if first is None or last is None or last[0] <= first[0]:
         raise RuntimeError(f"no progress lines from {' '.join(cmd)}")
-    return (last[0] - first[0]) / (last[1] - first[1])
+    return (last[0] - first[0]) / (last[1] - first[1]), last[1] - first[1], cpu_view, cpu_page
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--scenario", default="scenarios/fig6.toml")
     p.add_argument("--agents", type=int, default=10)
-    p.add_argument("--ticks", type=int, default=1000)
+    p.add_argument("--ticks", type=int, default=800)
     p.add_argument("--reps", type=int, default=2)
     p.add_argument("--port", type=int, default=17611)
     p.add_argument("--view-port", type=int, default=17612)
-    p.add_argument("--maps-every", type=int, default=0)
+    p.add_argument("--select", metavar="ID", help="the page shows this agent (its decisions and maps)")
     args = p.parse_args(argv)
-    plain, viewed = [], []
+    plain, viewed, share = [], [], []
     for rep in range(args.reps):
-        plain.append(one_run(args.scenario, args.agents, args.ticks, args.port, None, 0))
-        viewed.append(one_run(args.scenario, args.agents, args.ticks, args.port, args.view_port, args.maps_every))
-        print(f"rep {rep + 1}: {plain[-1]:.0f} ticks/s without, {viewed[-1]:.0f} with the viewer and a page",
-              flush=True)
+        plain.append(one_run(args.scenario, args.agents, args.ticks, args.port, None, None)[0])
+        rate, wall, cpu_view, cpu_page = one_run(args.scenario, args.agents, args.ticks, args.port, args.view_port,
+                                                 args.select)
+        viewed.append(rate)
+        share.append((cpu_view + cpu_page) / wall)
+        print(f"rep {rep + 1}: {plain[-1]:.0f} ticks/s without, {rate:.0f} with the viewer and a page; viewer "
+              f"{cpu_view:.1f} s CPU, page {cpu_page:.1f} s CPU over a {wall:.0f} s build "
+              f"({100 * share[-1]:.0f}% of one core)", flush=True)
     a, b = statistics.median(plain), statistics.median(viewed)
-    print(f"{args.scenario}, {args.agents} agents, {args.ticks} ticks, {args.reps} repetitions: median {a:.0f} "
-          f"ticks/s without, {b:.0f} with the viewer (maps every {args.maps_every or 'never'}): slowdown "
-          f"{100 * (a - b) / a:.1f}% (ranges {min(plain):.0f}-{max(plain):.0f} and "
-          f"{min(viewed):.0f}-{max(viewed):.0f})")
+    print(f"{args.scenario}, {args.agents} agents, {args.ticks} ticks, {args.reps} repetitions"
+          f"{', page showing ' + args.select if args.select else ''}: median {a:.0f} ticks/s without, {b:.0f} "
+          f"with the viewer: slowdown {100 * (a - b) / a:.1f}% (ranges {min(plain):.0f}-{max(plain):.0f} and "
+          f"{min(viewed):.0f}-{max(viewed):.0f}); viewer and page used {100 * statistics.median(share):.0f}% of "
+          "one core")
     return 0
 
 

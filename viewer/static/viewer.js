@@ -85,6 +85,9 @@ function drawChart(points, total, tick) {
 
 function drawAgents(p) {
   const body = document.querySelector("#agents tbody");
+  const rows = JSON.stringify([viewer.selectedAgent, p.agents.map(a => [a.id, a.alive, a.behaviour, a.holding])]);
+  if (rows === viewer.rows) { drawDetails(p); return; }  // the table only when it changed: DOM work is the dearest
+  viewer.rows = rows;
   body.innerHTML = "";
   for (const a of p.agents) {
     const tr = document.createElement("tr");
@@ -96,6 +99,10 @@ function drawAgents(p) {
     tr.onclick = () => selectAgent(a.id);
     body.appendChild(tr);
   }
+  drawDetails(p);
+}
+
+function drawDetails(p) {
   const a = p.agents.find(q => q.id === viewer.selectedAgent), d = document.getElementById("details");
   if (!a) { d.textContent = "none"; return; }
   const lines = [`${a.id} at (${a.x.toFixed(2)}, ${a.y.toFixed(2)}), heading ${(a.heading * 180 / Math.PI).toFixed(0)} deg`,
@@ -232,4 +239,6 @@ fetch("/api/info").then(r => r.json()).then(info => {
   viewer.mode = info.mode;
   document.getElementById("mode").textContent = info.mode === "live" ? "live" : "recording";
   if (info.mode === "live") live(); else recording(info);
+  const pick = /select=([A-Za-z0-9_.-]+)/.exec(location.hash);  // a link to one agent: page#select=a1
+  if (pick) selectAgent(pick[1]);
 });
