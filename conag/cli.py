@@ -35,6 +35,7 @@ from conag.common import bus_options as _bus
 from conag.common import stop_on_signals as _stop_on_signals
 from conag.layouts import add_commands as add_layout_commands
 from conag.recordings import add_commands as add_recording_commands
+from conag.view import add_commands as add_view_commands
 from world_server.summary import write_summary
 
 EXIT_USAGE = 2
@@ -330,7 +331,7 @@ def cmd_run(args) -> int:
                       extra_agent_args=("--map-size", str(args.map_size), *learn_args,
                                         *(("--nearest-first",) if args.nearest_first else ())),
                       teacher=args.teacher, weights_dir=args.weights_dir, stall_ticks=args.stall_ticks,
-                      record=args.record)
+                      record=args.record, view=args.view, maps_every=args.maps_every)
     with _stop_on_signals() as stop:
         summary = run(opts, stop)
     state = "complete" if summary["completed"] else "STALLED" if summary["stalled"] else "NOT complete"
@@ -363,7 +364,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for add in (_add_world, _add_status, _add_perturb, _add_agent, _add_teacher, _add_run, _add_control,
-                _add_render, add_layout_commands, add_recording_commands, _add_router):
+                _add_render, add_layout_commands, add_recording_commands, add_view_commands, _add_router):
         add(sub)  # add_layout_commands: generate, check; add_recording_commands: record, replay, echo
     for command in sub.choices.values():  # -v also after the subcommand: `conag world X -v`
         command.add_argument("-v", "--verbose", dest="verbose_after", action="count", default=0,
@@ -457,6 +458,11 @@ def _add_run(sub) -> None:
     u.add_argument("--world-id", default="w0")
     u.add_argument("--record", metavar="OUT.mcap",
                    help="record every message of the run to an MCAP file (conag record; see conag replay)")
+    u.add_argument("--view", nargs="?", type=int, const=8765, metavar="PORT",
+                   help="watch the run in the browser: starts `conag view` on PORT (default 8765)")
+    u.add_argument("--maps-every", type=_non_negative, default=0, metavar="N",
+                   help="the agents publish their maps every N ticks for --record (default 0: off) and --view "
+                        "(default: conag view's)")
     u.add_argument("--map-size", type=int, default=AGENT_MAP_SIZE, metavar="N",
                    help=f"cells per side of every agent's maps, odd (default {AGENT_MAP_SIZE})")
     u.add_argument("--nearest-first", action="store_true",

@@ -34,6 +34,9 @@ def add_commands(sub) -> None:
     r.add_argument("--note", action="append", default=[], metavar="KEY=VALUE",
                    help="more metadata, e.g. agent_args='--map-size 41' (repeatable)")
     r.add_argument("--id", default="recorder", help="recorder id for its liveliness token (default recorder)")
+    r.add_argument("--maps-every", type=int, default=0, metavar="N",
+                   help="ask the agents for their maps (ESMs, NMs, Matching grid) every N ticks, to record them "
+                        "(default 0: off)")
     bus_args(r)
     r.set_defaults(func=cmd_record)
 
@@ -117,7 +120,7 @@ def cmd_record(args) -> int:
         try:
             print(f"recording world {args.world_id} to {args.out}", flush=True)
             run_recorder(session, args.world_id, args.out, stop, metadata=meta, tick_ns=_tick_ns(args.scenario),
-                         recorder_id=args.id, report=report)
+                         recorder_id=args.id, report=report, maps_every=max(args.maps_every, 0))
         finally:
             session.close()
     print(f"wrote {report.path}: {report.messages} messages, last tick {report.last_tick}", flush=True)

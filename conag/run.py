@@ -52,6 +52,8 @@ class RunOptions:
     weights_dir: str | None = None    # learning agents save their weights to weights_dir/<id>.json
     stall_ticks: int = DEFAULT_STALL_TICKS  # stop when no site is filled for this many ticks; 0: never
     record: str | None = None         # record the run to this MCAP file (`conag record`)
+    view: int | None = None           # serve the browser viewer on this port (`conag view`)
+    maps_every: int = 0               # the recorder and viewer ask for the agents' maps every N ticks
 
 
 @dataclass
@@ -177,7 +179,7 @@ def run(opts: RunOptions, stop: threading.Event) -> dict:
     fleet = Fleet(opts)
     watch = StallWatch(opts.stall_ticks)
     tty = sys.stdout.isatty() and not opts.headless
-    recorder = None
+    recorder = viewer = None
     with RunBus(opts, fleet, watch, tty) as run_bus:
         try:
             if opts.record:
@@ -185,6 +187,8 @@ def run(opts: RunOptions, stop: threading.Event) -> dict:
                 _wait_until(run_bus.recording, stop.is_set, lambda: recorder.poll() is not None)
                 if recorder.poll() is not None:
                     raise RuntimeError(f"the recorder exited ({recorder.returncode}) before the run started")
+            if opts.view is not None:
+                viewer = _start_viewer(opts)
             for i in range(n_agents):
                 fleet.start(f"a{i + 1}")
             _wait_until(lambda: world.poll() is not None, stop.is_set, lambda: watch.stalled)
@@ -195,6 +199,8 @@ def run(opts: RunOptions, stop: threading.Event) -> dict:
             fleet.stop_all()
             if teacher is not None:
                 _stop(teacher)
+            if viewer is not None:
+                _stop(viewer)
             if recorder is not None:
                 _stop(recorder, grace=60.0)  # last: it writes what is queued, the summary and the footer
     if tty and not watch.stalled:
@@ -224,8 +230,19 @@ def _start_recorder(opts: RunOptions) -> subprocess.Popen:
     cmd = [sys.executable, "-m", "conag", "record", opts.record, "--world-id", opts.world_id,
            "--connect", opts.endpoint, "--scenario", opts.scenario_path, "--seed", str(seed),
            "--note", f"agents={opts.agents if opts.agents is not None else opts.scenario.agents}",
-           "--note", "agent_args=" + " ".join(opts.extra_agent_args)]
+           "--note", "agent_args=" + " ".join(opts.extra_agent_args), "--maps-every", str(opts.maps_every)]
     return subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
+
+
+def _start_viewer(opts: RunOptions) -> subprocess.Popen:
+    """`conag view` on the run's bus; it prints the page's address (stdout is the run's)."""
+    cmd = [sys.executable, "-m", "conag", "view", "--world-id", opts.world_id, "--connect", opts.endpoint,
+           "--port", str(opts.view)]
+    if opts.maps_every:
+        cmd += ["--maps-every", str(opts.maps_every)]  # else the viewer's default
+    if not opts.headless and sys.stdout.isatty():
+        cmd.append("--open")
+    return subprocess.Popen(cmd, stdin=subprocess.DEVNULL)
 
 
 def _start_world(opts: RunOptions, n_agents: int, final_path: Path) -> subprocess.Popen:

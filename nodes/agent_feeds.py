@@ -10,15 +10,24 @@ versions it already has.
 Every `every` ticks, and once more on the way out, the agent publishes the brain's
 AgentState (what it is doing, what blocks it): `conag run` prints the last one per agent
 when a build stalls, and the world keeps it for the run summary's behaviour counts.
+
+While some liveliness token `keys.maps_request_token(world, requester, N, agent)` for this
+agent or for all is up (a recorder with `--maps-every N` asks all agents, a viewer the one
+its page shows), the agent also publishes its maps
+(`agent_runtime.snapshot`: the ESMs, both NMs, the Matching grid; one AgentMap per layer)
+at every tick that is a multiple of the smallest such N; with none up it publishes nothing.
 """
 
 from __future__ import annotations
 
 import logging
+import threading
+from collections import Counter
 
 import zenoh
 
-from bus import Declarations, Inbox
+from agent_runtime.snapshot import map_snapshot
+from bus import Declarations, Inbox, watch_tokens
 from protocol import keys
 from protocol.codec import ProtocolError, decode, encode
 from protocol.messages import Blueprint
@@ -39,6 +48,26 @@ class AgentFeeds:
         self._blueprints = self._declared.add(Inbox(256).subscribe(session, keys.blueprint(world_id)))
         self._states = self._declared.add(session.declare_publisher(keys.agent_state(world_id, agent_id),
                                                                     reliability=zenoh.Reliability.RELIABLE))
+        # Map snapshots: only while a maps request token is up (its last segment is the period).
+        self._maps_lock = threading.Lock()
+        self._maps_requests: Counter[int] = Counter()
+        self._maps = self._declared.add(session.declare_publisher(
+            keys.agent_maps(world_id, agent_id), congestion_control=zenoh.CongestionControl.DROP))
+        for key in keys.maps_requests_for(world_id, agent_id):
+            self._declared.add(watch_tokens(session, key, self._on_maps_request))
+
+    def _on_maps_request(self, every: str, up: bool) -> None:
+        if not every.isdigit() or int(every) < 1:
+            return
+        with self._maps_lock:
+            self._maps_requests[int(every)] += 1 if up else -1
+            self._maps_requests = +self._maps_requests  # drop the zeros
+
+    @property
+    def maps_every(self) -> int:
+        """Ticks between map snapshots: the smallest asked for; 0 when nobody asks."""
+        with self._maps_lock:
+            return min(self._maps_requests, default=0)
 
     def newest_blueprint(self) -> Blueprint | None:
         """The highest-version Blueprint among those that arrived since the last call."""
@@ -64,6 +93,10 @@ class AgentFeeds:
         """Publish the brain's state report if `every` ticks have passed since the last one."""
         if self._last_report is None or tick - self._last_report >= self.every:
             self.report(brain, tick)
+        every = self.maps_every
+        if every and tick % every == 0:
+            for layer in map_snapshot(brain, tick):
+                self._maps.put(encode(layer))
 
     def report(self, brain, tick: int) -> None:
         """Publish the brain's AgentState as of `tick`."""

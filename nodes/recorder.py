@@ -11,6 +11,8 @@ Once the world's first status arrives (the world then routes its publications he
 the recorder declares its liveliness token: `conag run --record` starts the agents only
 then, so the recording holds the run from its first tick. The newest status goes into
 the file's closing metadata (scenario name, seed, tick mode, ticks, completed).
+With `maps_every` N, it asks the agents for their map snapshots every N ticks (a maps
+request token, see nodes/agent_feeds.py), so they are recorded too.
 """
 
 from __future__ import annotations
@@ -47,7 +49,7 @@ class RecordReport:
 
 def run_recorder(session: zenoh.Session, world_id: str, out: str | Path, stop: threading.Event, *,
                  metadata: Mapping[str, str] | None = None, tick_ns: int = DEFAULT_TICK_NS,
-                 recorder_id: str = "recorder", flush_every: float = 1.0,
+                 recorder_id: str = "recorder", flush_every: float = 1.0, maps_every: int = 0,
                  clock: Callable[[], int] = time.time_ns, report: RecordReport | None = None) -> RecordReport:
     """Record world `world_id` into `out` until `stop` is set; returns (and fills in) `report`."""
     report = report if report is not None else RecordReport()
@@ -61,6 +63,9 @@ def run_recorder(session: zenoh.Session, world_id: str, out: str | Path, stop: t
     try:
         with Declarations() as declared:
             declared.add(session.declare_subscriber(f"{keys.world_root(world_id)}/**", on_sample))
+            if maps_every:  # the agents' map snapshots, every `maps_every` ticks
+                declared.add(session.liveliness().declare_token(keys.maps_request_token(world_id, recorder_id,
+                                                                                         maps_every)))
             last_flush = time.monotonic()
             while not stop.is_set():
                 try:

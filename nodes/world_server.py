@@ -24,6 +24,11 @@ as a `Perturbed` on the world's `perturbed` key (both reliable): the queries the
 reach the world alone. A lockstep step taken without some agents' commands (the timeout
 passed) is published as a `LockstepTimeout`, so a replay can step without them too.
 
+For a viewer (`conag view`), a WorldView (discs, sites, bodies, walls) is published at every
+tick that is a multiple of `view_every` and after each perturbation, only while some subscriber matches its key
+(zenoh's matching status: a world nobody watches builds none); the `view` queryable
+answers a fresh one, built by the loop thread like everything that reads the world.
+
 A perturbation that changes the blueprint (add_site, remove_site) is followed by the new
 Blueprint, published reliably (RELIABLE, congestion control BLOCK: an agent must not miss
 a site); a queryable on the same key answers the current one. The agents' AgentState
@@ -76,7 +81,8 @@ class WorldServer:
     def __init__(self, world: World, session: zenoh.Session, *, mode: str | None = None,
                  max_ticks: int | None = None, stop_when_complete: bool = False, wait_agents: int = 1,
                  clock: Callable[[], float] = time.monotonic,
-                 on_status: Callable[[WorldStatus], None] | None = None, block_frames: bool = False):
+                 on_status: Callable[[WorldStatus], None] | None = None, block_frames: bool = False,
+                 view_every: int = 10):
         self.world = world
         self.session = session
         self.mode = mode or world.scenario.tick_mode
@@ -98,6 +104,8 @@ class WorldServer:
         self._declared = Declarations()
         self._last_status = float("-inf")
         self._status_seq = 0  # WorldStatus.seq of the last status published
+        self.view_every = view_every  # ticks between WorldView publications (0: only on query)
+        self._view_failed = False
 
     # zenoh callbacks: decode if cheap, then hand over to the loop thread ------------------
     def _on_command(self, sample: zenoh.Sample) -> None:
@@ -137,6 +145,9 @@ class WorldServer:
         add(s.declare_subscriber(keys.all_agents(w, "command"), self._on_command))
         add(s.declare_queryable(keys.all_agents(w, "attach"), lambda q: self._events.put(("attach", q))))
         add(s.declare_queryable(keys.perturb(w), lambda q: self._events.put(("perturb", q))))
+        add(s.declare_queryable(keys.view(w), lambda q: self._events.put(("view", q))))
+        # Views are "latest wins" like frames: a slow viewer is never queued behind.
+        self._view_pub = add(s.declare_publisher(keys.view(w), congestion_control=zenoh.CongestionControl.DROP))
         add(s.declare_queryable(keys.status(w), self._on_status_query))
         add(s.declare_queryable(keys.blueprint(w), self._on_blueprint_query))
         add(s.declare_subscriber(keys.all_agents(w, "state"), self._on_agent_state))
@@ -162,6 +173,9 @@ class WorldServer:
                         self.stop_when_complete and self.world.completed()):
                     break
                 self._publish_status_if_due()
+                if self.view_every and self.world.tick % self.view_every == 0:
+                    self._publish_view()
+            self._publish_view()
             return self._publish_status()
 
     def _live(self) -> list[str]:
@@ -226,6 +240,8 @@ class WorldServer:
             self._attach(event[1])
         elif kind == "perturb":
             self._perturb(event[1])
+        elif kind == "view":
+            self._answer_view(event[1])
         elif kind == "bad":
             self._bad(*event[1:])
 
@@ -293,6 +309,33 @@ class WorldServer:
         query.reply(query.key_expr, encode(result))
         query.drop()
         self._perturbed_pub.put(encode(Perturbed.of(p, result)))
+        if result.ok:
+            self._publish_view()
+
+    def _view_bytes(self) -> bytes | None:
+        """The encoded WorldView of now, or None for a world too large to draw in one message."""
+        try:
+            return encode(self.world.view())
+        except (ValueError, ProtocolError) as exc:
+            if not self._view_failed:
+                log.warning("no WorldView for this world: %s", exc)
+                self._view_failed = True
+            return None
+
+    def _publish_view(self) -> None:
+        if not self._view_pub.matching_status.matching:
+            return  # nobody watches: build nothing
+        data = self._view_bytes()
+        if data is not None:
+            self._view_pub.put(data)
+
+    def _answer_view(self, query: zenoh.Query) -> None:
+        data = self._view_bytes()
+        if data is None:
+            query.reply_err(b"this world is too large for a WorldView")
+        else:
+            query.reply(query.key_expr, data)
+        query.drop()
 
     def _publish_frame(self, frame) -> None:
         pub = self._publishers.get(frame.agent_id)

@@ -14,6 +14,7 @@ from protocol.messages import (
     PERTURB_OPS,
     SCHEMA_VERSION,
     AgentCommand,
+    AgentMap,
     AgentState,
     Blueprint,
     CommandRejected,
@@ -29,6 +30,7 @@ from protocol.messages import (
     SensorFrame,
     Welcome,
     WorldStatus,
+    WorldView,
 )
 
 __all__ = [
@@ -41,6 +43,7 @@ __all__ = [
     "PERTURB_OPS",
     "SCHEMA_VERSION",
     "AgentCommand",
+    "AgentMap",
     "AgentState",
     "Blueprint",
     "CommandRejected",
@@ -57,6 +60,7 @@ __all__ = [
     "SensorFrame",
     "Welcome",
     "WorldStatus",
+    "WorldView",
     "decode",
     "encode",
 ]

@@ -45,6 +45,37 @@ def blueprint(world: str) -> str:
     return f"{world_root(world)}/blueprint"
 
 
+def view(world: str) -> str:
+    """WorldView publications (every few ticks while someone subscribes) and a queryable
+    answering the current one: what a viewer draws."""
+    return f"{world_root(world)}/view"
+
+
+def agent_maps(world: str, agent: str) -> str:
+    """AgentMap publications (a debug key): one agent's map snapshots, while someone asks
+    for them with a `maps_request_token`."""
+    return f"{world_root(world)}/agent/{check_id(agent, 'agent id')}/maps"
+
+
+MAPS_ALL = "_all_"  # the agent segment of a maps request token that asks every agent
+
+
+def maps_request_token(world: str, requester: str, every: int, agent: str = MAPS_ALL) -> str:
+    """A liveliness token asking `agent` (every agent: MAPS_ALL) for its map snapshot each
+    `every` ticks (at ticks that are multiples of it); an agent follows the smallest
+    `every` among the tokens up for it."""
+    if not (isinstance(every, int) and every >= 1):
+        raise ValueError("maps every must be an int >= 1 (ticks)")
+    return (f"{world_root(world)}/alive/maps/{check_id(requester, 'requester id')}/"
+            f"{check_id(agent, 'agent id')}/{every}")
+
+
+def maps_requests_for(world: str, agent: str) -> tuple[str, str]:
+    """The maps request tokens that concern `agent`, to watch: its own and those for every agent."""
+    return (f"{world_root(world)}/alive/maps/*/{check_id(agent, 'agent id')}/*",
+            f"{world_root(world)}/alive/maps/*/{MAPS_ALL}/*")
+
+
 def agent_state(world: str, agent: str) -> str:
     """AgentState publications from one agent (what it does, what blocks it)."""
     return f"{world_root(world)}/agent/{check_id(agent, 'agent id')}/state"

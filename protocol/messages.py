@@ -482,8 +482,93 @@ class RunControlResult:
         _require(len(self.message) <= MAX_STRING, "RunControlResult.message too long")
 
 
+MAX_VIEW_ITEMS = 4096  # discs, and wall cells, a WorldView holds at most (a message stays under 256 KiB)
+
+
+@dataclass(frozen=True)
+class WorldView:
+    """World -> anyone (a viewer, a recorder): what there is to draw at one tick.
+
+    Published every few ticks while someone subscribes to it, and the answer to a query on
+    the same key. Discs lying in the world (a carried brick is not among them: its agent's
+    `agent_holding` says so), every drop site and whether it holds a brick, every body with
+    its heading, and the fixed `#` wall cells. One entry per item in each group of arrays.
+    """
+
+    world_id: str
+    tick: int
+    width: float
+    height: float
+    disc_xs: tuple[float, ...]
+    disc_ys: tuple[float, ...]
+    disc_kinds: tuple[str, ...]
+    site_xs: tuple[float, ...]
+    site_ys: tuple[float, ...]
+    site_filled: tuple[bool, ...]
+    agent_ids: tuple[str, ...]
+    agent_alive: tuple[bool, ...]
+    agent_x: tuple[float, ...]
+    agent_y: tuple[float, ...]
+    agent_heading: tuple[float, ...]
+    agent_holding: tuple[bool, ...]
+    wall_xs: tuple[float, ...]
+    wall_ys: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        check_id(self.world_id, "world id")
+        _finite(self)
+        _require(self.tick >= 0 and self.width > 0 and self.height > 0, "WorldView tick/extent out of range")
+        groups = (("disc_xs", "disc_ys", "disc_kinds"), ("site_xs", "site_ys", "site_filled"),
+                  ("agent_ids", "agent_alive", "agent_x", "agent_y", "agent_heading", "agent_holding"),
+                  ("wall_xs", "wall_ys"))
+        for group in groups:
+            n = len(getattr(self, group[0]))
+            for name in group[1:]:
+                _require(len(getattr(self, name)) == n, f"WorldView.{name} must match {group[0]}")
+        _require(len(self.disc_xs) <= MAX_VIEW_ITEMS and len(self.wall_xs) <= MAX_VIEW_ITEMS,
+                 "WorldView holds too many discs or walls")
+        _require(len(self.site_xs) <= MAX_SITES, "WorldView has too many sites")
+        _require(len(self.agent_ids) <= MAX_AGENTS_IN_STATUS, "WorldView lists too many agents")
+        _require(all(k in DISC_KINDS for k in self.disc_kinds), f"WorldView.disc_kinds must be among {DISC_KINDS}")
+        for a in self.agent_ids:
+            check_id(a, "agent id")
+
+
+# The layers of an agent's map snapshot (AgentMap.layer): its six ESMs, both navigation maps
+# and the Matching grid.
+MAP_LAYERS = ("food", "water", "brick", "obstacle", "config", "agent", "config_nm", "brick_nm", "matching")
+MAP_LEVEL = 127  # cell values are 0..MAP_LEVEL (one msgpack byte each)
+NM_UNREACHABLE = MAP_LEVEL  # a navigation map cell from which no goal can be reached
+
+
+@dataclass(frozen=True)
+class AgentMap:
+    """Agent -> anyone (a viewer, a recorder), on request: one layer of its maps at `tick`.
+
+    `cells` is the size x size grid row by row, row 0 north, columns growing east, the
+    agent in the centre cell. ESM layers (food ... agent) and `matching` hold their value in
+    [0, 1] times MAP_LEVEL, rounded; the navigation maps (`config_nm`, `brick_nm`) hold the
+    path distance to the nearest goal in cells, rounded and capped at MAP_LEVEL - 1, and
+    NM_UNREACHABLE where no goal can be reached.
+    """
+
+    agent_id: str
+    tick: int
+    layer: str
+    size: int
+    cells: tuple[int, ...]
+
+    def __post_init__(self) -> None:
+        check_id(self.agent_id, "agent id")
+        _require(self.tick >= 0, "AgentMap.tick must be >= 0")
+        _require(self.layer in MAP_LAYERS, f"AgentMap.layer must be one of {MAP_LAYERS}")
+        _require(1 <= self.size <= 89 and self.size % 2 == 1, "AgentMap.size must be odd, 1 to 89")
+        _require(len(self.cells) == self.size * self.size, "AgentMap.cells must hold size x size values")
+        _require(all(0 <= c <= MAP_LEVEL for c in self.cells), f"AgentMap.cells must be 0 to {MAP_LEVEL}")
+
+
 MESSAGE_TYPES: tuple[type, ...] = (
     Hello, Welcome, SensorFrame, AgentCommand, CommandRejected, WorldStatus,
     Perturbation, PerturbResult, Decision, Reinforcement, RunControl, RunControlResult,
-    Blueprint, AgentState, Perturbed, LockstepTimeout,
+    Blueprint, AgentState, Perturbed, LockstepTimeout, WorldView, AgentMap,
 )

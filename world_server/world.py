@@ -25,6 +25,7 @@ from protocol.messages import (
     SensorFrame,
     Welcome,
     WorldStatus,
+    WorldView,
 )
 from world_server.discs import BRICK_DISC, FOOD_DISC, WATER_DISC, DiscStore
 from world_server.physics import Physics, motor_update
@@ -76,6 +77,7 @@ class World:
         for i in range(len(self.discs)):
             self.physics.add_disc(i, self.discs.xy[i])
         self._obstacle_xy = _obstacle_points(scenario, cells["#"])
+        self._walls_xy = scenario.to_world(cells["#"]).reshape(-1, 2)  # fixed `#` cells, for views
         self._sense_inputs: tuple | None = None  # (present discs, xy, channels) with obstacles appended
         self.sites_xy = scenario.to_world(np.vstack([cells["+"], cells["B"]]))
         self._site_codes = self._cell_code(self.sites_xy)
@@ -320,6 +322,25 @@ class World:
             agent_restarts=tuple(r.restarts for r in self._order),
             agent_x=tuple(float(pos[r.index, 0]) for r in self._order),
             agent_y=tuple(float(pos[r.index, 1]) for r in self._order), seq=seq)
+
+    def view(self) -> WorldView:
+        """What there is to draw now: discs lying in the world, sites and whether each is
+        filled, bodies with headings and held bricks, wall cells (the WorldView message).
+        Raises ValueError when the world holds more than MAX_VIEW_ITEMS discs or walls."""
+        _, xy, kind = self.discs.present_arrays()
+        filled = self.sites_filled()
+        pos, order = self._positions, self._order
+        return WorldView(
+            world_id=self.world_id, tick=self.tick, width=float(self.size[0]), height=float(self.size[1]),
+            disc_xs=tuple(xy[:, 0].tolist()), disc_ys=tuple(xy[:, 1].tolist()),
+            disc_kinds=tuple(DISC_KINDS[k] for k in kind.tolist()),
+            site_xs=tuple(self.sites_xy[:, 0].tolist()), site_ys=tuple(self.sites_xy[:, 1].tolist()),
+            site_filled=tuple(bool(f) for f in filled.tolist()),
+            agent_ids=tuple(r.agent_id for r in order), agent_alive=tuple(r.alive for r in order),
+            agent_x=tuple(float(pos[r.index, 0]) for r in order), agent_y=tuple(float(pos[r.index, 1]) for r in order),
+            agent_heading=tuple(float(self.heading[r.index]) for r in order),
+            agent_holding=tuple(r.holding >= 0 for r in order),
+            wall_xs=tuple(self._walls_xy[:, 0].tolist()), wall_ys=tuple(self._walls_xy[:, 1].tolist()))
 
     def agent_poses(self) -> np.ndarray:
         """(n, 3) x, y, heading of every body, in attach order (for pictures and tests)."""

@@ -1,0 +1,71 @@
+"""`conag view`: the browser viewer, of a live world or of a recording.
+
+    conag view [--port P]               serve http://127.0.0.1:P/ showing the world on the bus, live
+    conag view FILE.mcap [--port P]     the same page over a recording, with a timeline to scrub and play
+
+Registered by conag/cli.py; the shell is nodes/viewer.py, the pure part viewer/.
+`conag run --view` starts `conag view` beside the run.
+"""
+
+from __future__ import annotations
+
+import sys
+
+from conag.common import bus_args, bus_options, stop_on_signals
+
+DEFAULT_PORT = 8765
+
+
+def add_commands(sub) -> None:
+    """Register `view` on the main parser's subparsers."""
+    v = sub.add_parser("view", help="watch a world (or a recording) in the browser")
+    v.add_argument("file", nargs="?", metavar="FILE.mcap", help="a recording to open instead of the live world")
+    v.add_argument("--port", type=int, default=DEFAULT_PORT, help=f"HTTP port (default {DEFAULT_PORT}; 0: any free)")
+    v.add_argument("--host", default="127.0.0.1", help="address to serve on (default 127.0.0.1: this machine only)")
+    v.add_argument("--open", action="store_true", help="open the page in the default browser")
+    v.add_argument("--maps-every", type=int, default=10, metavar="N",
+                   help="live: ask the agent shown in the page's panel for its maps every N ticks (default 10; 0: off)")
+    bus_args(v)
+    v.set_defaults(func=cmd_view)
+
+
+def cmd_view(args) -> int:
+    def ready(url: str) -> None:
+        print(f"viewer at {url}", flush=True)
+        if args.open:
+            import webbrowser
+
+            webbrowser.open(url)
+
+    with stop_on_signals() as stop:
+        if args.file:
+            from nodes.viewer import serve_timeline
+
+            timeline = load_timeline(args.file)
+            print(f"{args.file}: {len(timeline)} pictures, ticks {timeline.summary()['first']}-"
+                  f"{timeline.summary()['last']}", flush=True)
+            serve_timeline(timeline, stop, host=args.host, port=args.port, on_ready=ready)
+            return 0
+        from bus import open_session
+        from nodes.viewer import serve_live
+
+        session = open_session(bus_options(args))
+        try:
+            serve_live(session, args.world_id, stop, host=args.host, port=args.port, on_ready=ready,
+                       maps_every=max(args.maps_every, 0))
+        finally:
+            session.close()
+    return 0
+
+
+def load_timeline(path: str):
+    """A recording's Timeline (only the keys the viewer draws are read)."""
+    from recording.mcap_log import read_recording
+    from viewer.scene import Timeline, wanted
+
+    rec = read_recording(path, keep=wanted)
+    if not rec.complete:
+        print(f"warning: {path}: {rec.problem}", file=sys.stderr)
+    info = {k: v for k, v in rec.info.items() if k in ("scenario_path", "scenario_name", "seed", "world_id",
+                                                       "conag_version", "tick_mode")}
+    return Timeline.from_entries(rec.entries, info)

@@ -1,0 +1,244 @@
+// The ConAg viewer page: draws the pictures of nodes/viewer.py (see viewer/scene.py for their
+// fields). Live: a Server-Sent Events stream of pictures. Recording: a timeline to scrub and play.
+"use strict";
+const COLOURS = { food: "#3a9d23", water: "#2a6fdb", brick: "#b5462f", wall: "#555555",
+                  site: "#f2d27a", filled: "#e0a100", agent: "#6a3d9a", dead: "#aaaaaa", heading: "#111111" };
+const DISC_R = 0.5, AGENT_R = 0.3, MARGIN = 10;
+const canvas = document.getElementById("world"), ctx = canvas.getContext("2d");
+const viewer = window.viewer = { picture: null, mode: null, selectedAgent: null, selectedDisc: null,
+                                 moving: false, frames: 0, scale: 1, ox: 0, oy: 0 };
+
+viewer.toCanvas = (x, y) => [viewer.ox + x * viewer.scale, viewer.oy - y * viewer.scale];
+viewer.toWorld = (px, py) => [(px - viewer.ox) / viewer.scale, (viewer.oy - py) / viewer.scale];
+
+const MAX_W = 820, MAX_H = 620;
+function fit(p) {  // the canvas takes the world's shape, at most MAX_W x MAX_H pixels
+  const s = Math.min((MAX_W - 2 * MARGIN) / p.width, (MAX_H - 2 * MARGIN) / p.height);
+  const w = Math.round(p.width * s + 2 * MARGIN), h = Math.round(p.height * s + 2 * MARGIN);
+  if (canvas.width !== w || canvas.height !== h) { canvas.width = w; canvas.height = h; }
+  viewer.scale = s; viewer.ox = MARGIN; viewer.oy = MARGIN + p.height * s;
+}
+
+function circle(x, y, r, fill) {
+  const [px, py] = viewer.toCanvas(x, y);
+  ctx.beginPath(); ctx.arc(px, py, r * viewer.scale, 0, 2 * Math.PI); ctx.fillStyle = fill; ctx.fill();
+}
+
+function cell(x, y, fill, inset) {
+  const s = viewer.scale, [px, py] = viewer.toCanvas(x - 0.5, y + 0.5);
+  ctx.fillStyle = fill; ctx.fillRect(px + inset, py + inset, s - 2 * inset, s - 2 * inset);
+}
+
+function draw(p) {
+  viewer.picture = p;
+  if (!p.width) { document.getElementById("status").textContent = "waiting for the world's first view..."; return; }
+  fit(p);
+  ctx.clearRect(0, 0, canvas.width, canvas.height);
+  const [x0, y0] = viewer.toCanvas(0, p.height);
+  ctx.strokeStyle = "#888"; ctx.lineWidth = 1; ctx.strokeRect(x0, y0, p.width * viewer.scale, p.height * viewer.scale);
+  for (const [x, y] of p.walls) cell(x, y, COLOURS.wall, 0);
+  for (const [x, y, filled] of p.sites) cell(x, y, filled ? COLOURS.filled : COLOURS.site, 1);
+  for (const [x, y, kind] of p.discs) circle(x, y, DISC_R * 0.92, COLOURS[kind]);
+  if (viewer.selectedDisc) {
+    const [px, py] = viewer.toCanvas(viewer.selectedDisc[0], viewer.selectedDisc[1]);
+    ctx.beginPath(); ctx.arc(px, py, DISC_R * viewer.scale, 0, 2 * Math.PI);
+    ctx.strokeStyle = "#000"; ctx.lineWidth = 2; ctx.stroke();
+  }
+  for (const a of p.agents) {
+    circle(a.x, a.y, AGENT_R, a.alive ? COLOURS.agent : COLOURS.dead);
+    const [px, py] = viewer.toCanvas(a.x, a.y), r = AGENT_R * viewer.scale;
+    const hx = Math.cos(a.heading), hy = -Math.sin(a.heading);
+    ctx.beginPath(); ctx.moveTo(px, py); ctx.lineTo(px + hx * r * 1.9, py + hy * r * 1.9);
+    ctx.strokeStyle = COLOURS.heading; ctx.lineWidth = 2; ctx.stroke();
+    if (a.holding) { ctx.beginPath(); ctx.arc(px + hx * r * 1.9, py + hy * r * 1.9, r * 0.55, 0, 2 * Math.PI);
+                     ctx.fillStyle = COLOURS.brick; ctx.fill(); }
+    if (a.id === viewer.selectedAgent) {
+      ctx.beginPath(); ctx.arc(px, py, r * 1.6, 0, 2 * Math.PI); ctx.strokeStyle = "#c2185b"; ctx.lineWidth = 2; ctx.stroke();
+    }
+    ctx.fillStyle = "#000"; ctx.font = "11px sans-serif"; ctx.fillText(a.id, px + r + 2, py - r - 2);
+  }
+  const total = p.sites_total ?? p.sites.length, filled = p.sites_filled ?? p.sites.filter(s => s[2]).length;
+  const alive = p.agents_alive ?? p.agents.filter(a => a.alive).length;
+  document.getElementById("status").textContent =
+    `tick ${p.tick}   sites ${filled}/${total}   agents alive ${alive}/${p.agents.length}` +
+    (p.completed ? "   COMPLETE" : "") + (p.scenario ? `   (${p.scenario}, ${p.mode})` : "");
+  if (p.progress) viewer.progress = p.progress;
+  drawChart(viewer.progress || [], total, p.tick);
+  drawAgents(p);
+  viewer.frames += 1;
+  document.body.dataset.tick = p.tick;
+}
+
+function drawChart(points, total, tick) {
+  const c = document.getElementById("chart"), g = c.getContext("2d");
+  g.clearRect(0, 0, c.width, c.height);
+  g.strokeStyle = "#ccc"; g.strokeRect(0.5, 0.5, c.width - 1, c.height - 1);
+  if (!points.length) return;
+  const tmax = Math.max(points[points.length - 1][0], 1), ymax = Math.max(total, 1, ...points.map(q => q[1]));
+  const X = t => 4 + (c.width - 8) * t / tmax, Y = n => c.height - 4 - (c.height - 8) * n / ymax;
+  g.beginPath(); g.strokeStyle = COLOURS.filled; g.lineWidth = 2;
+  points.forEach(([t, n], i) => i ? g.lineTo(X(t), Y(n)) : g.moveTo(X(t), Y(n)));
+  g.stroke();
+  g.strokeStyle = "#c2185b"; g.lineWidth = 1; g.beginPath(); g.moveTo(X(tick), 0); g.lineTo(X(tick), c.height); g.stroke();
+  g.fillStyle = "#333"; g.font = "11px sans-serif"; g.fillText(`${total} sites, ${tmax} ticks`, 8, 14);
+}
+
+function drawAgents(p) {
+  const body = document.querySelector("#agents tbody");
+  const rows = JSON.stringify([viewer.selectedAgent, p.agents.map(a => [a.id, a.alive, a.behaviour, a.holding])]);
+  if (rows === viewer.rows) { drawDetails(p); return; }  // the table only when it changed: DOM work is the dearest
+  viewer.rows = rows;
+  body.innerHTML = "";
+  for (const a of p.agents) {
+    const tr = document.createElement("tr");
+    tr.className = "agent" + (a.alive ? "" : " dead") + (a.id === viewer.selectedAgent ? " selected" : "");
+    tr.dataset.id = a.id;
+    for (const v of [a.id, a.alive ? "yes" : "no", a.behaviour || "?", a.holding ? "brick" : ""]) {
+      const td = document.createElement("td"); td.textContent = v; tr.appendChild(td);
+    }
+    tr.onclick = () => selectAgent(a.id);
+    body.appendChild(tr);
+  }
+  drawDetails(p);
+}
+
+function drawDetails(p) {
+  const a = p.agents.find(q => q.id === viewer.selectedAgent), d = document.getElementById("details");
+  if (!a) { d.textContent = "none"; return; }
+  const lines = [`${a.id} at (${a.x.toFixed(2)}, ${a.y.toFixed(2)}), heading ${(a.heading * 180 / Math.PI).toFixed(0)} deg`,
+                 `alive ${a.alive}, holding ${a.holding ? "a brick" : "nothing"}`];
+  if (a.behaviour) {
+    lines.push(`behaviour ${a.behaviour} (report of tick ${a.state_tick}), ${a.sites_open} sites believed open`);
+    if (a.blocker) lines.push(`blocker: ${a.blocker}`);
+    lines.push("ticks per behaviour: " + Object.entries(a.behaviour_ticks || {}).map(([k, v]) => `${k} ${v}`).join(", "));
+  } else lines.push("no AgentState report yet (agents send one every 100 ticks)");
+  if (a.state_nodes) {
+    lines.push(`state nodes (tick ${a.decision_tick}): ` + Object.entries(a.state_nodes).map(([k, v]) => `${k} ${v}`).join(", "));
+    lines.push(`arm ${a.arm}, motor ${a.motor}`);
+  } else lines.push("state nodes: published by learning students only (Decision)");
+  d.textContent = lines.join("\n");
+}
+
+// the selected agent's maps: ESMs grey (dark = sure), NMs bright near a goal, dark far, black unreachable
+const MAP_ORDER = ["food", "water", "brick", "obstacle", "config", "agent", "config_nm", "brick_nm", "matching"];
+async function loadMaps() {
+  const id = viewer.selectedAgent, note = document.getElementById("mapsnote"), box = document.getElementById("maps");
+  if (!id) { box.innerHTML = ""; note.textContent = ""; return; }
+  const tick = viewer.picture ? viewer.picture.tick : 0;
+  const m = await (await fetch(`/api/maps?agent=${encodeURIComponent(id)}&tick=${tick}`)).json();
+  viewer.maps = m;
+  if (!m.size) { box.innerHTML = "";
+    note.textContent = "no maps from this agent (a viewer or recorder asks for them with --maps-every N)"; return; }
+  note.textContent = `maps of ${id} at tick ${m.tick}, ${m.size} x ${m.size} cells, the agent in the centre`;
+  box.innerHTML = "";
+  for (const name of MAP_ORDER) {
+    const cells = m.layers[name]; if (!cells) continue;
+    const fig = document.createElement("figure"), c = document.createElement("canvas");
+    c.width = c.height = m.size; c.style.width = c.style.height = `${m.size * 2}px`; c.dataset.layer = name;
+    const img = c.getContext("2d").createImageData(m.size, m.size), nm = name.endsWith("_nm");
+    cells.forEach((v, i) => {
+      let r, g, b;
+      if (nm) { if (v >= 127) { r = g = b = 0; } else { const k = Math.max(0, 1 - v / 40); r = 255 * k; g = 200 * k; b = 60 * k; } }
+      else { r = g = b = 255 - 2 * v; }
+      img.data.set([r, g, b, 255], 4 * i);
+    });
+    const mid = (m.size >> 1) * m.size + (m.size >> 1); img.data.set([200, 30, 90, 255], 4 * mid);
+    c.getContext("2d").putImageData(img, 0, 0);
+    fig.appendChild(c); const cap = document.createElement("figcaption"); cap.textContent = name; fig.appendChild(cap);
+    box.appendChild(fig);
+  }
+}
+setInterval(() => { if (viewer.selectedAgent && viewer.mode === "live") loadMaps(); }, 1000);
+
+function selectAgent(id) { viewer.selectedAgent = id; if (viewer.picture) draw(viewer.picture); loadMaps(); }
+
+function nearest(items, x, y, reach) {
+  let best = null, bd = reach;
+  for (const it of items) { const d = Math.hypot(it[0] - x, it[1] - y); if (d <= bd) { bd = d; best = it; } }
+  return best;
+}
+
+canvas.addEventListener("click", (ev) => {
+  const p = viewer.picture; if (!p || !p.width) return;
+  const r = canvas.getBoundingClientRect();
+  const [x, y] = viewer.toWorld(ev.clientX - r.left, ev.clientY - r.top);
+  if (viewer.moving && viewer.selectedDisc) { perturb("move", viewer.selectedDisc, [x, y]); return; }
+  const agent = nearest(p.agents.map(a => [a.x, a.y, a.id]), x, y, 0.6);
+  if (agent) { selectAgent(agent[2]); return; }
+  const disc = nearest(p.discs, x, y, 0.6);
+  viewer.selectedDisc = disc;
+  document.getElementById("disc").textContent = disc ? `${disc[2]} at (${disc[0]}, ${disc[1]})` : "none";
+  const live = viewer.mode === "live";
+  document.getElementById("remove").disabled = document.getElementById("move").disabled = !(disc && live);
+  draw(p);
+});
+
+async function perturb(op, disc, to) {
+  viewer.moving = false;
+  const body = { op, x: disc[0], y: disc[1], kind: disc[2], to_x: to ? to[0] : 0, to_y: to ? to[1] : 0 };
+  const res = await fetch("/api/perturb", { method: "POST", headers: { "Content-Type": "application/json" },
+                                            body: JSON.stringify(body) });
+  const out = await res.json();
+  document.getElementById("perturbed").textContent = (out.ok ? "done: " : "refused: ") + out.message;
+  viewer.lastPerturb = out;
+  viewer.selectedDisc = null;
+  document.getElementById("disc").textContent = "none";
+  document.getElementById("remove").disabled = document.getElementById("move").disabled = true;
+}
+document.getElementById("remove").onclick = () => viewer.selectedDisc && perturb("remove", viewer.selectedDisc);
+document.getElementById("move").onclick = () => { viewer.moving = true;
+  document.getElementById("perturbed").textContent = "click where the disc goes"; };
+
+// live: pictures pushed at the display rate ---------------------------------------------------
+function live() {
+  const es = new EventSource("/api/events");
+  es.onmessage = (ev) => { if (!viewer.frozen) draw(JSON.parse(ev.data)); };  // frozen: tests read one picture
+  fetch("/api/scene").then(r => r.json()).then(p => { if (!viewer.frames) draw(p); });
+}
+
+// recording: a timeline to scrub and play ------------------------------------------------------
+async function recording(info) {
+  viewer.progress = info.progress;
+  const bar = document.getElementById("timebar"), slider = document.getElementById("timeline");
+  bar.className = "on";
+  slider.min = info.first; slider.max = info.last; slider.value = info.first;
+  document.getElementById("title").textContent = info.info.scenario_path || info.info.scenario_name || "";
+  let inflight = false, wanted = null, playing = false, last = 0;
+  async function show(tick) {
+    wanted = tick;
+    document.getElementById("tickshow").textContent = `tick ${tick}`;
+    if (inflight) return;
+    inflight = true;
+    while (wanted !== null) {
+      const t = wanted; wanted = null;
+      const p = await (await fetch(`/api/frame?tick=${t}`)).json();
+      draw(p);
+      if (viewer.selectedAgent) await loadMaps();
+    }
+    inflight = false;
+  }
+  viewer.seek = (tick) => { slider.value = tick; return show(Number(slider.value)); };
+  slider.addEventListener("input", () => show(Number(slider.value)));
+  const button = document.getElementById("play");
+  let pos = 0;
+  button.onclick = () => { playing = !playing; button.textContent = playing ? "pause" : "play";
+                           pos = Number(slider.value); last = performance.now(); if (playing) requestAnimationFrame(step); };
+  function step(now) {
+    if (!playing) return;
+    pos = Math.min(pos + Number(document.getElementById("speed").value) * (now - last) / 1000, info.last);
+    last = now;
+    const t = Math.floor(pos);
+    if (t !== Number(slider.value)) { slider.value = t; show(t); }
+    if (pos >= info.last) { playing = false; button.textContent = "play"; return; }
+    requestAnimationFrame(step);
+  }
+  await show(info.first);
+}
+
+fetch("/api/info").then(r => r.json()).then(info => {
+  viewer.mode = info.mode;
+  document.getElementById("mode").textContent = info.mode === "live" ? "live" : "recording";
+  if (info.mode === "live") live(); else recording(info);
+  const pick = /select=([A-Za-z0-9_.-]+)/.exec(location.hash);  // a link to one agent: page#select=a1
+  if (pick) selectAgent(pick[1]);
+});
