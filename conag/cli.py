@@ -37,12 +37,15 @@ from conag.layouts import add_commands as add_layout_commands
 from conag.recordings import add_commands as add_recording_commands
 from world_server.summary import write_summary
 
+EXIT_ERROR = 1         # something failed (conag run: e.g. the world died without a final status)
 EXIT_USAGE = 2
-EXIT_INCOMPLETE = 3  # conag run: the tick limit passed (or it was stopped) before the structure was complete
-EXIT_STALLED = 4     # conag run: no site was filled for --stall-ticks ticks
-RUN_EPILOG = f"""exit codes: 0 the structure is complete; 1 an error; {EXIT_USAGE} a usage or scenario error;
-{EXIT_INCOMPLETE} not complete when the tick limit passed or the run was stopped; {EXIT_STALLED} stalled: no site was
-filled for --stall-ticks ticks (a report of every agent's position, behaviour and blocker is printed first)"""
+EXIT_INCOMPLETE = 3    # conag run: the tick limit passed before the structure was complete
+EXIT_STALLED = 4       # conag run: no site was filled for --stall-ticks ticks
+EXIT_INTERRUPTED = 130  # Ctrl-C or SIGTERM (128 + SIGINT, as shells report an interrupted command)
+RUN_EPILOG = f"""exit codes: 0 the structure is complete; {EXIT_ERROR} an error (e.g. the world died);
+{EXIT_USAGE} a usage or scenario error; {EXIT_INCOMPLETE} not complete when the tick limit passed; {EXIT_STALLED}
+stalled: no site was filled for --stall-ticks ticks (a report of every agent's position, behaviour and blocker is
+printed first); {EXIT_INTERRUPTED} interrupted (Ctrl-C or SIGTERM) before the structure was complete"""
 AGENT_MAP_SIZE = 41  # AgentConfig's default, without importing the agent for --help
 
 
@@ -233,6 +236,10 @@ class _Stopped(Exception):
     """Raised by the agent's signal handler, so a blocking frame wait ends at once."""
 
 
+def _quiet(_signum, _frame) -> None:
+    """A signal handler that does nothing: the process is already stopping."""
+
+
 def _agent_options(args):
     """The AgentOptions `conag agent` asks for (ValueError for learning flags without --learn)."""
     from agent_runtime.config import AgentConfig
@@ -260,6 +267,10 @@ def cmd_agent(args) -> int:
     report = AgentReport()
 
     def raise_stop(_signum, _frame):
+        # The first signal ends the frame wait; later ones (a second Ctrl-C while closing)
+        # are let pass quietly, so the cleanup finishes without a traceback.
+        for s in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(s, _quiet)
         raise _Stopped()
 
     previous = {s: signal.signal(s, raise_stop) for s in (signal.SIGINT, signal.SIGTERM)}
@@ -332,8 +343,14 @@ def cmd_run(args) -> int:
                       teacher=args.teacher, weights_dir=args.weights_dir, stall_ticks=args.stall_ticks,
                       record=args.record)
     with _stop_on_signals() as stop:
-        summary = run(opts, stop)
-    state = "complete" if summary["completed"] else "STALLED" if summary["stalled"] else "NOT complete"
+        try:
+            summary = run(opts, stop)
+        except RuntimeError as exc:  # a process of the run failed (the world died, the recorder did)
+            print(f"\nerror: {exc}", file=sys.stderr)
+            return EXIT_INTERRUPTED if stop.is_set() else EXIT_ERROR
+    interrupted = stop.is_set() and not summary["completed"]
+    state = ("complete" if summary["completed"] else "STALLED" if summary["stalled"]
+             else "INTERRUPTED" if interrupted else "NOT complete")
     print(f"{summary['scenario']}: {state}: {summary['sites_filled']}/{summary['sites_total']} sites in "
           f"{summary['ticks']} ticks, {len(summary['agents'])} agents, total distance "
           f"{summary['total_distance']:.1f}")
@@ -343,7 +360,9 @@ def cmd_run(args) -> int:
         print(json.dumps(summary, indent=2))
     elif args.summary:
         print(f"summary written to {args.summary}")
-    return 0 if summary["completed"] else EXIT_STALLED if summary["stalled"] else EXIT_INCOMPLETE
+    if summary["completed"]:
+        return 0
+    return EXIT_STALLED if summary["stalled"] else EXIT_INTERRUPTED if interrupted else EXIT_INCOMPLETE
 
 
 def cmd_control(args) -> int:
@@ -515,3 +534,5 @@ def main(argv: list[str] | None = None) -> int:
     except (ScenarioError, FileNotFoundError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    except KeyboardInterrupt:  # Ctrl-C outside a command's own handling (starting up, a last print)
+        return EXIT_INTERRUPTED

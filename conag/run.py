@@ -168,8 +168,12 @@ def _progress(st: WorldStatus, started: float) -> str:
 
 def run(opts: RunOptions, stop: threading.Event) -> dict:
     """Run the scenario; returns the run summary (also written to opts.summary)."""
+    with tempfile.TemporaryDirectory(prefix="conag-run-") as tmp:  # gone however the run ends
+        return _run(opts, stop, Path(tmp) / "final.json")
+
+
+def _run(opts: RunOptions, stop: threading.Event, final_path: Path) -> dict:
     n_agents = opts.scenario.agents if opts.agents is None else opts.agents
-    final_path = Path(tempfile.mkdtemp(prefix="conag-run-")) / "final.json"
     world = _start_world(opts, n_agents, final_path)
     if opts.weights_dir:
         Path(opts.weights_dir).mkdir(parents=True, exist_ok=True)
@@ -241,10 +245,7 @@ def _start_world(opts: RunOptions, n_agents: int, final_path: Path) -> subproces
 def _final_summary(final_path: Path, world: subprocess.Popen) -> dict:
     if not final_path.exists():
         raise RuntimeError(f"the world exited ({world.returncode}) without a final status")
-    summary = json.loads(final_path.read_text(encoding="utf-8"))
-    final_path.unlink()
-    final_path.parent.rmdir()
-    return summary
+    return json.loads(final_path.read_text(encoding="utf-8"))
 
 
 def _on_control(fleet: Fleet):
