@@ -8,6 +8,7 @@
     conag agent --id ID       one agent process (--learn: a student learning from the teacher)
     conag teacher             the teacher process: reinforces learning students (paper §5.1)
     conag run SCENARIO        a world and its agents as processes, until the structure is done
+    conag chaos SCENARIO      builds while agent processes are SIGKILLed at random (some restarted)
     conag generate --seed N   write seeded, buildable scenario files (or a --suite of them)
     conag check FILE...       parse scenario files and check their structure can be built
     conag record OUT.mcap     record every message of a world to an MCAP file
@@ -365,6 +366,28 @@ def cmd_run(args) -> int:
     return EXIT_STALLED if summary["stalled"] else EXIT_INTERRUPTED if interrupted else EXIT_INCOMPLETE
 
 
+def cmd_chaos(args) -> int:
+    from conag.chaos import ChaosOptions, chaos, report
+
+    opts = ChaosOptions(args.scenario, runs=args.runs, kill_every=args.kill_every, restart_share=args.restart_share,
+                        min_alive=args.min_alive, seed=args.seed, agents=args.agents, max_ticks=args.max_ticks,
+                        stall_ticks=args.stall_ticks, run_timeout=args.run_timeout, world_seed=args.world_seed)
+    with _stop_on_signals() as stop:
+        results = chaos(opts, stop, log=lambda line: print(line, flush=True))
+    out = report(opts, results)
+    print(f"chaos {args.scenario}: {out['completed']}/{out['total']} runs complete, bricks_total kept in "
+          f"{out['bricks_kept']}/{out['total']}")
+    if args.json:
+        with open(args.json, "w", encoding="utf-8") as f:
+            json.dump(out, f, indent=2)
+            f.write("\n")
+    if out["bricks_kept"] < out["total"]:
+        return EXIT_ERROR
+    if len(results) < opts.runs:
+        return EXIT_INTERRUPTED
+    return 0 if out["completed"] == out["total"] else EXIT_INCOMPLETE
+
+
 def cmd_control(args) -> int:
     from conag.run import control
 
@@ -381,7 +404,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="conag", description="ConAg: agents that build structures from a blueprint.")
     p.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for add in (_add_world, _add_status, _add_perturb, _add_agent, _add_teacher, _add_run, _add_control,
+    for add in (_add_world, _add_status, _add_perturb, _add_agent, _add_teacher, _add_run, _add_chaos, _add_control,
                 _add_render, add_layout_commands, add_recording_commands, _add_router):
         add(sub)  # add_layout_commands: generate, check; add_recording_commands: record, replay, echo
     for command in sub.choices.values():  # -v also after the subcommand: `conag world X -v`
@@ -486,6 +509,31 @@ def _add_run(sub) -> None:
     g.add_argument("--eta", type=float, metavar="RATE", help="their learning rate (default 0.1)")
     g.add_argument("--weights-dir", metavar="DIR", help="each student saves its weights to DIR/<id>.json")
     u.set_defaults(func=cmd_run)
+
+
+def _add_chaos(sub) -> None:
+    c = sub.add_parser("chaos", help="build while agent processes are SIGKILLed at random (some restarted)",
+                       epilog=f"exit codes: 0 every run complete with bricks_total kept; {EXIT_ERROR} some run "
+                              f"changed bricks_total; {EXIT_INCOMPLETE} some run did not complete; "
+                              f"{EXIT_INTERRUPTED} interrupted")
+    c.add_argument("scenario")
+    c.add_argument("--runs", type=int, default=1, help="conag runs, one after the other (default 1)")
+    c.add_argument("--kill-every", type=float, default=3.0, metavar="S",
+                   help="mean wall seconds between kills (default 3)")
+    c.add_argument("--restart-share", type=float, default=0.5, metavar="P",
+                   help="chance that a killed agent is started again at once (default 0.5)")
+    c.add_argument("--min-alive", type=int, default=1, metavar="N",
+                   help="never leave fewer agents alive (a kill then restarts; default 1)")
+    c.add_argument("--seed", type=int, default=0, help="seed of the kill schedule (default 0)")
+    c.add_argument("--world-seed", type=int, help="the world's seed (default: the scenario's)")
+    c.add_argument("--agents", type=int, help="number of agents (default: the scenario's)")
+    c.add_argument("--max-ticks", type=int, help="tick limit per run (default: the scenario's)")
+    c.add_argument("--stall-ticks", type=_non_negative, default=3000, metavar="N",
+                   help="a run stops as stalled after N ticks without a site filled (default 3000)")
+    c.add_argument("--run-timeout", type=float, default=600.0, metavar="S",
+                   help="stop a run after S wall seconds (default 600)")
+    c.add_argument("--json", metavar="PATH", help="write every run's figures as JSON")
+    c.set_defaults(func=cmd_chaos)
 
 
 def _add_control(sub) -> None:
