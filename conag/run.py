@@ -54,6 +54,10 @@ class RunOptions:
     record: str | None = None         # record the run to this MCAP file (`conag record`)
 
 
+class RunEnding(RuntimeError):
+    """A restart asked for while the run stops its processes."""
+
+
 @dataclass
 class Fleet:
     """The agent processes of a run, by id."""
@@ -61,6 +65,7 @@ class Fleet:
     opts: RunOptions
     procs: dict[str, subprocess.Popen] = field(default_factory=dict)
     lock: threading.Lock = field(default_factory=threading.Lock)
+    closed: bool = False  # stop_all has begun: a `conag restart` then starts nothing (it would outlive the run)
 
     def start(self, agent_id: str) -> subprocess.Popen:
         o = self.opts
@@ -74,8 +79,10 @@ class Fleet:
                 # A restarted student picks up what it had learned (saved every few hundred
                 # ticks and on exit), not its seed's random weights.
                 cmd += ["--weights-in", str(weights)]
-        proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL)
         with self.lock:
+            if self.closed:
+                raise RunEnding(f"the run is ending: {agent_id} not started")
+            proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL)
             self.procs[agent_id] = proc
         return proc
 
@@ -96,6 +103,7 @@ class Fleet:
 
     def stop_all(self, grace: float = 5.0) -> None:
         with self.lock:
+            self.closed = True
             procs = list(self.procs.values())
         for p in procs:
             if p.poll() is None:
@@ -260,6 +268,8 @@ def _on_control(fleet: Fleet):
             result = RunControlResult(False, f"bad request: {exc}")
         except KeyError as exc:
             result = RunControlResult(False, f"no agent {exc.args[0]!r} in this run")
+        except RunEnding as exc:
+            result = RunControlResult(False, str(exc))
         query.reply(query.key_expr, encode(result))
         query.drop()
 

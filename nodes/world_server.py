@@ -195,8 +195,8 @@ class WorldServer:
                         late = sorted(set(awaited) - self._answered)
                         log.info("tick %d: no command from %s in time", self.world.tick, ", ".join(late))
                         for agent in self.lockstep.deadline_passed(late):
-                            log.warning("tick %d: agent %s missed %d deadlines in a row: not waiting for it "
-                                        "until it answers", self.world.tick, agent, self.cfg.lockstep_miss_limit)
+                            log.info("tick %d: agent %s missed %d deadlines in a row: not waiting for it "
+                                     "until it answers", self.world.tick, agent, self.cfg.lockstep_miss_limit)
                         self._stepping_without(sorted(set(live) - self._answered))
                     return True
                 timeout = min(last_tick + period - now, 0.05)
@@ -223,7 +223,7 @@ class WorldServer:
                           "token, then attach)", cmd.agent_id)
                 return
             if self.lockstep.heard(cmd.agent_id):
-                log.warning("tick %d: agent %s answers again: waiting for it", self.world.tick, cmd.agent_id)
+                log.info("tick %d: agent %s answers again: waiting for it", self.world.tick, cmd.agent_id)
             if self.mode == "lockstep" and cmd.tick != self.world.tick:
                 # Not taken: lockstep applies a command to the tick it answers, and only to that one.
                 self._bad(f"command from {cmd.agent_id!r} for tick {cmd.tick}, but the world is at tick "
