@@ -106,7 +106,7 @@ def round_trip_ms(samples: int, endpoint: str) -> tuple[float, float]:
     from protocol.messages import AgentCommand
 
     world = make_world(1, n_discs=200, side=30)
-    frame = world.frame("a0")
+    frame = dataclasses.replace(world.frame("a0"), agent_id="a1")  # the link takes only its own agent's frames
     ctx = mp.get_context("spawn")
     ready, done = ctx.Event(), ctx.Event()
     session = open_session(BusOptions(listen=(endpoint,)), serve=True)

@@ -8,6 +8,7 @@
     conag agent --id ID       one agent process (--learn: a student learning from the teacher)
     conag teacher             the teacher process: reinforces learning students (paper §5.1)
     conag run SCENARIO        a world and its agents as processes, until the structure is done
+    conag chaos SCENARIO      builds while agent processes are SIGKILLed at random (some restarted)
     conag generate --seed N   write seeded, buildable scenario files (or a --suite of them)
     conag check FILE...       parse scenario files and check their structure can be built
     conag record OUT.mcap     record every message of a world to an MCAP file
@@ -38,12 +39,15 @@ from conag.recordings import add_commands as add_recording_commands
 from conag.view import add_commands as add_view_commands
 from world_server.summary import write_summary
 
+EXIT_ERROR = 1         # something failed (conag run: e.g. the world died without a final status)
 EXIT_USAGE = 2
-EXIT_INCOMPLETE = 3  # conag run: the tick limit passed (or it was stopped) before the structure was complete
-EXIT_STALLED = 4     # conag run: no site was filled for --stall-ticks ticks
-RUN_EPILOG = f"""exit codes: 0 the structure is complete; 1 an error; {EXIT_USAGE} a usage or scenario error;
-{EXIT_INCOMPLETE} not complete when the tick limit passed or the run was stopped; {EXIT_STALLED} stalled: no site was
-filled for --stall-ticks ticks (a report of every agent's position, behaviour and blocker is printed first)"""
+EXIT_INCOMPLETE = 3    # conag run: the tick limit passed before the structure was complete
+EXIT_STALLED = 4       # conag run: no site was filled for --stall-ticks ticks
+EXIT_INTERRUPTED = 130  # Ctrl-C or SIGTERM (128 + SIGINT, as shells report an interrupted command)
+RUN_EPILOG = f"""exit codes: 0 the structure is complete; {EXIT_ERROR} an error (e.g. the world died);
+{EXIT_USAGE} a usage or scenario error; {EXIT_INCOMPLETE} not complete when the tick limit passed; {EXIT_STALLED}
+stalled: no site was filled for --stall-ticks ticks (a report of every agent's position, behaviour and blocker is
+printed first); {EXIT_INTERRUPTED} interrupted (Ctrl-C or SIGTERM) before the structure was complete"""
 AGENT_MAP_SIZE = 41  # AgentConfig's default, without importing the agent for --help
 
 
@@ -234,6 +238,10 @@ class _Stopped(Exception):
     """Raised by the agent's signal handler, so a blocking frame wait ends at once."""
 
 
+def _quiet(_signum, _frame) -> None:
+    """A signal handler that does nothing: the process is already stopping."""
+
+
 def _agent_options(args):
     """The AgentOptions `conag agent` asks for (ValueError for learning flags without --learn)."""
     from agent_runtime.config import AgentConfig
@@ -261,6 +269,10 @@ def cmd_agent(args) -> int:
     report = AgentReport()
 
     def raise_stop(_signum, _frame):
+        # The first signal ends the frame wait; later ones (a second Ctrl-C while closing)
+        # are let pass quietly, so the cleanup finishes without a traceback.
+        for s in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(s, _quiet)
         raise _Stopped()
 
     previous = {s: signal.signal(s, raise_stop) for s in (signal.SIGINT, signal.SIGTERM)}
@@ -333,8 +345,14 @@ def cmd_run(args) -> int:
                       teacher=args.teacher, weights_dir=args.weights_dir, stall_ticks=args.stall_ticks,
                       record=args.record, view=args.view, maps_every=args.maps_every)
     with _stop_on_signals() as stop:
-        summary = run(opts, stop)
-    state = "complete" if summary["completed"] else "STALLED" if summary["stalled"] else "NOT complete"
+        try:
+            summary = run(opts, stop)
+        except RuntimeError as exc:  # a process of the run failed (the world died, the recorder did)
+            print(f"\nerror: {exc}", file=sys.stderr)
+            return EXIT_INTERRUPTED if stop.is_set() else EXIT_ERROR
+    interrupted = stop.is_set() and not summary["completed"]
+    state = ("complete" if summary["completed"] else "STALLED" if summary["stalled"]
+             else "INTERRUPTED" if interrupted else "NOT complete")
     print(f"{summary['scenario']}: {state}: {summary['sites_filled']}/{summary['sites_total']} sites in "
           f"{summary['ticks']} ticks, {len(summary['agents'])} agents, total distance "
           f"{summary['total_distance']:.1f}")
@@ -344,7 +362,31 @@ def cmd_run(args) -> int:
         print(json.dumps(summary, indent=2))
     elif args.summary:
         print(f"summary written to {args.summary}")
-    return 0 if summary["completed"] else EXIT_STALLED if summary["stalled"] else EXIT_INCOMPLETE
+    if summary["completed"]:
+        return 0
+    return EXIT_STALLED if summary["stalled"] else EXIT_INTERRUPTED if interrupted else EXIT_INCOMPLETE
+
+
+def cmd_chaos(args) -> int:
+    from conag.chaos import ChaosOptions, chaos, report
+
+    opts = ChaosOptions(args.scenario, runs=args.runs, kill_every=args.kill_every, restart_share=args.restart_share,
+                        min_alive=args.min_alive, seed=args.seed, agents=args.agents, max_ticks=args.max_ticks,
+                        stall_ticks=args.stall_ticks, run_timeout=args.run_timeout, world_seed=args.world_seed)
+    with _stop_on_signals() as stop:
+        results = chaos(opts, stop, log=lambda line: print(line, flush=True))
+    out = report(opts, results)
+    print(f"chaos {args.scenario}: {out['completed']}/{out['total']} runs complete, bricks_total kept in "
+          f"{out['bricks_kept']}/{out['total']}")
+    if args.json:
+        with open(args.json, "w", encoding="utf-8") as f:
+            json.dump(out, f, indent=2)
+            f.write("\n")
+    if out["bricks_kept"] < out["total"]:
+        return EXIT_ERROR
+    if len(results) < opts.runs:
+        return EXIT_INTERRUPTED
+    return 0 if out["completed"] == out["total"] else EXIT_INCOMPLETE
 
 
 def cmd_control(args) -> int:
@@ -363,7 +405,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="conag", description="ConAg: agents that build structures from a blueprint.")
     p.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for add in (_add_world, _add_status, _add_perturb, _add_agent, _add_teacher, _add_run, _add_control,
+    for add in (_add_world, _add_status, _add_perturb, _add_agent, _add_teacher, _add_run, _add_chaos, _add_control,
                 _add_render, add_layout_commands, add_recording_commands, add_view_commands, _add_router):
         add(sub)  # add_layout_commands: generate, check; add_recording_commands: record, replay, echo
     for command in sub.choices.values():  # -v also after the subcommand: `conag world X -v`
@@ -475,6 +517,31 @@ def _add_run(sub) -> None:
     u.set_defaults(func=cmd_run)
 
 
+def _add_chaos(sub) -> None:
+    c = sub.add_parser("chaos", help="build while agent processes are SIGKILLed at random (some restarted)",
+                       epilog=f"exit codes: 0 every run complete with bricks_total kept; {EXIT_ERROR} some run "
+                              f"changed bricks_total; {EXIT_INCOMPLETE} some run did not complete; "
+                              f"{EXIT_INTERRUPTED} interrupted")
+    c.add_argument("scenario")
+    c.add_argument("--runs", type=int, default=1, help="conag runs, one after the other (default 1)")
+    c.add_argument("--kill-every", type=float, default=3.0, metavar="S",
+                   help="mean wall seconds between kills (default 3)")
+    c.add_argument("--restart-share", type=float, default=0.5, metavar="P",
+                   help="chance that a killed agent is started again at once (default 0.5)")
+    c.add_argument("--min-alive", type=int, default=1, metavar="N",
+                   help="never leave fewer agents alive (a kill then restarts; default 1)")
+    c.add_argument("--seed", type=int, default=0, help="seed of the kill schedule (default 0)")
+    c.add_argument("--world-seed", type=int, help="the world's seed (default: the scenario's)")
+    c.add_argument("--agents", type=int, help="number of agents (default: the scenario's)")
+    c.add_argument("--max-ticks", type=int, help="tick limit per run (default: the scenario's)")
+    c.add_argument("--stall-ticks", type=_non_negative, default=3000, metavar="N",
+                   help="a run stops as stalled after N ticks without a site filled (default 3000)")
+    c.add_argument("--run-timeout", type=float, default=600.0, metavar="S",
+                   help="stop a run after S wall seconds (default 600)")
+    c.add_argument("--json", metavar="PATH", help="write every run's figures as JSON")
+    c.set_defaults(func=cmd_chaos)
+
+
 def _add_control(sub) -> None:
     for name, text in (("kill", "SIGKILL one agent process of a running `conag run`"),
                        ("restart", "kill and start again one agent process of a running `conag run`")):
@@ -521,3 +588,5 @@ def main(argv: list[str] | None = None) -> int:
     except (ScenarioError, FileNotFoundError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    except KeyboardInterrupt:  # Ctrl-C outside a command's own handling (starting up, a last print)
+        return EXIT_INTERRUPTED

@@ -59,7 +59,7 @@ def add_commands(sub) -> None:
     e = sub.add_parser("echo", help="print the decoded messages on a key expression")
     e.add_argument("key", metavar="KEY_EXPR",
                    help="e.g. 'agent/a1/command', 'agent/*/sensors' or '**' (relative to the world's root, "
-                        "conag/v3/world/<id>/), or a full key starting with conag/")
+                        "conag/v4/world/<id>/), or a full key starting with conag/")
     e.add_argument("--once", action="store_true", help="stop after the first message (with --hz: the first rate)")
     e.add_argument("--json", action="store_true", help="one JSON object per message")
     e.add_argument("--hz", action="store_true", help="print the rate of the messages instead, like ros2 topic hz")

@@ -56,6 +56,10 @@ class RunOptions:
     maps_every: int = 0               # the recorder and viewer ask for the agents' maps every N ticks
 
 
+class RunEnding(RuntimeError):
+    """A restart asked for while the run stops its processes."""
+
+
 @dataclass
 class Fleet:
     """The agent processes of a run, by id."""
@@ -63,6 +67,7 @@ class Fleet:
     opts: RunOptions
     procs: dict[str, subprocess.Popen] = field(default_factory=dict)
     lock: threading.Lock = field(default_factory=threading.Lock)
+    closed: bool = False  # stop_all has begun: a `conag restart` then starts nothing (it would outlive the run)
 
     def start(self, agent_id: str) -> subprocess.Popen:
         o = self.opts
@@ -76,8 +81,10 @@ class Fleet:
                 # A restarted student picks up what it had learned (saved every few hundred
                 # ticks and on exit), not its seed's random weights.
                 cmd += ["--weights-in", str(weights)]
-        proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL)
         with self.lock:
+            if self.closed:
+                raise RunEnding(f"the run is ending: {agent_id} not started")
+            proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL)
             self.procs[agent_id] = proc
         return proc
 
@@ -98,6 +105,7 @@ class Fleet:
 
     def stop_all(self, grace: float = 5.0) -> None:
         with self.lock:
+            self.closed = True
             procs = list(self.procs.values())
         for p in procs:
             if p.poll() is None:
@@ -170,8 +178,12 @@ def _progress(st: WorldStatus, started: float) -> str:
 
 def run(opts: RunOptions, stop: threading.Event) -> dict:
     """Run the scenario; returns the run summary (also written to opts.summary)."""
+    with tempfile.TemporaryDirectory(prefix="conag-run-") as tmp:  # gone however the run ends
+        return _run(opts, stop, Path(tmp) / "final.json")
+
+
+def _run(opts: RunOptions, stop: threading.Event, final_path: Path) -> dict:
     n_agents = opts.scenario.agents if opts.agents is None else opts.agents
-    final_path = Path(tempfile.mkdtemp(prefix="conag-run-")) / "final.json"
     world = _start_world(opts, n_agents, final_path)
     if opts.weights_dir:
         Path(opts.weights_dir).mkdir(parents=True, exist_ok=True)
@@ -258,10 +270,7 @@ def _start_world(opts: RunOptions, n_agents: int, final_path: Path) -> subproces
 def _final_summary(final_path: Path, world: subprocess.Popen) -> dict:
     if not final_path.exists():
         raise RuntimeError(f"the world exited ({world.returncode}) without a final status")
-    summary = json.loads(final_path.read_text(encoding="utf-8"))
-    final_path.unlink()
-    final_path.parent.rmdir()
-    return summary
+    return json.loads(final_path.read_text(encoding="utf-8"))
 
 
 def _on_control(fleet: Fleet):
@@ -276,6 +285,8 @@ def _on_control(fleet: Fleet):
             result = RunControlResult(False, f"bad request: {exc}")
         except KeyError as exc:
             result = RunControlResult(False, f"no agent {exc.args[0]!r} in this run")
+        except RunEnding as exc:
+            result = RunControlResult(False, str(exc))
         query.reply(query.key_expr, encode(result))
         query.drop()
 

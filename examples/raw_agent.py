@@ -19,15 +19,15 @@ p.add_argument("--connect", default="tcp/127.0.0.1:7447")
 p.add_argument("--id", default="x1")
 p.add_argument("--world", default="w0")
 args = p.parse_args()
-root = f"conag/v3/world/{args.world}/agent/{args.id}"
-pack = lambda t, f: msgpack.packb({"v": 3, "t": t, "f": f}, use_bin_type=True)  # noqa: E731
+root = f"conag/v4/world/{args.world}/agent/{args.id}"
+pack = lambda t, f: msgpack.packb({"v": 4, "t": t, "f": f}, use_bin_type=True)  # noqa: E731
 floats = lambda b: struct.unpack(f"<{len(b) // 8}d", b)  # noqa: E731 -- a bin of float64s
 
 conf = zenoh.Config()
 conf.insert_json5("scouting/multicast/enabled", "false")
 conf.insert_json5("connect/endpoints", json.dumps([args.connect]))
 with zenoh.open(conf) as session:
-    token = session.liveliness().declare_token(f"conag/v3/world/{args.world}/alive/agent/{args.id}")  # 1. token
+    token = session.liveliness().declare_token(f"conag/v4/world/{args.world}/alive/agent/{args.id}")  # 1. token
     frames = session.declare_subscriber(f"{root}/sensors", zenoh.handlers.RingChannel(1))  # 2. frames first
     errors = session.declare_subscriber(  # why the world rejected a command (CommandRejected.reason)
         f"{root}/error", lambda s: print(msgpack.unpackb(s.payload.to_bytes())["f"][2], file=sys.stderr))
@@ -42,7 +42,7 @@ with zenoh.open(conf) as session:
     while last < welcome[3] + 3000:
         f = msgpack.unpackb(frames.recv().payload.to_bytes())["f"]  # 4. answer every frame
         tick, heading, sectors, holding = f[1], f[2], f[5], f[7]
-        if tick <= last:
+        if tick <= last or f[12] != welcome[29]:  # an old frame, or not from this world's run (epoch)
             continue
         if tick > welcome[3]:  # the attach frame's odometry is already in the Welcome's pose
             x, y = x + f[3], y + f[4]  # odometry: the last tick's displacement on world axes

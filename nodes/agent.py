@@ -70,6 +70,7 @@ class AgentReport:
     ticks: int = 0
     student: Student | None = None
     link: StudentLink | None = None   # a learning agent's link to the teacher (counts, teachers present)
+    world_link: WorldLink | None = None  # its link to the world (frames refused, bad frames)
 
 
 @dataclass(frozen=True)
@@ -115,7 +116,7 @@ class _AgentProcess:
         self.tick = 0
         self.teacher = StudentLink(session, w, a) if self.learning else None
         self.decisions = None if self.learning else session.declare_publisher(keys.decision(w, a), express=True)
-        report.student, report.link = self.student, self.teacher
+        report.student, report.link, report.world_link = self.student, self.teacher, self.link
 
     def attach(self) -> None:
         welcome = self.link.attach(timeout=self.opts.attach_timeout)

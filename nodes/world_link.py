@@ -7,12 +7,21 @@ no agent logic; the scripted test controller and the agent process both drive a 
 through it. Frames are taken with a blocking `recv` in the caller's thread (no Python
 callback thread in between: that hand-off cost more than the rest of the round trip);
 zenoh's `recv` still lets SIGINT/SIGTERM handlers run.
+
+Frames are checked before they are handed out (anyone on the bus can publish on the
+agent's key): a frame for another agent, of another epoch than the Welcome's (not from
+the world this agent attached to), or whose tick is further ahead of the last frame taken
+than the world could have stepped meanwhile (`tick_slack` plus `max_tick_rate` ticks per
+second since then: a frame of tick 2^62 would otherwise make the agent wait for ever for a
+newer one) is refused and counted in `refused_frames`.
 """
 
 from __future__ import annotations
 
+import logging
 import os
 import time
+from collections.abc import Callable
 
 import zenoh
 
@@ -20,6 +29,8 @@ from bus import Declarations
 from protocol import keys
 from protocol.codec import ProtocolError, decode, encode
 from protocol.messages import AgentCommand, Hello, SensorFrame, Welcome
+
+log = logging.getLogger("conag.agent")
 
 
 class AttachError(RuntimeError):
@@ -32,12 +43,21 @@ class WorldLink:
     A context manager; see the module for the frame channel ("latest wins").
     """
 
-    def __init__(self, session: zenoh.Session, world_id: str, agent_id: str, *, block: bool = True):
+    def __init__(self, session: zenoh.Session, world_id: str, agent_id: str, *, block: bool = True,
+                 tick_slack: int = 1000, max_tick_rate: float = 10_000.0,
+                 clock: Callable[[], float] = time.monotonic):
         """`block` (the default): commands are published RELIABLE with congestion control
         BLOCK, so a busy machine delays one (a few bytes a tick) rather than losing it: a lost
-        command costs a lockstep timeout, and a recording that lacks one cannot be replayed."""
+        command costs a lockstep timeout, and a recording that lacks one cannot be replayed.
+        `tick_slack`, `max_tick_rate`: how far ahead of the last frame taken a frame's tick may
+        be (ticks, plus ticks per second of `clock` since that frame)."""
         self.session, self.world_id, self.agent_id = session, world_id, agent_id
         self.bad_frames = 0
+        self.refused_frames = 0
+        self.welcome: Welcome | None = None
+        self.tick_slack, self.max_tick_rate, self.clock = tick_slack, max_tick_rate, clock
+        self._last_tick = -1            # the tick of the last frame taken (the Welcome's at attach)
+        self._last_time = clock()
         self._declared = Declarations()  # undeclared in reverse: the token goes last
         self._declared.add(session.liveliness().declare_token(keys.agent_token(world_id, agent_id)))
         self._sub = self._declared.add(session.declare_subscriber(keys.sensors(world_id, agent_id),
@@ -51,10 +71,33 @@ class WorldLink:
         if sample is None:
             return None
         try:
-            return decode(sample.payload.to_bytes(), SensorFrame)
+            frame = decode(sample.payload.to_bytes(), SensorFrame)
         except ProtocolError:
             self.bad_frames += 1
             return None
+        reason = self.refusal(frame)
+        if reason:
+            self.refused_frames += 1
+            # Once, then every 1000th: a flood of forged frames must not flood the log too.
+            if self.refused_frames % 1000 == 1:
+                log.warning("agent %s refused a sensor frame (%d so far): %s", self.agent_id,
+                            self.refused_frames, reason)
+            return None
+        return frame
+
+    def refusal(self, frame: SensorFrame) -> str | None:
+        """Why `frame` cannot be from the world this link attached to (None: it can)."""
+        if frame.agent_id != self.agent_id:
+            return f"it is for agent {frame.agent_id!r}"
+        if self.welcome is None:
+            return None
+        if frame.epoch != self.welcome.epoch:
+            return f"epoch {frame.epoch}, not the Welcome's {self.welcome.epoch}"
+        if self._last_tick >= 0:
+            ahead = self.tick_slack + self.max_tick_rate * max(self.clock() - self._last_time, 0.0)
+            if frame.tick > self._last_tick + ahead:
+                return f"tick {frame.tick} is too far ahead of the last frame's ({self._last_tick})"
+        return None
 
     def attach(self, timeout: float = 10.0, retry: float = 0.05) -> Welcome:
         """Ask the world for this agent's body; retry until it answers or `timeout` passes."""
@@ -66,9 +109,13 @@ class WorldLink:
                                           timeout=min(1.0, max(deadline - time.monotonic(), 0.05))):
                 if reply.ok is not None:
                     try:
-                        return decode(reply.ok.payload.to_bytes(), Welcome)
+                        welcome = decode(reply.ok.payload.to_bytes(), Welcome)
                     except ProtocolError as exc:
                         last_error = f"bad Welcome: {exc}"
+                    else:
+                        self.welcome = welcome
+                        self._last_tick, self._last_time = welcome.tick, self.clock()
+                        return welcome
                 else:
                     last_error = reply.err.payload.to_bytes().decode(errors="replace")
             time.sleep(retry)
@@ -96,6 +143,8 @@ class WorldLink:
                     pause = min(pause * 2, 0.002)
                     continue
             if frame.tick > after_tick:
+                if frame.tick > self._last_tick:
+                    self._last_tick, self._last_time = frame.tick, self.clock()
                 return frame
 
     def send(self, tick: int, speed: float = 0.0, turn: float = 0.0, action: str = "none") -> None:

@@ -11,8 +11,12 @@ world itself is never touched concurrently. The loop:
 * realtime: a tick every 1/tick_rate seconds, the latest command of each agent wins.
 
 Agents come and go: an agent is waited for only while its liveliness token exists.
-When the token disappears (process killed), its body stops and drops any brick where it
-stands; when a process with the same id attaches again, it gets the same body back.
+When the token disappears (process killed), its body stops, its brick is put down where
+nothing needs it, and after `body_grace_ticks` the body leaves the world; when a process
+with the same id attaches again, it gets its body back (`World.detach`, `World.attach`).
+An agent that holds its token but misses `lockstep_miss_limit` deadlines in a row is no
+longer waited for until it sends a command again (`world_server.lockstep.LockstepWaits`);
+every step taken without some live agent's command is published as a LockstepTimeout.
 Bad input of any kind is counted in `WorldStatus.bad_messages`, logged at INFO (`-v`) and
 otherwise ignored; a rejected command (undecodable, another agent's id, an agent not
 attached, in lockstep a tick other than the world's) is also answered with a
@@ -60,6 +64,7 @@ from protocol.messages import (
     Perturbed,
     WorldStatus,
 )
+from world_server.lockstep import LockstepWaits
 from world_server.world import World
 
 log = logging.getLogger("conag.world")
@@ -106,6 +111,7 @@ class WorldServer:
         self._status_seq = 0  # WorldStatus.seq of the last status published
         self.view_every = view_every  # ticks between WorldView publications (0: only on query)
         self._view_failed = False
+        self.lockstep = LockstepWaits(self.cfg.lockstep_miss_limit)
 
     # zenoh callbacks: decode if cheap, then hand over to the loop thread ------------------
     def _on_command(self, sample: zenoh.Sample) -> None:
@@ -186,9 +192,11 @@ class WorldServer:
         while not stop.is_set():
             self._publish_status_if_due()
             live = self._live()
+            awaited = self.lockstep.awaited(live)
             # Realtime ticks by the clock; lockstep only once agents are there to drive it.
             armed = self.mode == "realtime" or (bool(live) and len(self.world.agents) >= self.wait_agents)
-            if self.mode == "lockstep" and armed and self._answered.issuperset(live):
+            if self.mode == "lockstep" and armed and self._answered.issuperset(awaited):
+                self._stepping_without(sorted(set(live) - self._answered))
                 return True
             now = self.clock()
             if not armed:
@@ -198,10 +206,12 @@ class WorldServer:
                 period = 1.0 / self.cfg.tick_rate if self.mode == "realtime" else self.cfg.lockstep_timeout
                 if now >= last_tick + period:
                     if self.mode == "lockstep":
-                        late = sorted(set(live) - self._answered)
+                        late = sorted(set(awaited) - self._answered)
                         log.info("tick %d: no command from %s in time", self.world.tick, ", ".join(late))
-                        self._timeout_pub.put(encode(LockstepTimeout(self.world.world_id, self.world.tick,
-                                                                     tuple(late))))
+                        for agent in self.lockstep.deadline_passed(late):
+                            log.info("tick %d: agent %s missed %d deadlines in a row: not waiting for it "
+                                     "until it answers", self.world.tick, agent, self.cfg.lockstep_miss_limit)
+                        self._stepping_without(sorted(set(live) - self._answered))
                     return True
                 timeout = min(last_tick + period - now, 0.05)
             try:
@@ -211,6 +221,12 @@ class WorldServer:
             self._handle(event)
         return False
 
+    def _stepping_without(self, agents: list[str]) -> None:
+        """Tell a recorder that this step goes without the commands of `agents` (late, or
+        unresponsive and not waited for): a replay steps them the same way."""
+        if agents:
+            self._timeout_pub.put(encode(LockstepTimeout(self.world.world_id, self.world.tick, tuple(agents))))
+
     def _handle(self, event: tuple) -> None:
         kind = event[0]
         if kind == "cmd":
@@ -219,7 +235,10 @@ class WorldServer:
             if cmd.agent_id not in self._tokens or rec is None or not rec.alive:
                 self._bad(f"command from agent {cmd.agent_id!r}, which is not attached (declare its liveliness "
                           "token, then attach)", cmd.agent_id)
-            elif self.mode == "lockstep" and cmd.tick != self.world.tick:
+                return
+            if self.lockstep.heard(cmd.agent_id):
+                log.info("tick %d: agent %s answers again: waiting for it", self.world.tick, cmd.agent_id)
+            if self.mode == "lockstep" and cmd.tick != self.world.tick:
                 # Not taken: lockstep applies a command to the tick it answers, and only to that one.
                 self._bad(f"command from {cmd.agent_id!r} for tick {cmd.tick}, but the world is at tick "
                           f"{self.world.tick} (answer the newest frame's tick)", cmd.agent_id)
@@ -236,6 +255,7 @@ class WorldServer:
                 if agent in self.world.agents and self.world.agents[agent].alive:
                     log.info("agent %s is gone at tick %d; its body stops", agent, self.world.tick)
                 self.world.detach(agent)
+                self.lockstep.forget(agent)
         elif kind == "attach":
             self._attach(event[1])
         elif kind == "perturb":
@@ -282,6 +302,7 @@ class WorldServer:
             query.drop()
             return
         welcome = self.world.attach(hello.agent_id, hello.pid)
+        self.lockstep.forget(hello.agent_id)
         data = encode(welcome)
         query.reply(query.key_expr, data)
         query.drop()

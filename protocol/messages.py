@@ -16,8 +16,9 @@ from protocol.keys import check_id
 
 # 2: the obstacle channel in sensor frames, site perturbations, Blueprint and AgentState.
 # 3: the world's constants in Welcome; CommandRejected; WorldStatus.seq; Perturbation.force.
+# 4: the world's epoch in Welcome and every SensorFrame (an agent refuses frames of another).
 # An incompatible change raises this and keys.ROOT together (see docs/protocol.md, Versioning).
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 
 # Sensor channels, in the order of SensorFrame.ranges (channel-major).
 # Disc-like channels first (food, water, brick, obstacle: fixed `#` cells and the world's
@@ -126,11 +127,13 @@ class Welcome:
     touch_margin: float = 0.0    # eat / drink: surfaces (body to disc) at most this far apart
     sensor_noise: float = 0.0    # reading error: uniform, zero mean, std sensor_noise x distance
     odometry_noise: float = 0.0  # odometry error: normal, std odometry_noise x distance moved
+    epoch: int = 0               # this run of the world: every SensorFrame it sends carries it
 
     def __post_init__(self) -> None:
         check_id(self.world_id, "world id")
         check_id(self.agent_id, "agent id")
         _finite(self)
+        _require(self.epoch >= 0, "Welcome.epoch must be >= 0")
         _require(self.blueprint_version >= 0, "Welcome.blueprint_version must be >= 0")
         _require(self.world_width >= 0 and self.world_height >= 0, "Welcome world size must be >= 0")
         _require(len(self.site_xs) == len(self.site_ys), "Welcome site_xs/site_ys differ in length")
@@ -150,6 +153,8 @@ class SensorFrame:
     means nothing of that colour in range. Odometry is the displacement of the last
     tick in the compass frame, as the wheel encoders and compass report it (noisy).
     The flags report the outcome of the action the agent sent for the previous tick.
+    `epoch` is the Welcome's: a frame with another epoch is not from the world the agent
+    attached to.
     """
 
     agent_id: str
@@ -164,11 +169,13 @@ class SensorFrame:
     dropped: bool = False
     ate: bool = False
     drank: bool = False
+    epoch: int = 0
 
     def __post_init__(self) -> None:
         check_id(self.agent_id, "agent id")
         _finite(self)
         _require(self.tick >= 0, "SensorFrame.tick must be >= 0")
+        _require(self.epoch >= 0, "SensorFrame.epoch must be >= 0")
         _require(1 <= self.sectors <= MAX_SECTORS, "SensorFrame.sectors out of range")
         _require(
             len(self.ranges) == len(CHANNELS) * self.sectors,

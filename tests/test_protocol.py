@@ -68,11 +68,12 @@ EXAMPLES: dict[type, object] = {
         site_xs=(0.0, 1.0, 2.0), site_ys=(5.0, 5.0, 5.0), blueprint_version=2, world_width=12.0,
         world_height=8.0, dt=0.1, max_speed=3.0, max_turn=1.5707963, inertia=0.5, agent_radius=0.3,
         disc_radius=0.5, grab_reach=1.2, grab_cone=1.0471976, drop_tolerance=0.5, touch_margin=0.25,
-        sensor_noise=0.02, odometry_noise=0.01,
+        sensor_noise=0.02, odometry_noise=0.01, epoch=2**62 + 5,
     ),
     SensorFrame: SensorFrame(
         agent_id="a1", tick=121, heading=3.14, odom_dx=0.1, odom_dy=-0.05, sectors=8,
         ranges=_ranges(8), holding=False, grabbed=True, dropped=False, ate=True, drank=False,
+        epoch=2**62 + 5,
     ),
     AgentCommand: AgentCommand(agent_id="a1", tick=121, speed=0.5, turn=-0.2, action="grab"),
     CommandRejected: CommandRejected(agent_id="a1", tick=122, reason="command for tick 121, the world is at 122"),
@@ -168,7 +169,7 @@ def sensor_frames(draw):
         agent_id=draw(ids), tick=draw(nonneg_int), heading=draw(finite), odom_dx=draw(finite),
         odom_dy=draw(finite), sectors=sectors, ranges=tuple(ranges), holding=draw(st.booleans()),
         grabbed=draw(st.booleans()), dropped=draw(st.booleans()), ate=draw(st.booleans()),
-        drank=draw(st.booleans()),
+        drank=draw(st.booleans()), epoch=draw(nonneg_int),
     )
 
 
@@ -304,7 +305,7 @@ def test_protocol_error_is_a_value_error():
     assert issubclass(ProtocolError, ValueError)
 
 
-@pytest.mark.parametrize("version", [0, 1, 2, 4, -1, 2**40, "3", b"\x03", None, True, [3], {"v": 3}])
+@pytest.mark.parametrize("version", [0, 1, 2, 3, 5, -1, 2**40, "4", b"\x04", None, True, [4], {"v": 4}])
 def test_wrong_schema_version(version):
     _bad(_pack("Hello", ["a1", 1], version=version))
 

@@ -59,7 +59,7 @@ def test_the_version_keys_and_enumerations_named_are_the_codes():
     assert f"Protocol version: **{SCHEMA_VERSION}**" in DOC and f'{{"v": {SCHEMA_VERSION}, ' in DOC
     assert f"`{keys.ROOT}/world/<world>/`" in DOC
 
-    def doc_form(key: str) -> str:  # conag/v3/world/WORLD/agent/AGENT/command -> `W/agent/<agent>/command`
+    def doc_form(key: str) -> str:  # conag/v4/world/WORLD/agent/AGENT/command -> `W/agent/<agent>/command`
         rest = key[len(keys.world_root("WORLD")):]
         return "`W" + rest.replace("AGENT", "<agent>").replace("TEACHER", "<teacher>") + "`"
 

@@ -650,17 +650,16 @@ def test_a_repeated_attach_from_the_same_live_process_is_not_a_restart():
     assert w.attach("a", pid=200).restarts == 2        # the same pid after a detach: back again
 
 
-def test_detach_drops_the_brick_stops_the_body_and_refuses_commands():
-    w = make(".......\n.bA...A\n.......", agents=2, sensor_noise=0.0)
+def test_detach_puts_the_brick_down_stops_the_body_and_refuses_commands():
+    w = make(".........\n.........\n.bA...A..\n.........\n.........", agents=2, sensor_noise=0.0)
     w.attach("a")
     w.attach("b")
     face_nearest_brick(w)
     tick(w, {"a": (0.0, 0.0, "grab")})
     assert w.frame("a").holding
     tick(w, {"a": (3.0, 0.0, "none")}, 4)  # moving east
-    where = pose(w, "a")[:2].copy()
     w.detach("a")
-    assert w.status().bricks_total == 1
+    assert w.status().bricks_total == 1 and w.agents["a"].holding == -1
     assert w.status().agent_alive == (False, True) and w.live_agents() == ["b"]
     tick(w)
     _, vel = w.physics.state()
@@ -673,14 +672,79 @@ def test_detach_drops_the_brick_stops_the_body_and_refuses_commands():
     tick(w, n=2)
     assert pose(w, "a")[:2] == pytest.approx(stopped)
     assert [f.agent_id for f in w.frames()] == ["b"]
-    # the brick lies where the body stood at detach; b sees it, and a's body as an agent
+    # the brick lies on a cell centre clear of both bodies; b sees it, and a's body as an agent
+    brick = w.discs.xy[np.flatnonzero(w.discs.kind == 2)[0]]
+    assert (brick % 1.0) == pytest.approx((0.5, 0.5))
+    for body in (stopped, pose(w, "b")[:2]):
+        assert np.hypot(*(brick - body)) >= w.cfg.disc_radius + w.cfg.agent_radius
     r = ranges(w, "b")
     bxy = pose(w, "b")[:2]
-    assert r[BRICK].max() == pytest.approx(np.hypot(*(where - bxy)), abs=1e-6)
+    assert r[BRICK].max() == pytest.approx(np.hypot(*(brick - bxy)), abs=1e-6)
     assert r[AGENT, sector_of(*(stopped - bxy), 16)] == pytest.approx(np.hypot(*(stopped - bxy)), abs=1e-6)
     # the world keeps running for the others
     tick(w, {"b": (0.0, 1.0, "none")})
     assert w.tick > 0 and w.frame("b").heading == pytest.approx(1.0)
+
+
+def test_a_dead_body_leaves_the_world_after_its_grace_period():
+    w = make("A.....A", agents=2, sensor_noise=0.0, body_grace_ticks=5)
+    w.attach("a")
+    w.attach("b")
+    w.detach("a")
+    tick(w, n=4)
+    assert (ranges(w, "b")[AGENT] != NO_READING).any()   # still there, and solid
+    tick(w)
+    assert (ranges(w, "b")[AGENT] == NO_READING).all()   # gone: no sensor sees it
+    # b drives through where a's body lies: nothing stops it
+    tick(w, {"b": (0.0, math.pi / 2, "none")}, 2)  # face west
+    tick(w, {"b": (3.0, 0.0, "none")}, 40)
+    assert pose(w, "b")[0] < 0.5
+    assert w.status().agents_alive == 1
+    # a newcomer may start where a dead body lies, once it has left
+    w = make("A.....A", agents=2, body_grace_ticks=0)
+    w.attach("a")
+    w.detach("a")
+    assert w.attach("c").x == 0.5
+
+
+def test_a_restarted_agent_gets_its_body_back_at_the_free_cell_nearest_where_it_left():
+    w = make("......\n.A....\n......\n....A.", agents=2, sensor_noise=0.0, body_grace_ticks=0)
+    w.attach("a")
+    w.attach("b")
+    left = pose(w, "a")[:2].copy()
+    w.detach("a")
+    # b comes to stand where a's body was (it no longer collides), and a brick lands beside
+    w.physics.place_body(w.agents["b"].index, left)
+    w.perturb(Perturbation("add", left[0] + 1, left[1], "brick", 0.0, 0.0, False))
+    tick(w)
+    back = w.attach("a")
+    assert back.restarts == 1
+    xy = np.array([back.x, back.y])
+    assert np.hypot(*(xy - left)) == pytest.approx(1.0)          # a neighbouring cell
+    assert (xy % 1.0) == pytest.approx((0.5, 0.5))
+    assert np.hypot(*(xy - pose(w, "b")[:2])) >= 2 * w.cfg.agent_radius
+    present = w.discs.xy[w.discs.state == 0]
+    assert np.hypot(*(present - xy).T).min() >= w.cfg.disc_radius + w.cfg.agent_radius
+    assert (ranges(w, "b")[AGENT] != NO_READING).any()             # solid and sensed again
+    tick(w, {"a": (3.0, 0.0, "none")}, 3)
+    assert pose(w, "a")[:2] != pytest.approx(xy)                    # and it moves
+
+
+def test_a_dead_agents_brick_never_fills_a_site_and_bricks_are_conserved():
+    # The body dies standing on a site, holding a brick: the brick goes elsewhere.
+    w = make(".......\n.......\n..b+...\n.......\n.......", agents=1, sensor_noise=0.0)
+    w.attach("a", )
+    face_nearest_brick(w)  # the body starts at the first empty cell (0, 0)
+    w.physics.place_body(0, (3.5, 2.5))
+    w.heading[0] = math.pi
+    tick(w, {"a": (0.0, 0.0, "grab")})
+    assert w.agents["a"].holding >= 0
+    filled, total = w.status().sites_filled, w.status().bricks_total
+    w.detach("a")
+    assert (w.status().sites_filled, w.status().bricks_total) == (filled, total) == (0, 1)
+    brick = w.discs.xy[np.flatnonzero(w.discs.kind == 2)[0]]
+    site = w.sites_xy[0]
+    assert np.abs(brick - site).max() >= 2.0  # not on the site, not beside it
 
 
 # ---------------------------------------------------------------- perturbation (W6)
@@ -852,3 +916,22 @@ def test_heading_zero_is_east_a_positive_turn_is_counter_clockwise_and_motion_fo
     tick(w, {"a": (1.0, 0.0, "none")})
     f = w.frame("a")
     assert f.odom_dy == pytest.approx(0.1) and abs(f.odom_dx) < 1e-6  # north
+
+
+def test_lockstep_waits_for_responsive_agents_and_takes_a_silent_one_back_when_it_answers():
+    from world_server.lockstep import LockstepWaits
+
+    waits = LockstepWaits(miss_limit=2)
+    assert waits.awaited(["a", "b"]) == ["a", "b"]
+    assert waits.deadline_passed(["b"]) == []
+    assert waits.awaited(["a", "b"]) == ["a", "b"]       # one miss is not enough
+    assert waits.deadline_passed(["b"]) == ["b"]         # two in a row: unresponsive
+    assert waits.awaited(["a", "b"]) == ["a"]
+    assert waits.awaited(["b"]) == ["b"]                 # alone, it is still waited for
+    assert waits.heard("b") and not waits.unresponsive("b")
+    assert waits.awaited(["a", "b"]) == ["a", "b"]
+    waits.deadline_passed(["b"])
+    waits.heard("b")                                     # an answer in between resets the count
+    assert waits.deadline_passed(["b"]) == [] and not waits.unresponsive("b")
+    waits.forget("b")
+    assert waits.missed == {}

@@ -136,14 +136,14 @@ def test_agent_killed_holding_a_brick_leaves_it_and_gets_its_body_back(bus, star
         proc.send_signal(signal.SIGKILL)
         proc.wait(10)
         rec = world.agents["a1"]
-        # The world drops the brick before it marks the body dead.
+        # The world puts the brick down before it marks the body dead.
         wait_until(lambda: not rec.alive, what="the killed agent to be noticed")
         assert rec.holding == -1
         brick = int(np.flatnonzero(world.discs.kind == 2)[0])
-        assert world.discs.state[brick] == 0  # back in the world, where the body stands
-        x, y, _ = world.agent_poses()[rec.index]
-        assert np.hypot(*(world.discs.xy[brick] - (x, y))) < 1e-9
-        assert world.status().bricks_total == bricks
+        assert world.discs.state[brick] == 0  # back in the world, on a free cell clear of the site
+        assert (world.discs.xy[brick] % 1.0) == pytest.approx((0.5, 0.5))
+        assert np.abs(world.discs.xy[brick] - world.sites_xy[0]).max() >= 2.0
+        assert world.status().bricks_total == bricks and world.status().sites_filled == 0
         # Lockstep no longer waits for the dead agent: 50 ticks take far less than 50 timeouts.
         t0 = time.monotonic()
         for _ in range(50):

@@ -34,6 +34,8 @@ class WorldConfig:
     lockstep_timeout: float = 1.0   # wall seconds the world waits for a live agent's command
     tick_rate: float = 50.0         # ticks per wall second in realtime mode
     status_period: float = 0.5      # wall seconds between status publications
+    body_grace_ticks: int = 100     # ticks a dead agent's body stays solid before it leaves the world
+    lockstep_miss_limit: int = 3    # lockstep deadlines missed in a row before the world stops waiting
 
     @property
     def drop_tolerance(self) -> float:
@@ -60,6 +62,10 @@ class WorldConfig:
                              "(a body may move at most its radius per tick)")
         if not 0 < self.inertia <= 1:
             raise ValueError("world.inertia must be in (0, 1]")
+        if not (isinstance(self.body_grace_ticks, int) and self.body_grace_ticks >= 0):
+            raise ValueError("world.body_grace_ticks must be an integer >= 0")
+        if not (isinstance(self.lockstep_miss_limit, int) and self.lockstep_miss_limit >= 1):
+            raise ValueError("world.lockstep_miss_limit must be an integer >= 1")
         if not (isinstance(self.sensor_sectors, int) and 1 <= self.sensor_sectors <= 64):
             raise ValueError("world.sensor_sectors must be an integer from 1 to 64")
 

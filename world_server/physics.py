@@ -28,6 +28,7 @@ class Physics:
         self.space.gravity = (0.0, 0.0)
         self.space.collision_slop = 0.01  # contacts as tight as the map cares about
         self._bodies: list[pymunk.Body] = []
+        self._shapes: list[pymunk.Circle] = []
         self._discs: dict[int, pymunk.Circle] = {}
         self._rows = np.zeros(0, np.int64)  # batch row of each agent body
         self._nrows = 0
@@ -74,9 +75,26 @@ class Physics:
         shape.filter = pymunk.ShapeFilter(group=len(self._bodies) + 1)
         self.space.add(body, shape)
         self._bodies.append(body)
+        self._shapes.append(shape)
         self._map_rows()
         self._state = None
         return len(self._bodies) - 1
+
+    def set_solid(self, index: int, solid: bool) -> None:
+        """Whether agent body `index` collides with anything: a dead agent's body stops
+        colliding once its grace period is over (it stays in the space, where the batch
+        reads it, but its shape filter matches nothing)."""
+        group = index + 1
+        self._shapes[index].filter = (pymunk.ShapeFilter(group=group) if solid
+                                      else pymunk.ShapeFilter(group=group, categories=0, mask=0))
+
+    def place_body(self, index: int, xy: tuple[float, float] | np.ndarray) -> None:
+        """Put agent body `index` at `xy`, at rest (a restarted agent's body comes back)."""
+        body = self._bodies[index]
+        body.position = (float(xy[0]), float(xy[1]))
+        body.velocity = (0.0, 0.0)
+        self.space.reindex_shapes_for_body(body)
+        self._state = None
 
     def _map_rows(self) -> None:
         # The batch iterates every body of the space (the static one too) in the space's

@@ -9,6 +9,7 @@ from the injected generator, so the same seed and the same commands give the sam
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,6 +30,7 @@ from protocol.messages import (
 )
 from world_server.discs import BRICK_DISC, FOOD_DISC, WATER_DISC, DiscStore
 from world_server.physics import Physics, motor_update
+from world_server.placement import body_cell, brick_drop_cell
 from world_server.scenario import Scenario
 from world_server.sensors import sense
 
@@ -50,6 +52,8 @@ class AgentRecord:
     grabs: int = 0
     drops: int = 0
     pid: int | None = None  # the process that attached last, if it said
+    gone_at: int = -1       # the tick its process was seen gone (detach), while it is gone
+    solid: bool = True      # its body collides and is sensed (False once the grace period is over)
 
 
 class World:
@@ -58,15 +62,26 @@ class World:
     Built from a scenario (discs, walls, drop sites, agent starts) and a random generator
     (the noise). Agents `attach` by id (getting a body and the Welcome) and `detach`; each
     tick the caller gives every live agent's command (`set_command`), calls `step`, and
-    hands out the `frames`. `status`, `sites_filled`, `completed` and `blueprint` report
+    hands out the `frames`. A detached agent's brick is put down where nothing needs it
+    (`world_server.placement.brick_drop_cell`); its body stays, stopped, for
+    `body_grace_ticks`, then leaves the world (it no longer collides and is not sensed)
+    until the same id attaches again and gets it back at the free cell nearest where it
+    was (`placement.body_cell`). `status`, `sites_filled`, `completed` and `blueprint` report
     the build; `perturb` removes, adds or moves a disc or changes the blueprint.
     """
 
-    def __init__(self, scenario: Scenario, rng: np.random.Generator | None = None, world_id: str = "w0"):
+    def __init__(self, scenario: Scenario, rng: np.random.Generator | None = None, world_id: str = "w0",
+                 epoch: int | None = None):
         self.scenario = scenario
         self.cfg = scenario.world
         self.world_id = world_id
         self.rng = rng if rng is not None else np.random.default_rng(scenario.seed)
+        # Which run of the world this is, in the Welcome and every frame (an agent refuses
+        # frames of another epoch). By default a digest of the world's id and its generator's
+        # initial state, drawing nothing from it: the same seed gives the same run, frames
+        # included; another seed or world id, another epoch. Not a secret.
+        self.epoch = epoch if epoch is not None else int.from_bytes(hashlib.blake2b(
+            f"{world_id}|{self.rng.bit_generator.state}".encode(), digest_size=8).digest(), "little") >> 1
         self.tick = 0
         self.size = scenario.size
         cells = {ch: scenario.cells_col_row(ch) for ch in "FWbB#A+"}
@@ -91,6 +106,7 @@ class World:
         self.turn = np.zeros(n)
         self.action = np.zeros(n, np.int64)
         self.alive = np.zeros(n, bool)
+        self.solid = np.zeros(n, bool)  # the body collides and is sensed (alive, or dead within its grace)
         self.odometry = np.zeros((n, 2))
         self.distance = np.zeros(n)
         self.flags = np.zeros((n, len(FLAGS)), bool)
@@ -125,7 +141,11 @@ class World:
             rec.restarts += 1
             rec.alive = True
         rec.pid = pid
+        rec.gone_at = -1
+        if not rec.solid:
+            self._bring_back(rec)
         self.alive[rec.index] = True
+        self.solid[rec.index] = True
         self.speed[rec.index] = self.turn[rec.index] = 0.0
         self.action[rec.index] = 0
         pos, _ = self.physics.state()
@@ -138,28 +158,95 @@ class World:
             sensor_range=self.cfg.sensor_range, cell_size=self.cfg.cell_size,
             site_xs=tuple(self.sites_xy[:, 0].tolist()), site_ys=tuple(self.sites_xy[:, 1].tolist()),
             world_width=float(self.size[0]), world_height=float(self.size[1]),
-            blueprint_version=self.blueprint_version,
+            blueprint_version=self.blueprint_version, epoch=self.epoch,
             **{name: float(getattr(self.cfg, name)) for name in WELCOME_CONSTANTS})
 
     def detach(self, agent_id: str) -> None:
-        """The agent's process is gone: its body stops and drops what it held, where it stands."""
+        """The agent's process is gone: its body stops, and a brick it held is put down where
+        nothing needs it (`brick_drop_cell`: not on a site, not beside one, not in a gap).
+        After `body_grace_ticks` ticks the body leaves the world (`step`)."""
         rec = self.agents.get(agent_id)
         if rec is None or not rec.alive:
             return
         if rec.holding >= 0:
             pos, _ = self.physics.state()
-            self._drop(rec, pos[rec.index])
+            self._put_down(rec, pos[rec.index])
         self.speed[rec.index] = self.turn[rec.index] = 0.0
         self.action[rec.index] = 0
         self.alive[rec.index] = False
         rec.alive = False
+        rec.gone_at = self.tick
+        if self.cfg.body_grace_ticks == 0:
+            self._remove_body(rec)
+
+    def _fractional_cell(self, xy: np.ndarray) -> tuple[float, float]:
+        """World (x, y) -> fractional (col, row) for `world_server.placement` (row 0 north)."""
+        size = self.cfg.cell_size
+        return float(xy[0]) / size, self.scenario.rows - float(xy[1]) / size
+
+    def _free_cells(self, radius: float, body_margin: float = 0.0) -> np.ndarray:
+        """bool [row, col]: a circle of `radius` at the cell's centre overlaps no wall, no disc
+        in the world and no solid body (kept `body_margin` further from bodies)."""
+        sc = self.scenario
+        free = ~sc.grid("#")
+        rows, cols = free.shape
+        size = self.cfg.cell_size
+        pos, _ = self.physics.state()
+        objects = [(self.discs.present_arrays()[1], radius + self.cfg.disc_radius),
+                   (pos[self.solid], radius + self.cfg.agent_radius + body_margin)]
+        for xy, reach in objects:
+            if not len(xy):
+                continue
+            cells = np.floor(np.column_stack([xy[:, 0] / size, rows - xy[:, 1] / size])).astype(np.int64)
+            k = int(np.ceil(reach / size)) + 1
+            for dc in range(-k, k + 1):
+                for dr in range(-k, k + 1):
+                    c, r = cells[:, 0] + dc, cells[:, 1] + dr
+                    inside = (c >= 0) & (c < cols) & (r >= 0) & (r < rows)
+                    cx, cy = (c + 0.5) * size, (rows - r - 0.5) * size
+                    hit = inside & (np.hypot(xy[:, 0] - cx, xy[:, 1] - cy) < reach - 1e-9)
+                    free[r[hit], c[hit]] = False
+        return free
+
+    def _put_down(self, rec: AgentRecord, xy: np.ndarray) -> None:
+        """A dead agent's brick, put where nothing needs it (where the body stands if there is
+        no such cell). It is not the agent's drop: its drop count stays."""
+        site = np.zeros(self.scenario.grid("#").shape, bool)
+        cells = self.scenario.to_cell(self.sites_xy)
+        site[cells[:, 1], cells[:, 0]] = True
+        cell = brick_drop_cell(self._free_cells(self.cfg.disc_radius), site, self._fractional_cell(xy))
+        where = xy if cell is None else self.scenario.to_world(cell)[0]
+        brick, rec.holding = rec.holding, -1
+        self.discs.place(brick, where)
+        self.physics.add_disc(brick, where)
+
+    def _remove_body(self, rec: AgentRecord) -> None:
+        """The body leaves the world: it collides with nothing and no sensor sees it."""
+        rec.solid = False
+        self.solid[rec.index] = False
+        self.physics.set_solid(rec.index, False)
+        for brick, agent in list(self._pending_release.items()):
+            if agent == rec.index:
+                self.physics.release_disc(brick)
+                del self._pending_release[brick]
+
+    def _bring_back(self, rec: AgentRecord) -> None:
+        """A body that had left the world comes back at the free cell nearest where it was."""
+        pos, _ = self.physics.state()
+        free = self._free_cells(self.cfg.agent_radius, body_margin=0.1)
+        cell = body_cell(free, self._fractional_cell(pos[rec.index]))
+        if cell is None:
+            raise RuntimeError("no free cell left for a returning agent body")
+        self.physics.place_body(rec.index, self.scenario.to_world(cell)[0])
+        self.physics.set_solid(rec.index, True)
+        rec.solid = True
 
     def live_agents(self) -> list[str]:
         """Ids of the attached, live agents, in attach order."""
         return [r.agent_id for r in self._order if r.alive]
 
     def _grow_arrays(self) -> None:
-        for name in ("heading", "speed", "turn", "action", "alive", "distance"):
+        for name in ("heading", "speed", "turn", "action", "alive", "solid", "distance"):
             arr = getattr(self, name)
             setattr(self, name, np.append(arr, np.zeros(1, arr.dtype)))
         self.odometry = np.vstack([self.odometry, np.zeros((1, 2))])
@@ -168,7 +255,7 @@ class World:
 
     def _free_start(self) -> np.ndarray:
         """First `A` start not taken by a body, else the first clear empty cell (reading order)."""
-        taken, _ = self.physics.state()
+        taken = self.physics.state()[0][self.solid]
         clear = self.cfg.agent_radius * 2 + 0.1
         candidates = [self._starts, self.scenario.to_world(self.scenario.cells_col_row("."))]
         present = self.discs.xy[self.discs.present()]
@@ -218,13 +305,23 @@ class World:
             self.odometry = moved + self.rng.standard_normal(moved.shape) * self.cfg.odometry_noise * step_len
         self._release_dropped(new_pos)
         self.tick += 1
+        self._remove_expired()
         self._sense(new_pos)
+
+    def _remove_expired(self) -> None:
+        """Dead bodies whose grace period is over leave the world."""
+        for rec in self._order:
+            if rec.solid and not rec.alive and self.tick - rec.gone_at >= self.cfg.body_grace_ticks:
+                self._remove_body(rec)
 
     def _sense(self, pos: np.ndarray | None = None) -> None:
         if pos is None:
             pos, _ = self.physics.state()
         disc_xy, disc_kind = self._sensed_objects()
         seed = int(self.rng.integers(2**63)) if self.cfg.sensor_noise > 0 else 0
+        if not self.solid.all():
+            # A body that has left the world is out of every sensor's range.
+            pos = np.where(self.solid[:, None], pos, -1e9)
         self._ranges = sense(pos, self.alive, disc_xy, disc_kind, self.cfg.sensor_sectors,
                              self.cfg.sensor_range, self.size, noise=self.cfg.sensor_noise, seed=seed)
 
@@ -286,7 +383,7 @@ class World:
         return SensorFrame(agent_id=agent_id, tick=self.tick, heading=float(self.heading[i]),
                            odom_dx=float(self.odometry[i, 0]), odom_dy=float(self.odometry[i, 1]),
                            sectors=self.cfg.sensor_sectors, ranges=tuple(self._ranges[i].ravel().tolist()),
-                           holding=rec.holding >= 0, **flags)
+                           holding=rec.holding >= 0, epoch=self.epoch, **flags)
 
     def frames(self) -> list[SensorFrame]:
         """One frame per live agent, describing the world after the last tick."""
@@ -387,8 +484,8 @@ class World:
             col, row = (int(v) for v in self.scenario.to_cell((x, y))[0])
             return f"({x:g}, {y:g}) is in the drop site of cell ({col}, {row})"
         pos, _ = self.physics.state()
-        if len(pos):
-            d = np.hypot(pos[:, 0] - x, pos[:, 1] - y)
+        if self.solid.any():
+            d = np.where(self.solid, np.hypot(pos[:, 0] - x, pos[:, 1] - y), np.inf)
             i = int(np.argmin(d))
             if d[i] < self.cfg.disc_radius + self.cfg.agent_radius:
                 return f"a disc at ({x:g}, {y:g}) would overlap the body of agent {self._order[i].agent_id}"

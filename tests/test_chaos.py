@@ -1,0 +1,26 @@
+"""`conag chaos`: a build goes on while agent processes are SIGKILLed at random, some started
+again and some left dead; it completes and no brick is lost or made."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from tests.conftest import conag
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.mark.timeout(600)
+def test_fig6_completes_under_random_kills_with_bricks_total_kept(tmp_path):
+    out = tmp_path / "chaos.json"
+    r = conag("chaos", "scenarios/fig6.toml", "--runs", 2, "--kill-every", 1.5, "--seed", 1, "--json", out,
+              timeout=600)
+    assert r.returncode == 0, r.stdout + r.stderr
+    report = json.loads(out.read_text())
+    assert report["total"] == 2 and report["completed"] == 2 and report["bricks_kept"] == 2
+    runs = report["runs"]
+    assert all(run["bricks_total"] == run["bricks_expected"] > 0 for run in runs)
+    assert sum(run["kills"] for run in runs) >= 2, r.stdout  # it did kill
+    assert "2/2 runs complete" in r.stdout

@@ -1,0 +1,81 @@
+"""Where the world puts a dead agent's brick and a returning body: the pure rules of
+`world_server.placement` on small grids ([row, col], row 0 north)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from world_server.placement import body_cell, brick_drop_cell
+
+
+def grid(text: str) -> tuple[np.ndarray, np.ndarray]:
+    """(free, site) from a picture: `#` not free (wall, disc, body), `+` a drop site, `.` free."""
+    cells = np.array([list(line) for line in text.strip().splitlines()])
+    return cells != "#", cells == "+"
+
+
+def test_the_brick_goes_to_the_nearest_open_cell_away_from_the_structure():
+    free, site = grid("""
+.......
+.......
+..+++..
+.......
+.......
+.......
+""")
+    # dying on the middle site: not on a site, not next to one, all eight neighbours free
+    assert brick_drop_cell(free, site, (3.5, 2.5)) == (3, 4)
+
+
+def test_the_brick_never_closes_a_one_cell_gap():
+    free, site = grid("""
+...#....
+...#....
+........
+...#....
+...#....
+""")
+    # standing in the only gap of the wall: the brick goes to an open cell beside it
+    col, row = brick_drop_cell(free, site, (3.5, 2.5))
+    assert free[row, col] and not site[row, col]
+    ring = np.pad(free, 1, constant_values=False)[row:row + 3, col:col + 3]
+    assert ring.all()
+    assert (col, row) != (3, 2)
+
+
+def test_with_no_open_cell_it_falls_back_to_cells_that_are_merely_free_and_not_sites():
+    free, site = grid("""
+#.#
++.+
+""")
+    # (1, 0) has walls around it and sites beside it; (1, 1) lies between two sites
+    assert brick_drop_cell(free, site, (1.5, 1.5)) == (1, 1)
+    free, site = grid("""
+#+#
++++
+""")
+    assert brick_drop_cell(free, site, (1.5, 1.5)) is None
+
+
+def test_ties_are_broken_in_reading_order_and_the_choice_is_deterministic():
+    free, site = grid("""
+.....
+.....
+.....
+.....
+.....
+""")
+    # equidistant from the centre: the first in reading order wins
+    assert brick_drop_cell(free, site, (2.5, 2.5)) == (2, 2)
+    free[2, 2] = False
+    assert body_cell(free, (2.5, 2.5)) == (2, 1)
+
+
+def test_a_body_comes_back_at_the_nearest_free_cell():
+    free, _ = grid("""
+####
+#..#
+####
+""")
+    assert body_cell(free, (0.2, 0.2)) == (1, 1)
+    assert body_cell(np.zeros((2, 2), bool), (0.0, 0.0)) is None

@@ -1,0 +1,66 @@
+"""Where the world puts things an agent can no longer place itself: pure functions on grids.
+
+A dead agent's brick must land where nothing needs it (`brick_drop_cell`), and a restarted
+agent's body where it overlaps nothing (`body_cell`). Both take bool grids indexed
+[row, col] like `Scenario.grid` (row 0 is the north) and a start in fractional cell
+coordinates (col, row), the centre of cell (c, r) being (c + 0.5, r + 0.5); they return
+the nearest cell that qualifies, by straight-line distance from the start, ties in
+reading order (row, then column), so the choice is deterministic.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def _by_distance(ok: np.ndarray, start: tuple[float, float]) -> tuple[int, int] | None:
+    """The (col, row) of the `ok` cell nearest `start`; None if there is none."""
+    rows, cols = np.nonzero(ok)  # reading order
+    if rows.size == 0:
+        return None
+    d2 = np.square(cols + 0.5 - start[0]) + np.square(rows + 0.5 - start[1])
+    best = int(np.argmin(d2))  # the first of equals: reading order
+    return int(cols[best]), int(rows[best])
+
+
+def _dilate(grid: np.ndarray, outside: bool) -> np.ndarray:
+    """Cells whose 8-neighbourhood (themselves included) holds a True cell; beyond the
+    grid's edge counts as `outside`."""
+    padded = np.pad(grid, 1, constant_values=outside)
+    out = np.zeros_like(grid)
+    rows, cols = grid.shape
+    for dr in (0, 1, 2):
+        for dc in (0, 1, 2):
+            out |= padded[dr:dr + rows, dc:dc + cols]
+    return out
+
+
+def brick_drop_cell(free: np.ndarray, site: np.ndarray, start: tuple[float, float]) -> tuple[int, int] | None:
+    """The cell where a dead agent's brick is dropped: the nearest one, in order of preference,
+
+    1. that is free, is no drop site and has no drop site among its 8 neighbours (the
+       structure and the ring round it, where builders walk, stay clear), and whose 8
+       neighbours are all free and inside the world: a brick there cannot cut any path,
+       since a way through the cell can go round it by the free ring of neighbours;
+    2. failing that, free, no site and no site among its neighbours;
+    3. failing that, free and no site.
+
+    `free`: the cell can take a brick (no wall, disc or body in it); `site`: it is a drop
+    site. None when no free cell is left that is not a site (the caller drops the brick
+    where it is).
+    """
+    free = np.asarray(free, bool)
+    site = np.asarray(site, bool)
+    candidates = free & ~site
+    clear = candidates & ~_dilate(site, outside=False)
+    open_ = clear & ~_dilate(~free, outside=True)
+    for ok in (open_, clear, candidates):
+        cell = _by_distance(ok, start)
+        if cell is not None:
+            return cell
+    return None
+
+
+def body_cell(free: np.ndarray, start: tuple[float, float]) -> tuple[int, int] | None:
+    """The free cell nearest `start` for a body to come back at; None if there is none."""
+    return _by_distance(np.asarray(free, bool), start)
