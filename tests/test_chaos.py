@@ -13,9 +13,12 @@ pytestmark = pytest.mark.slow
 
 
 @pytest.mark.timeout(600)
-def test_fig6_completes_under_random_kills_with_bricks_total_kept(tmp_path):
+def test_nested_squares_completes_under_random_kills_with_bricks_total_kept(tmp_path):
+    # A build of a few seconds (about 3,400 ticks): fig6 completes in about one second once
+    # the kernels are cached, often before the first kill, and kills much faster than an
+    # agent process starts would leave nobody working.
     out = tmp_path / "chaos.json"
-    r = conag("chaos", "scenarios/fig6.toml", "--runs", 2, "--kill-every", 1.5, "--seed", 1, "--json", out,
+    r = conag("chaos", "scenarios/nested_squares.toml", "--runs", 2, "--kill-every", 1.5, "--seed", 1, "--json", out,
               timeout=600)
     assert r.returncode == 0, r.stdout + r.stderr
     report = json.loads(out.read_text())
