@@ -26,6 +26,31 @@ ROOT = Path(__file__).resolve().parent.parent
 LINE = re.compile(r"^tick\s+(\d+)\s")
 
 
+class BuildClock:
+    """The build's tick rate from `conag run`'s progress lines: from the first line of tick
+    >= 1 to the last one seen (process start-up and numba loading left out)."""
+
+    def __init__(self) -> None:
+        self.first: tuple[int, float] | None = None
+        self.last: tuple[int, float] | None = None
+
+    def observe(self, line: str) -> bool:
+        """Take one output line; True if it was a progress line of tick >= 1."""
+        m = LINE.match(line)
+        if not m or int(m.group(1)) < 1:
+            return False
+        self.last = (int(m.group(1)), time.monotonic())
+        self.first = self.first or self.last
+        return True
+
+    def rate(self, cmd: list[str]) -> tuple[float, float]:
+        """(ticks per second, wall seconds) of the build; RuntimeError if it never progressed."""
+        if self.first is None or self.last is None or self.last[0] <= self.first[0]:
+            raise RuntimeError(f"no progress lines from {' '.join(cmd)}")
+        seconds = self.last[1] - self.first[1]
+        return (self.last[0] - self.first[0]) / seconds, seconds
+
+
 def one_run(scenario: str, ticks: int, record: Path | None, port: int) -> tuple[float, int]:
     """(ticks per second of the build, the recording's size in bytes or 0)."""
     cmd = [sys.executable, "-m", "conag", "run", scenario, "--headless", "--max-ticks", str(ticks),
@@ -33,17 +58,11 @@ def one_run(scenario: str, ticks: int, record: Path | None, port: int) -> tuple[
     if record is not None:
         cmd += ["--record", str(record)]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, text=True)
-    first = last = None
+    clock = BuildClock()
     for line in proc.stdout:
-        m = LINE.match(line)
-        if m and int(m.group(1)) >= 1:
-            now = time.monotonic()
-            first = first or (int(m.group(1)), now)
-            last = (int(m.group(1)), now)
+        clock.observe(line)
     proc.wait()
-    if first is None or last is None or last[0] <= first[0]:
-        raise RuntimeError(f"no progress lines from {' '.join(cmd)}")
-    rate = (last[0] - first[0]) / (last[1] - first[1])
+    rate, _ = clock.rate(cmd)
     return rate, (record.stat().st_size if record is not None and record.exists() else 0)
 
 

@@ -23,9 +23,8 @@ import shutil
 import statistics
 import subprocess
 import sys
-import time
 
-from bench.bench_record import LINE, ROOT
+from bench.bench_record import ROOT, BuildClock
 
 
 def tree_cpu(pid: int) -> float:
@@ -55,7 +54,7 @@ def one_run(scenario: str, agents: int, ticks: int, port: int, view_port: int | 
            str(ticks), "--stall-ticks", "0", "--listen", f"tcp/127.0.0.1:{port}"]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, text=True)
     viewer = browser = None
-    first = last = None
+    clock = BuildClock()
     cpu_view = cpu_page = 0.0
     start_cpu = (0.0, 0.0)
     try:
@@ -69,13 +68,10 @@ def one_run(scenario: str, agents: int, ticks: int, port: int, view_port: int | 
                 browser = subprocess.Popen([shutil.which("chromium") or "/usr/bin/chromium", "--headless=new",
                                             "--no-sandbox", "--disable-gpu", "--remote-debugging-port=0", url],
                                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-            m = LINE.match(line)
-            if m and int(m.group(1)) >= 1:
-                now = time.monotonic()
-                if first is None and viewer is not None:
+            starting = clock.first is None
+            if clock.observe(line):
+                if starting and viewer is not None:
                     start_cpu = (tree_cpu(viewer.pid), tree_cpu(browser.pid))
-                first = first or (int(m.group(1)), now)
-                last = (int(m.group(1)), now)
                 if viewer is not None:  # the CPU they used while the build went on
                     cpu_view, cpu_page = tree_cpu(viewer.pid) - start_cpu[0], tree_cpu(browser.pid) - start_cpu[1]
         proc.wait()
@@ -84,9 +80,8 @@ def one_run(scenario: str, agents: int, ticks: int, port: int, view_port: int | 
             if p is not None:
                 p.terminate()
                 p.wait(10)
-    if first is None or last is None or last[0] <= first[0]:
-        raise RuntimeError(f"no progress lines from {' '.join(cmd)}")
-    return (last[0] - first[0]) / (last[1] - first[1]), last[1] - first[1], cpu_view, cpu_page
+    rate, seconds = clock.rate(cmd)
+    return rate, seconds, cpu_view, cpu_page
 
 
 def main(argv: list[str] | None = None) -> int:

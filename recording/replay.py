@@ -127,6 +127,9 @@ class LockstepScript:
 
     def _add_stand_ins(self) -> None:
         """A command for each (tick, agent) the world stepped without (see the module)."""
+        missed: dict[int, list[str]] = defaultdict(list)
+        for t, a in sorted(self.missed):
+            missed[t].append(a)
         speed: dict[str, float] = {}
         for tick in range(self.last_tick + 1):
             for w in self.attaches.get(tick, ()):
@@ -134,9 +137,8 @@ class LockstepScript:
             for c in self.commands.get(tick, ()):
                 if c.tick == tick:  # taken; a late one naming an earlier tick was refused
                     speed[c.agent_id] = c.speed
-            for t, a in sorted(self.missed):
-                if t == tick:
-                    self.commands[tick].append(AgentCommand(a, tick, speed.get(a, 0.0), 0.0, "none"))
+            for a in missed.get(tick, ()):
+                self.commands[tick].append(AgentCommand(a, tick, speed.get(a, 0.0), 0.0, "none"))
 
     def agents(self) -> list[str]:
         """Every agent that attached, in the order it first did."""

@@ -53,7 +53,6 @@ class AgentRecord:
     drops: int = 0
     pid: int | None = None  # the process that attached last, if it said
     gone_at: int = -1       # the tick its process was seen gone (detach), while it is gone
-    solid: bool = True      # its body collides and is sensed (False once the grace period is over)
 
 
 class World:
@@ -137,15 +136,15 @@ class World:
             self.agents[agent_id] = rec
             self._order.append(rec)
             self._grow_arrays()
+            self.solid[index] = True
         elif not (rec.alive and pid is not None and rec.pid == pid):
             rec.restarts += 1
             rec.alive = True
         rec.pid = pid
         rec.gone_at = -1
-        if not rec.solid:
+        if not self.solid[rec.index]:
             self._bring_back(rec)
         self.alive[rec.index] = True
-        self.solid[rec.index] = True
         self.speed[rec.index] = self.turn[rec.index] = 0.0
         self.action[rec.index] = 0
         pos, _ = self.physics.state()
@@ -222,7 +221,6 @@ class World:
 
     def _remove_body(self, rec: AgentRecord) -> None:
         """The body leaves the world: it collides with nothing and no sensor sees it."""
-        rec.solid = False
         self.solid[rec.index] = False
         self.physics.set_solid(rec.index, False)
         for brick, agent in list(self._pending_release.items()):
@@ -239,7 +237,7 @@ class World:
             raise RuntimeError("no free cell left for a returning agent body")
         self.physics.place_body(rec.index, self.scenario.to_world(cell)[0])
         self.physics.set_solid(rec.index, True)
-        rec.solid = True
+        self.solid[rec.index] = True
 
     def live_agents(self) -> list[str]:
         """Ids of the attached, live agents, in attach order."""
@@ -311,7 +309,7 @@ class World:
     def _remove_expired(self) -> None:
         """Dead bodies whose grace period is over leave the world."""
         for rec in self._order:
-            if rec.solid and not rec.alive and self.tick - rec.gone_at >= self.cfg.body_grace_ticks:
+            if self.solid[rec.index] and not rec.alive and self.tick - rec.gone_at >= self.cfg.body_grace_ticks:
                 self._remove_body(rec)
 
     def _sense(self, pos: np.ndarray | None = None) -> None:
