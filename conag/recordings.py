@@ -191,7 +191,7 @@ def _verify(args, rec, entries, world_id: str) -> int:
         client = open_session(BusOptions(connect=(endpoint,)))
         try:
             server = WorldServer(world, serve, mode="lockstep", max_ticks=script.last_tick + 1,
-                                 wait_agents=len(script.attaches.get(first, ())))
+                                 wait_agents=len({w.agent_id for w in script.attaches.get(first, ())}))
             world_stop = threading.Event()
             thread = threading.Thread(target=server.run, args=(world_stop,), daemon=True)
             thread.start()

@@ -32,7 +32,7 @@ from world_server.discs import BRICK_DISC, FOOD_DISC, WATER_DISC, DiscStore
 from world_server.physics import Physics, motor_update
 from world_server.placement import body_cell, brick_drop_cell
 from world_server.scenario import Scenario
-from world_server.sensors import sense
+from world_server.sensors import sense, warm_up
 
 GRAB, DROP, EAT, DRINK = (ACTIONS.index(a) for a in ("grab", "drop", "eat", "drink"))
 OBSTACLE_CHANNEL = CHANNELS.index("obstacle")
@@ -93,6 +93,7 @@ class World:
         self._obstacle_xy = _obstacle_points(scenario, cells["#"])
         self._walls_xy = scenario.to_world(cells["#"]).reshape(-1, 2)  # fixed `#` cells, for views
         self._sense_inputs: tuple | None = None  # (present discs, xy, channels) with obstacles appended
+        warm_up()  # the sensor kernel, now rather than at the first attach
         self.sites_xy = scenario.to_world(np.vstack([cells["+"], cells["B"]]))
         self._site_codes = self._cell_code(self.sites_xy)
         self.blueprint_version = 0  # +1 per site added or removed (a Blueprint message each time)
