@@ -96,6 +96,11 @@ class Physics:
         self.space.reindex_shapes_for_body(body)
         self._state = None
 
+    def set_velocity(self, index: int, velocity: tuple[float, float] | np.ndarray) -> None:
+        """Give agent body `index` this velocity (a space rebuilt from a checkpoint)."""
+        self._bodies[index].velocity = (float(velocity[0]), float(velocity[1]))
+        self._state = None
+
     def _map_rows(self) -> None:
         # The batch iterates every body of the space (the static one too) in the space's
         # own order; map each agent to its row once, whenever a body is added.
