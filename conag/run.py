@@ -9,6 +9,13 @@ run summary. A run that fills no site for `stall_ticks` ticks is stalled: it pri
 everything and is marked `stalled` in the summary, so a stuck build never just sits
 there until the limit.
 
+The run supervises the world: the world checkpoints into the run's temporary directory
+every `checkpoint_every` ticks, and when its process dies without a final status (SIGKILL,
+a crash) the run says so and starts it again from its last good checkpoint (from the
+start if it had written none yet); the agents wait for it and attach again by themselves.
+A world that dies `MAX_QUICK_DEATHS` times in a row within seconds of starting ends the
+run as an error.
+
 With `record`, a `conag record` process records the run (`nodes/recorder.py`): it starts
 after the world and before the agents, which start once it has heard the world, so the
 recording holds every tick; it stops last, after the agents' final state reports.
@@ -31,8 +38,12 @@ from bus import BusOptions, Declarations, open_session
 from protocol import keys
 from protocol.codec import ProtocolError, decode, encode
 from protocol.messages import AgentState, RunControl, RunControlResult, WorldStatus
+from world_server.checkpoint import DEFAULT_EVERY, newest_good, read_checkpoint
 from world_server.scenario import Scenario
 from world_server.stall import DEFAULT_STALL_TICKS, StallWatch
+
+MAX_QUICK_DEATHS = 3  # a world dying this many times in a row soon after starting is not restarted again
+QUICK_DEATH = 10.0    # wall seconds: a death sooner than this after starting counts as quick
 
 
 @dataclass
@@ -54,6 +65,7 @@ class RunOptions:
     record: str | None = None         # record the run to this MCAP file (`conag record`)
     view: int | None = None           # serve the browser viewer on this port (`conag view`)
     maps_every: int = 0               # the recorder and viewer ask for the agents' maps every N ticks
+    checkpoint_every: int = DEFAULT_EVERY  # ticks between the world's checkpoints (it is restarted from the last)
 
 
 class RunEnding(RuntimeError):
@@ -127,6 +139,7 @@ class RunBus:
 
     def __init__(self, opts: RunOptions, fleet: Fleet, watch: StallWatch, tty: bool):
         self.opts, self.watch, self.tty = opts, watch, tty
+        self.world_restarts = 0
         self._started = time.monotonic()
         self.session = open_session(BusOptions(connect=(opts.endpoint,)))
         self._declared = Declarations()
@@ -143,7 +156,7 @@ class RunBus:
             return
         self.watch.observe(st)
         if not self.opts.quiet and not self.watch.stalled:
-            line = _progress(st, self._started)
+            line = _progress(st, self._started, self.world_restarts)
             print(("\r" + line) if self.tty else line, end="" if self.tty else "\n", flush=True)
 
     def on_state(self, sample) -> None:
@@ -170,21 +183,60 @@ class RunBus:
         self.close()
 
 
-def _progress(st: WorldStatus, started: float) -> str:
+def _progress(st: WorldStatus, started: float, world_restarts: int = 0) -> str:
     return (f"tick {st.tick:>7}  sites {st.sites_filled}/{st.sites_total}  "
             f"agents alive {st.agents_alive}/{len(st.agent_ids)}  {time.monotonic() - started:6.1f} s"
+            + (f"  world restarts {world_restarts}" if world_restarts else "")
             + ("  COMPLETE" if st.completed else ""))
 
 
 def run(opts: RunOptions, stop: threading.Event) -> dict:
     """Run the scenario; returns the run summary (also written to opts.summary)."""
     with tempfile.TemporaryDirectory(prefix="conag-run-") as tmp:  # gone however the run ends
-        return _run(opts, stop, Path(tmp) / "final.json")
+        return _run(opts, stop, Path(tmp))
 
 
-def _run(opts: RunOptions, stop: threading.Event, final_path: Path) -> dict:
+@dataclass
+class WorldProcess:
+    """The run's world process, started again from its last checkpoint when it dies."""
+
+    opts: RunOptions
+    n_agents: int
+    final_path: Path
+    checkpoint: Path
+    proc: subprocess.Popen | None = None
+    restarts: int = 0
+    started: float = 0.0
+    quick_deaths: int = 0
+
+    def start(self, resume: Path | None = None) -> None:
+        self.proc = _start_world(self.opts, self.n_agents, self.final_path, self.checkpoint, resume)
+        self.started = time.monotonic()
+
+    def died(self) -> bool:
+        """The process exited without writing the final status (killed, crashed)."""
+        return self.proc.poll() is not None and not self.final_path.exists()
+
+    def restart(self) -> str:
+        """Start it again from the newest good checkpoint; what happened, for the user."""
+        code = self.proc.returncode
+        self.quick_deaths = self.quick_deaths + 1 if time.monotonic() - self.started < QUICK_DEATH else 0
+        if self.quick_deaths >= MAX_QUICK_DEATHS:
+            raise RuntimeError(f"the world exited ({code}) {self.quick_deaths} times in a row within "
+                               f"{QUICK_DEATH:g} s of starting; not starting it again")
+        resume = newest_good(self.checkpoint)
+        where = (f"its checkpoint of tick {read_checkpoint(resume)['tick']}" if resume
+                 else "the start (no checkpoint yet)")
+        self.restarts += 1
+        self.start(resume)
+        return f"the world died (exit {code}); restarted it from {where} (world restart {self.restarts})"
+
+
+def _run(opts: RunOptions, stop: threading.Event, tmp: Path) -> dict:
     n_agents = opts.scenario.agents if opts.agents is None else opts.agents
-    world = _start_world(opts, n_agents, final_path)
+    world = WorldProcess(opts, n_agents, tmp / "final.json", tmp / "world.ckpt")
+    world.start()
+    final_path = world.final_path
     if opts.weights_dir:
         Path(opts.weights_dir).mkdir(parents=True, exist_ok=True)
     teacher = _start_teacher(opts) if opts.teacher else None
@@ -203,11 +255,17 @@ def _run(opts: RunOptions, stop: threading.Event, final_path: Path) -> dict:
                 viewer = _start_viewer(opts)
             for i in range(n_agents):
                 fleet.start(f"a{i + 1}")
-            _wait_until(lambda: world.poll() is not None, stop.is_set, lambda: watch.stalled)
+            while True:
+                _wait_until(lambda: world.proc.poll() is not None, stop.is_set, lambda: watch.stalled)
+                if stop.is_set() or watch.stalled or not world.died():
+                    break
+                message = world.restart()
+                run_bus.world_restarts = world.restarts
+                print(("\n" if tty else "") + message, flush=True)
             if watch.stalled:
                 print(("\n" if tty else "") + "\n".join(watch.report), flush=True)
         finally:
-            _stop(world, grace=10.0)
+            _stop(world.proc, grace=10.0)
             fleet.stop_all()
             if teacher is not None:
                 _stop(teacher)
@@ -217,8 +275,9 @@ def _run(opts: RunOptions, stop: threading.Event, final_path: Path) -> dict:
                 _stop(recorder, grace=60.0)  # last: it writes what is queued, the summary and the footer
     if tty and not watch.stalled:
         print()
-    summary = _final_summary(final_path, world)
+    summary = _final_summary(final_path, world.proc)
     summary["stalled"] = watch.stalled
+    summary["world_restarts"] = world.restarts
     if opts.summary and opts.summary != "-":
         Path(opts.summary).write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
     return summary
@@ -242,7 +301,8 @@ def _start_recorder(opts: RunOptions) -> subprocess.Popen:
     cmd = [sys.executable, "-m", "conag", "record", opts.record, "--world-id", opts.world_id,
            "--connect", opts.endpoint, "--scenario", opts.scenario_path, "--seed", str(seed),
            "--note", f"agents={opts.agents if opts.agents is not None else opts.scenario.agents}",
-           "--note", "agent_args=" + " ".join(opts.extra_agent_args), "--maps-every", str(opts.maps_every)]
+           "--note", "agent_args=" + " ".join(opts.extra_agent_args), "--maps-every", str(opts.maps_every),
+           "--note", f"checkpoint_every={opts.checkpoint_every}"]
     return subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
 
 
@@ -257,12 +317,17 @@ def _start_viewer(opts: RunOptions) -> subprocess.Popen:
     return subprocess.Popen(cmd, stdin=subprocess.DEVNULL)
 
 
-def _start_world(opts: RunOptions, n_agents: int, final_path: Path) -> subprocess.Popen:
-    """The world process; it stops by itself when complete or out of ticks, writing `final_path`."""
+def _start_world(opts: RunOptions, n_agents: int, final_path: Path, checkpoint: Path,
+                 resume: Path | None = None) -> subprocess.Popen:
+    """The world process; it stops by itself when complete or out of ticks, writing `final_path`.
+    It checkpoints to `checkpoint`; with `resume` it continues from that checkpoint."""
     cmd = [sys.executable, "-m", "conag", "world", opts.scenario_path, "--world-id", opts.world_id,
            "--listen", opts.endpoint, "--ticks", str(opts.max_ticks or opts.scenario.max_ticks),
-           "--stop-when-complete", "--wait-agents", str(max(n_agents, 1)), "--quiet", "--summary", str(final_path)]
-    if opts.seed is not None:
+           "--stop-when-complete", "--wait-agents", str(max(n_agents, 1)), "--quiet", "--summary", str(final_path),
+           "--checkpoint", str(checkpoint), "--checkpoint-every", str(opts.checkpoint_every)]
+    if resume is not None:
+        cmd += ["--resume", str(resume)]
+    elif opts.seed is not None:
         cmd += ["--seed", str(opts.seed)]
     return subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
 

@@ -29,6 +29,7 @@ import hashlib
 import json
 import os
 import struct
+from dataclasses import dataclass
 from pathlib import Path
 
 import msgpack
@@ -40,6 +41,7 @@ from world_server.world import AgentRecord, World
 
 MAGIC = b"CONAGCKP"
 FORMAT_VERSION = 1
+DEFAULT_EVERY = 100  # ticks between checkpoints (`conag world --checkpoint-every`)
 _HEADER = struct.Struct("<8sIQ32s")  # magic, format version, payload length, SHA-256 of the payload
 _ARRAYS = ("heading", "speed", "turn", "action", "alive", "solid", "odometry", "distance", "flags")
 _RECORD_FIELDS = tuple(f.name for f in dataclasses.fields(AgentRecord))
@@ -124,10 +126,12 @@ def _load_into(world: World, state: dict) -> None:
     world.rebuild_physics(_unpack_array(state["positions"]), _unpack_array(state["velocities"]))
 
 
-def checkpoint_world(world: World) -> bytes:
+def checkpoint_world(world: World, every: int | None = None) -> bytes:
     """The world's checkpoint file contents; the world's space is rebuilt from that very
-    state, so this run and any run resumed from the file step on alike (see the module)."""
+    state, so this run and any run resumed from the file step on alike (see the module).
+    `every`: the interval the world checkpoints at, kept for a resumed world to go on with."""
     state = world_state(world)
+    state["checkpoint_every"] = every
     data = encode_checkpoint(state)
     world.rebuild_physics(_unpack_array(state["positions"]), _unpack_array(state["velocities"]))
     return data
@@ -204,11 +208,11 @@ def read_checkpoint(path: str | Path) -> dict:
     return decode_checkpoint(path.read_bytes(), str(path))
 
 
-def load_world(path: str | Path) -> World:
-    """The world saved in checkpoint `path`, ready to step on from its tick."""
+def load_state(path: str | Path) -> dict:
+    """The state in checkpoint `path`; a CheckpointError also says whether FILE.prev is intact."""
     path = Path(path)
     try:
-        return restore_world(read_checkpoint(path))
+        return read_checkpoint(path)
     except CheckpointError as exc:
         prev = previous_path(path)
         hint = ""
@@ -221,6 +225,11 @@ def load_world(path: str | Path) -> World:
         raise CheckpointError(f"{exc}{hint}") from exc
 
 
+def load_world(path: str | Path) -> World:
+    """The world saved in checkpoint `path`, ready to step on from its tick."""
+    return restore_world(load_state(path))
+
+
 def newest_good(path: str | Path) -> Path | None:
     """The checkpoint to resume from: `path` if it reads back, else FILE.prev if that does
     (a crash between the two renames of a write), else None."""
@@ -231,3 +240,29 @@ def newest_good(path: str | Path) -> Path | None:
         except (OSError, CheckpointError):
             continue
     return None
+
+
+@dataclass(frozen=True)
+class CheckpointPlan:
+    """When a world server checkpoints: every `every` ticks (the ticks that are multiples of
+    it) and when it stops, to `path`. Without a path the space is still rebuilt at those
+    ticks and nothing is written: a replay of a checkpointing run steps the same way."""
+
+    path: str | None = None
+    every: int = DEFAULT_EVERY
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.every, int) and self.every >= 1):
+            raise ValueError("the checkpoint interval must be a whole number of ticks >= 1")
+
+    def due(self, tick: int) -> bool:
+        """Whether the world checkpoints after stepping to `tick`."""
+        return tick > 0 and tick % self.every == 0
+
+
+def resumed_epoch(world: World) -> int:
+    """The epoch of a world resumed from a checkpoint: a new run of the world, told apart
+    from the one that died (agents refuse its frames after the new Welcome), and still a
+    function of the checkpoint alone."""
+    text = f"{world.world_id}|{world.epoch}|resumed at {world.tick}"
+    return int.from_bytes(hashlib.blake2b(text.encode(), digest_size=8).digest(), "little") >> 1
