@@ -225,7 +225,8 @@ class WorldServer:
         """A resumed world still waits for some live agent to attach again (see the module)."""
         if self._resume_deadline is None:
             return False
-        if any(a not in self._attached for a in live) and self.clock() < self._resume_deadline:
+        waiting = not live or any(a not in self._attached for a in live)  # (no token seen yet: realtime)
+        if waiting and self.clock() < self._resume_deadline:
             return True
         self._resume_deadline = None
         return False
