@@ -46,8 +46,9 @@ EXIT_STALLED = 4       # conag run: no site was filled for --stall-ticks ticks
 EXIT_INTERRUPTED = 130  # Ctrl-C or SIGTERM (128 + SIGINT, as shells report an interrupted command)
 RUN_EPILOG = f"""exit codes: 0 the structure is complete; {EXIT_ERROR} an error (e.g. the world kept dying as
 it started; a world that dies is otherwise restarted from its last checkpoint); {EXIT_USAGE} a usage or scenario
-error; {EXIT_INCOMPLETE} not complete when the tick limit passed; {EXIT_STALLED} stalled: no site was filled for --stall-ticks ticks (a report of every agent's position, behaviour and blocker is
-printed first); {EXIT_INTERRUPTED} interrupted (Ctrl-C or SIGTERM) before the structure was complete"""
+error; {EXIT_INCOMPLETE} not complete when the tick limit passed; {EXIT_STALLED} stalled: no site was filled for
+--stall-ticks ticks (a report of every agent's position, behaviour and blocker is printed first); {EXIT_INTERRUPTED}
+interrupted (Ctrl-C or SIGTERM) before the structure was complete"""
 CHECKPOINT_EVERY = 100  # world_server.checkpoint.DEFAULT_EVERY, without importing it for --help
 AGENT_MAP_SIZE = 41  # AgentConfig's default, without importing the agent for --help
 
