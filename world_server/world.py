@@ -258,10 +258,9 @@ class World:
         for i in np.flatnonzero(self.discs.state == IN_WORLD).tolist():
             owner = self._pending_release.get(i)
             physics.add_disc(i, self.discs.xy[i], group=0 if owner is None else owner + 1)
-        for rec in self._order:
-            index = physics.add_agent(pos[rec.index])
-            physics.set_velocity(index, vel[rec.index])
-            physics.set_solid(index, bool(self.solid[rec.index]))
+        for index in physics.add_agents(pos[[rec.index for rec in self._order]]):
+            physics.set_velocity(index, vel[index])
+            physics.set_solid(index, bool(self.solid[index]))
         self.physics = physics
         self._positions = pos.copy()
 
