@@ -88,8 +88,11 @@ class WorldLink:
         self._world_up.clear()
         self.world_lost = True
         # Wake a frame wait blocked in recv (only this session's subscriber gets it).
-        self.session.put(keys.sensors(self.world_id, self.agent_id), WAKE,
-                         allowed_destination=zenoh.Locality.SESSION_LOCAL)
+        try:
+            self.session.put(keys.sensors(self.world_id, self.agent_id), WAKE,
+                             allowed_destination=zenoh.Locality.SESSION_LOCAL)
+        except zenoh.ZError:
+            pass  # this session is closing (the process stops): nobody waits for a frame any more
 
     def wait_for_world(self, timeout: float) -> bool:
         """Wait up to `timeout` seconds for the world's liveliness token; whether it is there."""
