@@ -60,7 +60,7 @@ from collections.abc import Callable
 
 import zenoh
 
-from bus import Declarations, watch_tokens
+from bus import Declarations, token_event, watch_tokens
 from protocol import keys
 from protocol.codec import ProtocolError, decode, encode
 from protocol.messages import (
@@ -235,8 +235,14 @@ class WorldServer:
         """A resumed world, about to tick for the first time: agents the checkpoint holds alive
         whose process has no token died while the world was down; they are let go as usual."""
         self._unclaimed = False
-        for agent in self.world.live_agents():
-            if agent not in self._tokens and not self._token_exists(agent):
+        missing = [a for a in self.world.live_agents() if a not in self._tokens]
+        if not missing:
+            return
+        # One query for every token there is (not one per agent: a world may hold hundreds).
+        held = {token_event(r.ok)[0] for r in self.session.liveliness().get(
+            keys.all_agent_tokens(self.world.world_id), timeout=0.5) if r.ok is not None}
+        for agent in missing:
+            if agent not in held:
                 log.info("agent %s did not come back to the resumed world; its body stops", agent)
                 self.world.detach(agent)
 

@@ -72,11 +72,13 @@ def test_an_agent_waits_for_its_world_and_attaches_to_the_resumed_one(bus, start
         second = RunningWorld(world, bus.server_session(), resumed=True,
                               checkpoint=CheckpointPlan(str(path), every=20))
         try:
-            wait_until(lambda: link.welcome.epoch == world.epoch, what="the agent to attach to the resumed world")
+            # (Its session reconnects to the new world's endpoint first: zenoh retries with a backoff.)
+            wait_until(lambda: link.welcome.epoch == world.epoch, timeout=30,
+                       what="the agent to attach to the resumed world")
             assert link.welcome.tick < last_tick
             assert "re-attached to world w0" in caplog.text
             ticks = report.ticks
-            wait_until(lambda: report.ticks >= ticks + 30, what="the agent to act in the resumed world")
+            wait_until(lambda: report.ticks >= ticks + 30, timeout=30, what="the agent to act in the resumed world")
             assert second.world.tick >= link.welcome.tick + 30
             assert second.world.agents["a1"].restarts == 0  # the same process, not a restart
             # A frame of the world that died (its epoch, a tick just ahead) is refused.
