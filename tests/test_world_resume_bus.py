@@ -18,12 +18,14 @@ from protocol import keys
 from protocol.codec import encode
 from protocol.messages import CHANNELS, SensorFrame
 from sim.loop import start
-from tests.conftest import RunningWorld, wait_until
+from tests.conftest import SCENARIOS, Process, RunningWorld, wait_until
 from world_server.checkpoint import (
+    CheckpointError,
     CheckpointPlan,
     checkpoint_world,
     load_world,
     previous_path,
+    read_checkpoint,
     resumed_epoch,
     write_checkpoint,
 )
@@ -130,6 +132,41 @@ def test_a_resumed_world_lets_go_of_agents_that_did_not_come_back(bus, tmp_path,
         thread.join(10)
 
 
+def _tick(path) -> int:
+    """The tick of the checkpoint at `path`; -1 while there is none (or between the renames)."""
+    try:
+        return read_checkpoint(path)["tick"]
+    except (OSError, CheckpointError):
+        return -1
+
+
 def _frame(tick: int, epoch: int, sectors: int) -> bytes:
     return encode(SensorFrame(agent_id="a1", tick=tick, heading=0.0, odom_dx=0.0, odom_dy=0.0, sectors=sectors,
                               ranges=(-1.0,) * (len(CHANNELS) * sectors), holding=False, epoch=epoch))
+
+
+@pytest.mark.slow  # three processes
+def test_a_hand_started_agent_waits_for_a_killed_world_and_attaches_to_the_resumed_one(tmp_path, endpoint):
+    # `conag agent` blocks in its frame wait (no stop event): the world's token going must wake it.
+    path = tmp_path / "w.ckpt"
+    world = Process("world", str(SCENARIOS / "nested_squares.toml"), "--listen", endpoint, "--checkpoint", str(path),
+                    "--checkpoint-every", "20")
+    agent = Process("agent", "--id", "a1", "--connect", endpoint)
+    resumed = None
+    try:
+        wait_until(lambda: _tick(path) >= 40, timeout=60,
+                   what="the world to checkpoint")
+        world.kill()  # SIGKILL
+        wait_until(lambda: "waiting for world w0 to come back" in agent.err, timeout=30,
+                   what="the agent to say it waits")
+        resumed = Process("world", "--resume", str(path), "--listen", endpoint)
+        wait_until(lambda: "re-attached to world w0" in agent.err, timeout=60, what="the agent to attach again")
+        resumed.wait_for("resumed from")
+        tick = int(agent.err.split("re-attached to world w0 at tick ")[1].split()[0])
+        # It goes on: the resumed world checkpoints past where it started.
+        wait_until(lambda: _tick(path) >= tick + 40, timeout=60, what="the resumed world to tick")
+        assert agent.proc.poll() is None and "Traceback" not in agent.err
+    finally:
+        for proc in (agent, resumed, world):
+            if proc is not None:
+                proc.kill()
