@@ -7,7 +7,10 @@ run reports whether it completed, its exit code, ticks, sites and `bricks_total`
 must equal the scenario's: a kill neither loses nor makes a brick).
 
 With `kill_world_every` the world process itself is SIGKILLed too, every few seconds on
-average (`conag run` restarts it from its last checkpoint, and the agents attach again).
+average, counted from when the restarted world's frames come again, and not before the
+world has ticked one checkpoint interval past where it started (`conag run` restarts it
+from its last checkpoint, and the agents attach again; a world that dies before it gets a
+checkpoint further, three times in a row, is taken for one that cannot start).
 For each world kill the run records the ticks lost: the newest tick any agent's frame
 showed before the kill, less the tick the restarted world's first frame shows (at most the
 checkpoint interval). `kill_every` 0 kills no agents (only the world).
@@ -38,6 +41,7 @@ from conag.run import control
 from protocol import keys
 from protocol.codec import ProtocolError, decode
 from protocol.messages import SensorFrame, WorldStatus
+from world_server.checkpoint import DEFAULT_EVERY
 from world_server.scenario import load_scenario
 from world_server.world import World
 
@@ -123,6 +127,7 @@ class FrameWatch:
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self.newest, self.epoch = -1, None
+        self.started_at = 0  # the first tick of the world now running (0, or where it resumed)
         self.lost: list[int] = []
         self._killed: tuple[int, int | None] | None = None  # (newest tick, epoch) at a kill not yet recovered
 
@@ -138,7 +143,7 @@ class FrameWatch:
                     return  # a frame of the world that was killed, late
                 self.lost.append(before - f.tick)
                 self._killed = None
-                self.newest, self.epoch = f.tick, f.epoch
+                self.newest, self.epoch, self.started_at = f.tick, f.epoch, f.tick
             elif f.tick > self.newest or f.epoch != self.epoch:
                 self.newest, self.epoch = f.tick, f.epoch
 
@@ -219,6 +224,9 @@ def chaos_run(opts: ChaosOptions, index: int, stop: threading.Event, log=print) 
                     break
             now = time.monotonic()
             next_agent, next_world = now + _draw(rng, opts.kill_every), now + _draw(world_rng, opts.kill_world_every)
+            # A world is killed only once it has got one checkpoint past where it started: one
+            # that dies before (three times in a row) is taken for one that cannot start.
+            interval = opts.checkpoint_every or DEFAULT_EVERY
             while proc.poll() is None:
                 if stop.wait(0) or time.monotonic() - started > opts.run_timeout:
                     proc.send_signal(signal.SIGTERM)
@@ -226,12 +234,12 @@ def chaos_run(opts: ChaosOptions, index: int, stop: threading.Event, log=print) 
                 if next_world == float("inf") and opts.kill_world_every and not frames.recovering:
                     next_world = time.monotonic() + _draw(world_rng, opts.kill_world_every)
                 try:
-                    proc.wait(min(max(min(next_agent, next_world) - time.monotonic(), 0.01), 0.5))
+                    proc.wait(min(max(min(next_agent, next_world) - time.monotonic(), 0.05), 0.5))
                     break
                 except subprocess.TimeoutExpired:
                     pass
                 now = time.monotonic()
-                if now >= next_world:
+                if now >= next_world and frames.newest >= frames.started_at + interval:
                     next_world = float("inf")  # the next is drawn once the restarted world ticks
                     pid = _world_pid(proc.pid)
                     if pid is not None:
@@ -239,7 +247,7 @@ def chaos_run(opts: ChaosOptions, index: int, stop: threading.Event, log=print) 
                         os.kill(pid, signal.SIGKILL)
                         result.world_kills += 1
                         log(f"  run {index}: killed the world (pid {pid}) at tick {frames.newest}")
-                elif now >= next_agent:
+                if now >= next_agent:
                     next_agent = now + _draw(rng, opts.kill_every)
                     _kill_agent(opts, session, rng, alive, result, index, log)
             result.exit_code = proc.wait(opts.run_timeout)

@@ -13,8 +13,8 @@ The run supervises the world: the world checkpoints into the run's temporary dir
 every `checkpoint_every` ticks, and when its process dies without a final status (SIGKILL,
 a crash) the run says so and starts it again from its last good checkpoint (from the
 start if it had written none yet); the agents wait for it and attach again by themselves.
-A world that dies `MAX_QUICK_DEATHS` times in a row within seconds of starting ends the
-run as an error.
+A world that dies `MAX_QUICK_DEATHS` times in a row within `QUICK_DEATH` seconds of
+starting, before it got a checkpoint further, ends the run as an error.
 
 With `record`, a `conag record` process records the run (`nodes/recorder.py`): it starts
 after the world and before the agents, which start once it has heard the world, so the
@@ -38,7 +38,7 @@ from bus import BusOptions, Declarations, open_session
 from protocol import keys
 from protocol.codec import ProtocolError, decode, encode
 from protocol.messages import AgentState, RunControl, RunControlResult, WorldStatus
-from world_server.checkpoint import DEFAULT_EVERY, newest_good, read_checkpoint
+from world_server.checkpoint import DEFAULT_EVERY, CheckpointError, newest_good, read_checkpoint
 from world_server.scenario import Scenario
 from world_server.stall import DEFAULT_STALL_TICKS, StallWatch
 
@@ -207,11 +207,13 @@ class WorldProcess:
     proc: subprocess.Popen | None = None
     restarts: int = 0
     started: float = 0.0
+    from_tick: int = -1      # the tick of the checkpoint it started from (-1: the start)
     quick_deaths: int = 0
 
     def start(self, resume: Path | None = None) -> None:
         self.proc = _start_world(self.opts, self.n_agents, self.final_path, self.checkpoint, resume)
         self.started = time.monotonic()
+        self.from_tick = _checkpoint_tick(resume) if resume else -1
 
     def died(self) -> bool:
         """The process exited without writing the final status (killed, crashed)."""
@@ -220,16 +222,26 @@ class WorldProcess:
     def restart(self) -> str:
         """Start it again from the newest good checkpoint; what happened, for the user."""
         code = self.proc.returncode
-        self.quick_deaths = self.quick_deaths + 1 if time.monotonic() - self.started < QUICK_DEATH else 0
+        resume = newest_good(self.checkpoint)
+        tick = _checkpoint_tick(resume) if resume else -1
+        # Quick: soon after starting, and before it got one checkpoint further (a world that
+        # cannot even start; not one that was killed while it worked).
+        quick = time.monotonic() - self.started < QUICK_DEATH and tick <= self.from_tick
+        self.quick_deaths = self.quick_deaths + 1 if quick else 0
         if self.quick_deaths >= MAX_QUICK_DEATHS:
             raise RuntimeError(f"the world exited ({code}) {self.quick_deaths} times in a row within "
                                f"{QUICK_DEATH:g} s of starting; not starting it again")
-        resume = newest_good(self.checkpoint)
-        where = (f"its checkpoint of tick {read_checkpoint(resume)['tick']}" if resume
-                 else "the start (no checkpoint yet)")
+        where = f"its checkpoint of tick {tick}" if resume else "the start (no checkpoint yet)"
         self.restarts += 1
         self.start(resume)
         return f"the world died (exit {code}); restarted it from {where} (world restart {self.restarts})"
+
+
+def _checkpoint_tick(path: Path) -> int:
+    try:
+        return int(read_checkpoint(path)["tick"])
+    except (OSError, CheckpointError, KeyError, TypeError, ValueError):
+        return -1
 
 
 def _run(opts: RunOptions, stop: threading.Event, tmp: Path) -> dict:
