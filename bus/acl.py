@@ -80,6 +80,8 @@ class Role:
 
 
 def world_role(world: str) -> Role:
+    """The world server: frames, errors, welcomes and the world's own keys out; commands and
+    AgentStates in; attach, perturb, view, status and blueprint answered."""
     w = keys.world_root(world)
     agent = f"{w}/agent/*"
     return Role(WORLD, (
@@ -95,6 +97,7 @@ def world_role(world: str) -> Role:
 
 
 def agent_role(world: str, agent: str) -> Role:
+    """Agent `agent`: its own keys only, in and out (see the module)."""
     return Role(agent_user(agent), (
         ("publish", (keys.command(world, agent), keys.decision(world, agent), keys.agent_state(world, agent),
                      keys.agent_maps(world, agent))),
@@ -107,6 +110,7 @@ def agent_role(world: str, agent: str) -> Role:
 
 
 def teacher_role(world: str) -> Role:
+    """The teacher: every decision in, every reinforcement out, its own token."""
     return Role(TEACHER, (
         ("publish", (keys.all_agents(world, "reinforcement"),)),
         ("subscribe", (keys.all_agents(world, "decision"),)),
@@ -125,6 +129,7 @@ def _reader_grants(world: str) -> tuple[tuple[str, tuple[str, ...]], ...]:
 
 
 def operator_role(world: str) -> Role:
+    """The operator: perturb and RunControl (asking and serving), and everything the observer reads."""
     return Role(OPERATOR, (
         ("ask", (keys.perturb(world), keys.run_control(world), keys.status(world), keys.blueprint(world),
                  keys.view(world))),
@@ -134,6 +139,7 @@ def operator_role(world: str) -> Role:
 
 
 def observer_role(world: str) -> Role:
+    """A read-only observer (recorder, viewer, status, echo): reads everything, asks for maps."""
     return Role(OBSERVER, (
         ("ask", (keys.status(world), keys.blueprint(world), keys.view(world))),
         *_reader_grants(world),

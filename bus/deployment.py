@@ -71,6 +71,7 @@ def _scouting_off() -> dict:
 
 
 def router_config(spec: DeploymentSpec, password: str) -> dict:
+    """The router's configuration: listen, scouting off, the dictionary, the ACL."""
     return {
         "mode": "router",
         "listen": {"endpoints": [spec.listen or spec.router]},
@@ -83,6 +84,7 @@ def router_config(spec: DeploymentSpec, password: str) -> dict:
 
 
 def client_config(spec: DeploymentSpec, user: str, password: str) -> dict:
+    """`user`'s client configuration: connect to the router with its credential, scouting off."""
     return {
         "mode": "client",
         "connect": {"endpoints": [spec.router]},

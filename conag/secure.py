@@ -111,7 +111,7 @@ def _deployment_for(opts, n_agents: int, tmp: Path) -> Path:
     return Path(opts.secure)
 
 
-def start_router(config: Path, endpoint: str, timeout: float = 30.0) -> subprocess.Popen:
+def start_router(config: Path, endpoint: str) -> subprocess.Popen:
     """`conag router --zenoh-config config --listen endpoint`, once it says it listens."""
     proc = subprocess.Popen([sys.executable, "-m", "conag", "router", "--zenoh-config", str(config),
                              "--listen", endpoint], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, text=True)

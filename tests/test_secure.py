@@ -13,8 +13,8 @@ import zenoh
 from bus import BusOptions, make_config
 from bus.acl import OBSERVER, OPERATOR, TEACHER, WORLD, access_control, agent_user, roles
 from bus.deployment import DICTIONARY_FILE, MANIFEST_FILE, ROUTER_FILE, DeploymentSpec, client_file, write_deployment
-from protocol import keys
 from conag.cli import main as conag_main
+from protocol import keys
 
 W = "w0"
 AGENTS = ("a1", "a2", "a3")
