@@ -38,6 +38,7 @@ from conag.common import stop_on_signals as _stop_on_signals
 from conag.layouts import add_commands as add_layout_commands
 from conag.recordings import add_commands as add_recording_commands
 from conag.secure import add_commands as add_secure_commands
+from conag.secure import check_agent_credential
 from conag.view import add_commands as add_view_commands
 from world_server.summary import write_summary
 
@@ -268,6 +269,7 @@ def cmd_agent(args) -> int:
     from nodes.world_link import AttachError
 
     opts = _agent_options(args)
+    check_agent_credential(args.zenoh_config, args.id)
     report = AgentReport()
 
     def raise_stop(_signum, _frame):

@@ -13,6 +13,7 @@ as a client of that router with its own credential; its own session (progress, s
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -20,8 +21,8 @@ from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
 
-from bus import BusOptions
-from bus.acl import OPERATOR
+from bus import BusOptions, make_config
+from bus.acl import OPERATOR, agent_user
 from bus.deployment import (
     DEFAULT_ROUTER,
     ROUTER_FILE,
@@ -74,6 +75,17 @@ def cmd_keys(args) -> int:
     print(f"start the router:  conag router --zenoh-config {out / ROUTER_FILE}")
     print(f"then each process: conag agent --id a1 --zenoh-config {out / client_file('agent-a1')}  (and so on)")
     return 0
+
+
+def check_agent_credential(zenoh_config: str | None, agent_id: str) -> None:
+    """Refuse (ValueError) a configuration file holding another agent's credential than
+    `agent_id`'s: the router would silently drop everything the agent does."""
+    if not zenoh_config:
+        return
+    user = json.loads(make_config(BusOptions(zenoh_config=zenoh_config)).get_json("transport/auth/usrpwd/user"))
+    if isinstance(user, str) and user.startswith("agent-") and user != agent_user(agent_id):
+        raise ValueError(f"{zenoh_config} holds the credential of {user}, not of {agent_user(agent_id)}: "
+                         f"on a secure bus agent {agent_id} must use its own")
 
 
 def bus_flags(opts, user: str, *, world: bool = False) -> list[str]:

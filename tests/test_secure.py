@@ -138,3 +138,9 @@ def test_nothing_outside_the_world_is_allowed(acl):
     for rule in acl["rules"]:
         for key in rule["key_exprs"]:
             assert key.startswith(keys.world_root(W) + "/"), (rule["id"], key)
+
+
+def test_an_agent_refuses_another_agents_credential_at_once(tmp_path, capsys):
+    write_deployment(tmp_path, DeploymentSpec(("a1", "a2")))
+    code = conag_main(["agent", "--id", "a1", "--zenoh-config", str(tmp_path / client_file("agent-a2"))])
+    assert code == 2 and "holds the credential of agent-a2, not of agent-a1" in capsys.readouterr().err
