@@ -61,6 +61,11 @@ def make_config(opts: BusOptions, *, serve: bool = False):
     return config
 
 
+def is_client(opts: BusOptions, *, serve: bool = False) -> bool:
+    """Whether these options make a zenoh client (of a router: a multi-host or secure bus)."""
+    return json.loads(make_config(opts, serve=serve).get_json("mode")) == "client"
+
+
 def _resolve_dictionary(config, path: str) -> None:
     """A relative user/password `dictionary_file` (a secure router's, `bus.deployment`) is
     relative to its configuration file, not to wherever the router is started from."""

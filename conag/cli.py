@@ -31,7 +31,7 @@ import threading
 import time
 from dataclasses import asdict
 
-from bus import BusOptions, Declarations, open_session
+from bus import BusOptions, Declarations, is_client, open_session
 from conag.common import bus_args as _bus_args
 from conag.common import bus_options as _bus
 from conag.common import stop_on_signals as _stop_on_signals
@@ -79,9 +79,13 @@ def cmd_world(args) -> int:
                   f"{args.mode_tick or scenario.tick_mode} mode", flush=True)
             if (args.mode_tick or scenario.tick_mode) == "lockstep":
                 print(f"lockstep: ticks start once {args.wait_agents} agent(s) have attached", flush=True)
+            # Through a router, frames sent "latest wins" (DROP) were lost under load, each costing a
+            # lockstep timeout and the agent's odometry of that tick (RELIABILITY.md); lockstep waits
+            # for every agent anyway, so there frames are sent BLOCK.
+            block = (args.mode_tick or scenario.tick_mode) == "lockstep" and is_client(_bus(args), serve=True)
             server = WorldServer(world, session, mode=args.mode_tick, max_ticks=args.ticks,
                                  stop_when_complete=args.stop_when_complete, wait_agents=args.wait_agents,
-                                 on_status=on_status)
+                                 on_status=on_status, block_frames=block)
             final = server.run(stop)
         finally:
             session.close()

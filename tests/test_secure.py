@@ -144,3 +144,13 @@ def test_an_agent_refuses_another_agents_credential_at_once(tmp_path, capsys):
     write_deployment(tmp_path, DeploymentSpec(("a1", "a2")))
     code = conag_main(["agent", "--id", "a1", "--zenoh-config", str(tmp_path / client_file("agent-a2"))])
     assert code == 2 and "holds the credential of agent-a2, not of agent-a1" in capsys.readouterr().err
+
+
+def test_a_world_through_a_router_is_told_apart(tmp_path):
+    """`conag world` sends lockstep frames BLOCK when it is a client of a router (is_client)."""
+    from bus import is_client
+
+    write_deployment(tmp_path, DeploymentSpec(("a1",)))
+    assert is_client(BusOptions(zenoh_config=str(tmp_path / client_file(WORLD))), serve=True)
+    assert is_client(BusOptions(mode="client", connect=("tcp/127.0.0.1:7447",)), serve=True)
+    assert not is_client(BusOptions(), serve=True)
