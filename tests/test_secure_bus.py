@@ -389,14 +389,13 @@ def test_nobody_but_the_world_answers_an_attach(secure):
 KINDS = 12  # the kinds of attempt above (joining the bus counts as one kind, tried four ways)
 
 
-def test_the_figures(capsys):
+def test_the_figures():
     """The tally RELIABILITY.md reports (`pytest tests/test_secure_bus.py -s` prints it); only
     when the whole module ran."""
     if len(INTRUSIONS.attempts) < KINDS:
         pytest.skip(f"only part of the module ran: {sorted(INTRUSIONS.attempts)}")
     total = sum(map(len, INTRUSIONS.attempts.values()))
-    with capsys.disabled():
-        print(f"\n{total} intrusion attempts of {len(INTRUSIONS.attempts)} kinds, all refused:")
-        for kind, who in INTRUSIONS.attempts.items():
-            print(f"  {kind}: {len(who)} ({', '.join(who)})")
+    print(f"\n{total} intrusion attempts of {len(INTRUSIONS.attempts)} kinds, all refused:")
+    for kind, who in INTRUSIONS.attempts.items():
+        print(f"  {kind}: {len(who)} ({', '.join(who)})")
     assert len(INTRUSIONS.attempts) == KINDS
