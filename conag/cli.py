@@ -5,6 +5,7 @@
     conag perturb OP ...      remove, add or move a disc, add or remove a drop site, in a running world
     conag render SCENARIO     draw a scenario as a bird's-eye PNG
     conag router              run a zenoh router (for several hosts)
+    conag keys OUTDIR         write a secure deployment: router with access control, a credential per process
     conag agent --id ID       one agent process (--learn: a student learning from the teacher)
     conag teacher             the teacher process: reinforces learning students (paper §5.1)
     conag run SCENARIO        a world and its agents as processes, until the structure is done
@@ -30,12 +31,14 @@ import threading
 import time
 from dataclasses import asdict
 
-from bus import BusOptions, Declarations, open_session
+from bus import BusOptions, Declarations, is_client, open_session
 from conag.common import bus_args as _bus_args
 from conag.common import bus_options as _bus
 from conag.common import stop_on_signals as _stop_on_signals
 from conag.layouts import add_commands as add_layout_commands
 from conag.recordings import add_commands as add_recording_commands
+from conag.secure import add_commands as add_secure_commands
+from conag.secure import check_agent_credential
 from conag.view import add_commands as add_view_commands
 from world_server.summary import write_summary
 
@@ -92,9 +95,14 @@ def cmd_world(args) -> int:
                   + (f", checkpoint every {plan.every} ticks to {plan.path}" if plan else ""), flush=True)
             if (args.mode_tick or scenario.tick_mode) == "lockstep" and not args.resume:
                 print(f"lockstep: ticks start once {args.wait_agents} agent(s) have attached", flush=True)
+            # Through a router, frames sent "latest wins" (DROP) were lost under load, each costing a
+            # lockstep timeout and the agent's odometry of that tick (RELIABILITY.md); lockstep waits
+            # for every agent anyway, so there frames are sent BLOCK.
+            block = (args.mode_tick or scenario.tick_mode) == "lockstep" and is_client(_bus(args), serve=True)
             server = WorldServer(world, session, mode=args.mode_tick, max_ticks=args.ticks,
                                  stop_when_complete=args.stop_when_complete, wait_agents=args.wait_agents,
-                                 on_status=on_status, checkpoint=plan, resumed=bool(args.resume))
+                                 on_status=on_status, block_frames=block, checkpoint=plan,
+                                 resumed=bool(args.resume))
             final = server.run(stop)
         finally:
             session.close()
@@ -310,6 +318,7 @@ def cmd_agent(args) -> int:
     from nodes.world_link import AttachError
 
     opts = _agent_options(args)
+    check_agent_credential(args.zenoh_config, args.id)
     report = AgentReport()
 
     def raise_stop(_signum, _frame):
@@ -387,7 +396,7 @@ def cmd_run(args) -> int:
                       extra_agent_args=("--map-size", str(args.map_size), *learn_args,
                                         *(("--nearest-first",) if args.nearest_first else ())),
                       teacher=args.teacher, weights_dir=args.weights_dir, stall_ticks=args.stall_ticks,
-                      record=args.record, view=args.view, maps_every=args.maps_every,
+                      record=args.record, view=args.view, maps_every=args.maps_every, secure=args.secure,
                       checkpoint_every=args.checkpoint_every or CHECKPOINT_EVERY)
     with _stop_on_signals() as stop:
         try:
@@ -454,8 +463,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for add in (_add_world, _add_status, _add_perturb, _add_agent, _add_teacher, _add_run, _add_chaos, _add_control,
-                _add_render, add_layout_commands, add_recording_commands, add_view_commands, _add_router):
-        add(sub)  # add_layout_commands: generate, check; add_recording_commands: record, replay, echo
+                _add_render, add_layout_commands, add_recording_commands, add_view_commands, _add_router,
+                add_secure_commands):
+        add(sub)  # add_layout_commands: generate, check; add_recording_commands: record, replay, echo; keys
     for command in sub.choices.values():  # -v also after the subcommand: `conag world X -v`
         command.add_argument("-v", "--verbose", dest="verbose_after", action="count", default=0,
                              help="more log output (-vv for debug); also accepted before the subcommand")
@@ -557,6 +567,9 @@ def _add_run(sub) -> None:
     u.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
                    help="where the world listens (default tcp/127.0.0.1:7447)")
     u.add_argument("--world-id", default="w0")
+    u.add_argument("--secure", nargs="?", const="", metavar="DIR",
+                   help="a secure bus: a zenoh router with access control on the --listen endpoint, every "
+                        "process its own credential (from DIR, written by `conag keys`; fresh ones without DIR)")
     u.add_argument("--record", metavar="OUT.mcap",
                    help="record every message of the run to an MCAP file (conag record; see conag replay)")
     u.add_argument("--view", nargs="?", type=int, const=8765, metavar="PORT",

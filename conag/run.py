@@ -19,6 +19,10 @@ starting, before it got a checkpoint further, ends the run as an error.
 With `record`, a `conag record` process records the run (`nodes/recorder.py`): it starts
 after the world and before the agents, which start once it has heard the world, so the
 recording holds every tick; it stops last, after the agents' final state reports.
+
+With `secure` (`conag run --secure`, `conag/secure.py`), a zenoh router with access control
+listens on the run's endpoint, every process is a client of it with its own credential, and
+this process's session is the operator's.
 """
 
 from __future__ import annotations
@@ -34,7 +38,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from bus import BusOptions, Declarations, open_session
+from bus import Declarations, open_session
+from bus.acl import OBSERVER, TEACHER, WORLD, agent_user
+from conag.secure import bus_flags, run_bus_options, secure_bus
 from protocol import keys
 from protocol.codec import ProtocolError, decode, encode
 from protocol.messages import AgentState, RunControl, RunControlResult, WorldStatus
@@ -65,6 +71,7 @@ class RunOptions:
     record: str | None = None         # record the run to this MCAP file (`conag record`)
     view: int | None = None           # serve the browser viewer on this port (`conag view`)
     maps_every: int = 0               # the recorder and viewer ask for the agents' maps every N ticks
+    secure: str | None = None         # a secure bus (conag/secure.py): a deployment dir; "" a fresh one
     checkpoint_every: int = DEFAULT_EVERY  # ticks between the world's checkpoints (it is restarted from the last)
 
 
@@ -84,7 +91,7 @@ class Fleet:
     def start(self, agent_id: str) -> subprocess.Popen:
         o = self.opts
         cmd = [sys.executable, "-m", "conag", "agent", "--id", agent_id, "--world-id", o.world_id,
-               "--connect", o.endpoint, "--seed", str(o.seed if o.seed is not None else o.scenario.seed),
+               *bus_flags(o, agent_user(agent_id)), "--seed", str(o.seed if o.seed is not None else o.scenario.seed),
                *o.extra_agent_args]
         if o.weights_dir:
             weights = Path(o.weights_dir) / f"{agent_id}.json"
@@ -141,7 +148,7 @@ class RunBus:
         self.opts, self.watch, self.tty = opts, watch, tty
         self.world_restarts = 0
         self._started = time.monotonic()
-        self.session = open_session(BusOptions(connect=(opts.endpoint,)))
+        self.session = open_session(run_bus_options(opts))
         self._declared = Declarations()
         w, add = opts.world_id, self._declared.add
         add(self.session.declare_subscriber(keys.status(w), self.on_status))
@@ -193,7 +200,9 @@ def _progress(st: WorldStatus, started: float, world_restarts: int = 0) -> str:
 def run(opts: RunOptions, stop: threading.Event) -> dict:
     """Run the scenario; returns the run summary (also written to opts.summary)."""
     with tempfile.TemporaryDirectory(prefix="conag-run-") as tmp:  # gone however the run ends
-        return _run(opts, stop, Path(tmp))
+        n_agents = opts.scenario.agents if opts.agents is None else opts.agents
+        with secure_bus(opts, n_agents, Path(tmp)) as bus_opts:
+            return _run(bus_opts, stop, Path(tmp))
 
 
 @dataclass
@@ -304,14 +313,14 @@ def _wait_until(*conditions: Callable[[], bool], poll: float = 0.1) -> None:
 
 def _start_teacher(opts: RunOptions) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "conag", "teacher", "--world-id", opts.world_id,
-                             "--connect", opts.endpoint, "--quiet"], stdin=subprocess.DEVNULL,
+                             *bus_flags(opts, TEACHER), "--quiet"], stdin=subprocess.DEVNULL,
                             stdout=subprocess.DEVNULL)
 
 
 def _start_recorder(opts: RunOptions) -> subprocess.Popen:
     seed = opts.seed if opts.seed is not None else opts.scenario.seed
     cmd = [sys.executable, "-m", "conag", "record", opts.record, "--world-id", opts.world_id,
-           "--connect", opts.endpoint, "--scenario", opts.scenario_path, "--seed", str(seed),
+           *bus_flags(opts, OBSERVER), "--scenario", opts.scenario_path, "--seed", str(seed),
            "--note", f"agents={opts.agents if opts.agents is not None else opts.scenario.agents}",
            "--note", "agent_args=" + " ".join(opts.extra_agent_args), "--maps-every", str(opts.maps_every),
            "--note", f"checkpoint_every={opts.checkpoint_every}"]
@@ -320,7 +329,7 @@ def _start_recorder(opts: RunOptions) -> subprocess.Popen:
 
 def _start_viewer(opts: RunOptions) -> subprocess.Popen:
     """`conag view` on the run's bus; it prints the page's address (stdout is the run's)."""
-    cmd = [sys.executable, "-m", "conag", "view", "--world-id", opts.world_id, "--connect", opts.endpoint,
+    cmd = [sys.executable, "-m", "conag", "view", "--world-id", opts.world_id, *bus_flags(opts, OBSERVER),
            "--port", str(opts.view)]
     if opts.maps_every:
         cmd += ["--maps-every", str(opts.maps_every)]  # else the viewer's default
@@ -334,7 +343,7 @@ def _start_world(opts: RunOptions, n_agents: int, final_path: Path, checkpoint: 
     """The world process; it stops by itself when complete or out of ticks, writing `final_path`.
     It checkpoints to `checkpoint`; with `resume` it continues from that checkpoint."""
     cmd = [sys.executable, "-m", "conag", "world", opts.scenario_path, "--world-id", opts.world_id,
-           "--listen", opts.endpoint, "--ticks", str(opts.max_ticks or opts.scenario.max_ticks),
+           *bus_flags(opts, WORLD, world=True), "--ticks", str(opts.max_ticks or opts.scenario.max_ticks),
            "--stop-when-complete", "--wait-agents", str(max(n_agents, 1)), "--quiet", "--summary", str(final_path),
            "--checkpoint", str(checkpoint), "--checkpoint-every", str(opts.checkpoint_every)]
     if resume is not None:
