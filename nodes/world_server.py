@@ -127,6 +127,7 @@ class WorldServer:
         self.lockstep = LockstepWaits(self.cfg.lockstep_miss_limit)
         self.checkpoint = checkpoint
         self.checkpoints_written = 0
+        self._checkpointed = -1  # the tick of the last checkpoint written
         self._unclaimed = resumed  # a resumed world: agents without a token are let go before the first tick
         self._resume_deadline: float | None = clock() + RESUME_WAIT if resumed else None
         self._attached: set[str] = set()  # agents that attached to this server
@@ -202,7 +203,7 @@ class WorldServer:
                 if self.view_every and self.world.tick % self.view_every == 0:
                     self._publish_view()
             self._publish_view()
-            if self.checkpoint is not None and self.checkpoint.path:
+            if self.checkpoint is not None and self.checkpoint.path and self._checkpointed != self.world.tick:
                 self._checkpoint()  # stopped (SIGTERM), complete or out of ticks: the state as it ends
             return self._publish_status()
 
@@ -218,6 +219,7 @@ class WorldServer:
             log.error("tick %d: checkpoint not written (%s); the one before it is kept", self.world.tick, exc)
             return
         self.checkpoints_written += 1
+        self._checkpointed = self.world.tick
         log.debug("tick %d: checkpoint written to %s (%d bytes, %.1f ms)", self.world.tick, self.checkpoint.path,
                   len(data), 1000 * (time.monotonic() - started))
 
