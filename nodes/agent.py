@@ -43,7 +43,7 @@ from protocol import keys
 from protocol.codec import encode
 
 log = logging.getLogger("conag.agent")
-WAIT_QUIET = 2.0    # seconds a world may be gone before the agent says it waits for it
+WAIT_QUIET = 1.0    # seconds a world may be gone before the agent warns that it waits for it
 WAIT_REPORT = 30.0  # seconds between "waiting for world" lines
 
 
@@ -155,6 +155,7 @@ class _AgentProcess:
         wait for it to come back, attach again."""
         a, w = self.opts.agent_id, self.opts.world_id
         lost_at, said = time.monotonic(), 0.0
+        log.info("agent %s: world %s is gone (last tick %d); waiting for it", a, w, self.tick)
         while stop is None or not stop.is_set():
             if self.link.wait_for_world(0.25):
                 try:
