@@ -99,6 +99,7 @@ class ChaosRun:
     world_restarts: int = 0        # as `conag run` reports them in its summary
     ticks_lost: list[int] = field(default_factory=list)  # per world kill (see the module)
     wall_seconds: float = 0.0
+    why: list[str] = field(default_factory=list)  # what `conag run` printed after its progress, if it did not complete
 
     @property
     def bricks_kept(self) -> bool:
@@ -110,7 +111,8 @@ class ChaosRun:
                 f"{self.kills} kills ({self.restarts} restarted, left dead: {', '.join(self.left_dead) or 'none'}), "
                 f"bricks_total {self.bricks_total} (expected {self.bricks_expected}), {self.wall_seconds:.0f} s"
                 + (f", {self.world_kills} world kills ({self.world_restarts} restarts, ticks lost "
-                   f"{', '.join(map(str, self.ticks_lost)) or '-'})" if self.world_kills else ""))
+                   f"{', '.join(map(str, self.ticks_lost)) or '-'})" if self.world_kills else "")
+                + "".join(f"\n    {line}" for line in self.why))
 
 
 def _free_endpoint() -> str:
@@ -203,7 +205,9 @@ def chaos_run(opts: ChaosOptions, index: int, stop: threading.Event, log=print) 
             cmd += ["--seed", str(opts.world_seed)]
         if opts.checkpoint_every is not None:
             cmd += ["--checkpoint-every", str(opts.checkpoint_every)]
-        proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
+        # Its output is kept: a run that does not complete says why (a stall's report).
+        output = (Path(tmp) / "run.out").open("w", encoding="utf-8")
+        proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=output)
         session = open_session(BusOptions(connect=(endpoint,)))
         ticking = threading.Event()
         frames = FrameWatch()
@@ -258,6 +262,7 @@ def chaos_run(opts: ChaosOptions, index: int, stop: threading.Event, log=print) 
             if proc.poll() is None:
                 proc.kill()
                 proc.wait(10)
+        output.close()
         result.ticks_lost = list(frames.lost)
         if summary_path.exists():
             s = json.loads(summary_path.read_text(encoding="utf-8"))
@@ -265,6 +270,9 @@ def chaos_run(opts: ChaosOptions, index: int, stop: threading.Event, log=print) 
             result.sites_filled, result.sites_total, result.bricks_total = (s["sites_filled"], s["sites_total"],
                                                                             s["bricks_total"])
             result.world_restarts = s.get("world_restarts", 0)
+        if not result.completed:
+            said = (Path(tmp) / "run.out").read_text(encoding="utf-8", errors="replace")
+            result.why = said.strip().splitlines()[-12:]
     result.wall_seconds = time.monotonic() - started
     return result
 
