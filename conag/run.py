@@ -23,6 +23,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -128,6 +129,7 @@ class RunBus:
     def __init__(self, opts: RunOptions, fleet: Fleet, watch: StallWatch, tty: bool):
         self.opts, self.watch, self.tty = opts, watch, tty
         self._started = time.monotonic()
+        self.rate = TickRate()
         self.session = open_session(BusOptions(connect=(opts.endpoint,)))
         self._declared = Declarations()
         w, add = opts.world_id, self._declared.add
@@ -142,8 +144,9 @@ class RunBus:
         except ProtocolError:
             return
         self.watch.observe(st)
+        rate = self.rate.observe(st.tick)
         if not self.opts.quiet and not self.watch.stalled:
-            line = _progress(st, self._started)
+            line = _progress(st, self._started, rate)
             print(("\r" + line) if self.tty else line, end="" if self.tty else "\n", flush=True)
 
     def on_state(self, sample) -> None:
@@ -170,10 +173,31 @@ class RunBus:
         self.close()
 
 
-def _progress(st: WorldStatus, started: float) -> str:
+class TickRate:
+    """Ticks per second over the statuses of the last `window` seconds (the world publishes
+    one every `status_period`, 0.5 s): steady enough to read, quick to follow a change."""
+
+    def __init__(self, window: float = 2.0, clock: Callable[[], float] = time.monotonic):
+        self.window, self.clock = window, clock
+        self._seen: deque[tuple[float, int]] = deque()
+
+    def observe(self, tick: int) -> float | None:
+        """Take a status's tick; the rate since the oldest status in the window (None: too few yet)."""
+        now = self.clock()
+        if self._seen and tick < self._seen[-1][1]:
+            self._seen.clear()  # a world started again
+        self._seen.append((now, tick))
+        while len(self._seen) > 2 and now - self._seen[1][0] >= self.window:
+            self._seen.popleft()
+        (t0, k0), (t1, k1) = self._seen[0], self._seen[-1]
+        return (k1 - k0) / (t1 - t0) if t1 > t0 else None
+
+
+def _progress(st: WorldStatus, started: float, rate: float | None = None) -> str:
     return (f"tick {st.tick:>7}  sites {st.sites_filled}/{st.sites_total}  "
-            f"agents alive {st.agents_alive}/{len(st.agent_ids)}  {time.monotonic() - started:6.1f} s"
-            + ("  COMPLETE" if st.completed else ""))
+            f"agents alive {st.agents_alive}/{len(st.agent_ids)}  "
+            + (f"{rate:7.1f} ticks/s  " if rate is not None else " " * 16)
+            + f"{time.monotonic() - started:6.1f} s" + ("  COMPLETE" if st.completed else ""))
 
 
 def run(opts: RunOptions, stop: threading.Event) -> dict:
