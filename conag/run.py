@@ -55,6 +55,8 @@ class RunOptions:
     record: str | None = None         # record the run to this MCAP file (`conag record`)
     view: int | None = None           # serve the browser viewer on this port (`conag view`)
     maps_every: int = 0               # the recorder and viewer ask for the agents' maps every N ticks
+    profile: str | None = None        # the world writes its loop's times here (conag world --profile)
+    per_process: int = 1              # agents per agent process; > 1: `conag agents` hosts
 
 
 class RunEnding(RuntimeError):
@@ -67,8 +69,26 @@ class Fleet:
 
     opts: RunOptions
     procs: dict[str, subprocess.Popen] = field(default_factory=dict)
+    hosted: set[str] = field(default_factory=set)  # ids in procs served by a `conag agents` host, not stopped
     lock: threading.Lock = field(default_factory=threading.Lock)
     closed: bool = False  # stop_all has begun: a `conag restart` then starts nothing (it would outlive the run)
+
+    def start_host(self, first: int, last: int) -> subprocess.Popen:
+        """One `conag agents` process for agents a<first>..a<last>; `kill` stops one alone
+        through its stdin."""
+        o = self.opts
+        cmd = [sys.executable, "-m", "conag", "agents", "--ids", f"a{first}..a{last}", "--stdin-control",
+               "--world-id", o.world_id, "--connect", o.endpoint,
+               "--seed", str(o.seed if o.seed is not None else o.scenario.seed), *o.extra_agent_args]
+        ids = [f"a{i}" for i in range(first, last + 1)]
+        with self.lock:
+            if self.closed:
+                raise RunEnding(f"the run is ending: {ids[0]}..{ids[-1]} not started")
+            proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, text=True)
+            for agent_id in ids:
+                self.procs[agent_id] = proc
+            self.hosted.update(ids)
+        return proc
 
     def start(self, agent_id: str) -> subprocess.Popen:
         o = self.opts
@@ -87,17 +107,33 @@ class Fleet:
                 raise RunEnding(f"the run is ending: {agent_id} not started")
             proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL)
             self.procs[agent_id] = proc
+            self.hosted.discard(agent_id)
         return proc
 
     def kill(self, agent_id: str) -> str:
         with self.lock:
             proc = self.procs.get(agent_id)
+            hosted = agent_id in self.hosted
+            self.hosted.discard(agent_id)
         if proc is None:
             raise KeyError(agent_id)
+        if hosted:
+            return self._stop_hosted(agent_id, proc)
         if proc.poll() is None:
             proc.kill()  # SIGKILL: the point is to show the world survives a crash
             proc.wait(10)
         return f"killed {agent_id} (pid {proc.pid})"
+
+    @staticmethod
+    def _stop_hosted(agent_id: str, proc: subprocess.Popen) -> str:
+        """A hosted agent is stopped alone (its host reads `stop ID`), not its whole host."""
+        if proc.poll() is None and proc.stdin is not None:
+            try:
+                proc.stdin.write(f"stop {agent_id}\n")
+                proc.stdin.flush()
+            except (BrokenPipeError, OSError):
+                pass  # the host has just exited: the agent is gone anyway
+        return f"stopped {agent_id} in its host (pid {proc.pid})"
 
     def restart(self, agent_id: str) -> str:
         killed = self.kill(agent_id) + ", " if agent_id in self.procs else ""
@@ -107,7 +143,7 @@ class Fleet:
     def stop_all(self, grace: float = 5.0) -> None:
         with self.lock:
             self.closed = True
-            procs = list(self.procs.values())
+            procs = list({id(p): p for p in self.procs.values()}.values())  # a host once
         for p in procs:
             if p.poll() is None:
                 p.send_signal(signal.SIGTERM)
@@ -225,8 +261,12 @@ def _run(opts: RunOptions, stop: threading.Event, final_path: Path) -> dict:
                     raise RuntimeError(f"the recorder exited ({recorder.returncode}) before the run started")
             if opts.view is not None:
                 viewer = _start_viewer(opts)
-            for i in range(n_agents):
-                fleet.start(f"a{i + 1}")
+            k = max(opts.per_process, 1)
+            for first in range(1, n_agents + 1, k):
+                if k == 1:
+                    fleet.start(f"a{first}")
+                else:
+                    fleet.start_host(first, min(first + k - 1, n_agents))
             _wait_until(lambda: world.poll() is not None, stop.is_set, lambda: watch.stalled)
             if watch.stalled:
                 print(("\n" if tty else "") + "\n".join(watch.report), flush=True)
@@ -288,6 +328,8 @@ def _start_world(opts: RunOptions, n_agents: int, final_path: Path) -> subproces
            "--stop-when-complete", "--wait-agents", str(max(n_agents, 1)), "--quiet", "--summary", str(final_path)]
     if opts.seed is not None:
         cmd += ["--seed", str(opts.seed)]
+    if opts.profile:
+        cmd += ["--profile", opts.profile]
     return subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
 
 

@@ -93,7 +93,7 @@ def run_agent(session, opts: AgentOptions, stop=None, report: AgentReport | None
     returned.
     """
     report = report if report is not None else AgentReport()
-    agent = _AgentProcess(session, opts, report)
+    agent = AgentProcess(session, opts, report)
     try:
         agent.attach()
         agent.serve(stop)
@@ -102,7 +102,7 @@ def run_agent(session, opts: AgentOptions, stop=None, report: AgentReport | None
     return report
 
 
-class _AgentProcess:
+class AgentProcess:
     """One agent process's links, brain and last tick, between `attach` and `close`."""
 
     def __init__(self, session, opts: AgentOptions, report: AgentReport):

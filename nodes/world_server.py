@@ -33,6 +33,9 @@ tick that is a multiple of `view_every` and after each perturbation, only while 
 (zenoh's matching status: a world nobody watches builds none); the `view` queryable
 answers a fresh one, built by the loop thread like everything that reads the world.
 
+The loop keeps where its time goes (`self.times`, `world_server.loop_times.LoopTimes`:
+stepping, publishing frames, waiting for commands; `conag world --profile PATH` writes it).
+
 A perturbation that changes the blueprint (add_site, remove_site) is followed by the new
 Blueprint, published reliably (RELIABLE, congestion control BLOCK: an agent must not miss
 a site); a queryable on the same key answers the current one. The agents' AgentState
@@ -65,6 +68,7 @@ from protocol.messages import (
     WorldStatus,
 )
 from world_server.lockstep import LockstepWaits
+from world_server.loop_times import LoopTimes
 from world_server.world import World
 
 log = logging.getLogger("conag.world")
@@ -112,6 +116,7 @@ class WorldServer:
         self.view_every = view_every  # ticks between WorldView publications (0: only on query)
         self._view_failed = False
         self.lockstep = LockstepWaits(self.cfg.lockstep_miss_limit)
+        self.times = LoopTimes()  # where the loop's time goes (conag world --profile)
 
     # zenoh callbacks: decode if cheap, then hand over to the loop thread ------------------
     def _on_command(self, sample: zenoh.Sample) -> None:
@@ -170,17 +175,32 @@ class WorldServer:
             self._declare()
             self._publish_status()
             last_tick = self.clock()
+            times, timer = self.times, time.perf_counter
+            t0 = timer()
             while self._wait_for_tick(last_tick, stop):
+                t1 = timer()
                 self.world.step()
                 last_tick = self.clock()
                 self._answered.clear()
+                t2 = timer()
                 self._publish_frames()
+                t3 = timer()
+                if times.first_tick is None:
+                    times.first_tick = time.monotonic()
+                else:  # from the second tick on: before it, the wait is for agents to start
+                    times.ticks += 1
+                    times.wait += t1 - t0
+                    times.step += t2 - t1
+                    times.publish += t3 - t2
                 if (self.max_ticks is not None and self.world.tick >= self.max_ticks) or (
                         self.stop_when_complete and self.world.completed()):
                     break
                 self._publish_status_if_due()
                 if self.view_every and self.world.tick % self.view_every == 0:
                     self._publish_view()
+                t0 = timer()
+                if times.ticks:
+                    times.other += t0 - t3
             self._publish_view()
             return self._publish_status()
 
