@@ -29,7 +29,7 @@ import threading
 import time
 from dataclasses import replace
 
-from nodes.agent import AgentOptions, AgentReport, AgentProcess
+from nodes.agent import AgentOptions, AgentProcess, AgentReport
 
 log = logging.getLogger("conag.agent")
 
