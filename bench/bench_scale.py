@@ -107,7 +107,7 @@ def _agents_in(cmd: str) -> int:
     """How many agents an agent process's command line serves (`conag agents --ids a1..a20`)."""
     words = cmd.split()
     if "--ids" in words:
-        from conag.hosting import parse_ids
+        from nodes.agent_host import parse_ids
 
         return len(parse_ids(words[words.index("--ids") + 1]))
     return 1

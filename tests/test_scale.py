@@ -37,3 +37,52 @@ def test_border_seed_is_the_octile_distance_to_the_nearest_target_beyond_the_map
     assert seed[4, 8] == 4.0  # straight east to the second target
     assert seed[8, 0] == min(11 + (math.sqrt(2) - 1) * 4, 12 + (math.sqrt(2) - 1) * 4)
     assert border_seed(np.zeros((0, 2), np.int64), n, obstacles) is None
+
+
+# ---------------------------------------------------------------- several agents in one process
+
+
+def test_parse_ids_takes_ranges_and_lists_and_refuses_nonsense():
+    import pytest
+
+    from nodes.agent_host import parse_ids
+
+    assert parse_ids("a1..a3") == ["a1", "a2", "a3"]
+    assert parse_ids("a1,a3..a4, b7") == ["a1", "a3", "a4", "b7"]
+    for bad in ("", "a3..a1", "a1..b3", "a1,a1", "a1..", ","):
+        with pytest.raises(ValueError):
+            parse_ids(bad)
+
+
+def test_a_host_serves_each_agent_its_own_body_and_stops_one_alone(bus, start_world):
+    import threading
+
+    from nodes.agent import AgentOptions
+    from nodes.agent_host import AgentHost, host_options
+    from tests.conftest import scenario, wait_until
+
+    rw = start_world(scenario("A.A.A\n.....\n..b..\n..+..", agents=3), wait_agents=3)
+    host = AgentHost(bus.client_session(), host_options(AgentOptions("w0", "a1"), ["a1", "a2", "a3"]))
+    stop = threading.Event()
+
+    def serve():
+        host.attach()
+        host.serve(stop)
+
+    thread = threading.Thread(target=serve, daemon=True)
+    thread.start()
+    try:
+        # lockstep: the world ticks only when all three hosted agents answer every frame
+        wait_until(lambda: rw.world.tick >= 20, timeout=60, what="20 lockstep ticks driven by the host")
+        assert sorted(rw.world.live_agents()) == ["a1", "a2", "a3"]
+        assert len({rec.index for rec in rw.world.agents.values()}) == 3  # three bodies
+        assert all(r.ticks >= 19 for r in host.reports.values())
+        host.stop_requests.put("a2")
+        wait_until(lambda: rw.world.live_agents() == ["a1", "a3"], timeout=30, what="a2 gone from the world")
+        tick = rw.world.tick
+        wait_until(lambda: rw.world.tick >= tick + 20, timeout=60, what="the others going on without a2")
+    finally:
+        stop.set()
+        thread.join(10)
+        host.close()
+    assert not thread.is_alive()
