@@ -175,7 +175,9 @@ class WorldServer:
             self._declare()
             self._publish_status()
             last_tick = self.clock()
-            times, timer = self.times, time.perf_counter
+            timer = time.perf_counter
+            # Realtime ticks before anyone is there: count from two seconds after all came.
+            warmup = int(2 * self.cfg.tick_rate) if self.mode == "realtime" else 0
             t0 = timer()
             while self._wait_for_tick(last_tick, stop):
                 t1 = timer()
@@ -185,13 +187,8 @@ class WorldServer:
                 t2 = timer()
                 self._publish_frames()
                 t3 = timer()
-                if times.first_tick is None:
-                    times.first_tick = time.monotonic()
-                else:  # from the second tick on: before it, the wait is for agents to start
-                    times.ticks += 1
-                    times.wait += t1 - t0
-                    times.step += t2 - t1
-                    times.publish += t3 - t2
+                self.times.tick_done(self.world.tick, len(self.world.agents) >= self.wait_agents, warmup,
+                                     time.monotonic(), wait=t1 - t0, step=t2 - t1, publish=t3 - t2)
                 if (self.max_ticks is not None and self.world.tick >= self.max_ticks) or (
                         self.stop_when_complete and self.world.completed()):
                     break
@@ -199,8 +196,7 @@ class WorldServer:
                 if self.view_every and self.world.tick % self.view_every == 0:
                     self._publish_view()
                 t0 = timer()
-                if times.ticks:
-                    times.other += t0 - t3
+                self.times.other_done(t0 - t3)
             self._publish_view()
             return self._publish_status()
 
@@ -264,6 +260,7 @@ class WorldServer:
                           f"{self.world.tick} (answer the newest frame's tick)", cmd.agent_id)
             else:
                 self.world.set_command(cmd.agent_id, cmd.speed, cmd.turn, cmd.action)
+                self.times.command(self.world.tick - cmd.tick)
                 if cmd.tick == self.world.tick:
                     self._answered.add(cmd.agent_id)
         elif kind == "live":

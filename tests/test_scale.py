@@ -86,3 +86,24 @@ def test_a_host_serves_each_agent_its_own_body_and_stops_one_alone(bus, start_wo
         thread.join(10)
         host.close()
     assert not thread.is_alive()
+
+
+def test_loop_times_count_from_when_everyone_is_there_and_realtime_lag():
+    from world_server.loop_times import LoopTimes
+
+    t = LoopTimes()
+    t.tick_done(1, False, 0, 10.0, wait=5.0, step=0.1, publish=0.1)  # agents still coming: nothing counts
+    t.command(0)
+    t.tick_done(2, True, 2, 11.0, wait=1.0, step=0.1, publish=0.1)   # all there: the first tick; 2 warm-up
+    assert t.first_tick == 11.0 and t.ticks == 0 and t.commands == 0
+    for tick in (3, 4):
+        t.tick_done(tick, True, 2, 12.0, wait=1.0, step=0.1, publish=0.1)
+    assert t.ticks == 0
+    for tick in (5, 6):
+        t.tick_done(tick, True, 2, 13.0, wait=0.010, step=0.002, publish=0.001)
+        t.other_done(0.001)
+    for lag in (0, 1, 3):
+        t.command(lag)
+    assert t.ticks == 2 and t.per_tick_ms() == {"step": 2.0, "publish": 1.0, "wait": 10.0, "other": 1.0}
+    assert (t.commands, t.stale_commands, t.max_lag) == (3, 1, 3)
+    assert "_count_from" not in t.as_dict() and t.as_dict()["per_tick_ms"]["wait"] == 10.0

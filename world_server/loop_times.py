@@ -4,7 +4,8 @@
 by `conag world --profile PATH` (also `conag run --profile PATH`) when the world stops; the
 scale benchmark (`bench/bench_scale.py`) reads it. Only ticks after the first are counted,
 so waiting for agents to start and attach is not mistaken for waiting for their commands;
-`first_tick` is the monotonic time (system-wide on Linux, comparable between processes)
+Commands are counted with how far their frame was behind the world when they came
+(`command`). `first_tick` is the monotonic time (system-wide on Linux, comparable between processes)
 at which the first tick's frames were out.
 """
 
@@ -28,6 +29,44 @@ class LoopTimes:
     wait: float = 0.0
     other: float = 0.0
     first_tick: float | None = None
+    commands: int = 0        # commands taken (after the first tick)
+    stale_commands: int = 0  # of those, answering a frame more than one tick old when they came
+    max_lag: int = 0         # the most ticks a command's frame was behind the world when it came
+    counting: bool = False   # past the first tick (and in realtime, a warm-up): the figures count
+    _count_from: int | None = None  # the first tick that counts, once known
+
+    def command(self, lag: int) -> None:
+        """A command came answering the frame of `lag` ticks ago (0: the newest frame).
+
+        In realtime mode the world does not wait: an agent slower than a tick answers an
+        older frame, and one that answers a frame more than a tick old lags behind."""
+        if not self.counting:
+            return
+        self.commands += 1
+        self.stale_commands += lag > 1
+        self.max_lag = max(self.max_lag, lag)
+
+    def tick_done(self, tick: int, everyone_there: bool, warmup: int, now: float, *, wait: float, step: float,
+                  publish: float) -> None:
+        """Tick `tick` is out at monotonic time `now`: how long the loop waited before it,
+        stepped and published. `everyone_there`: all awaited agents have attached; `warmup`:
+        ticks after that not counted (realtime)."""
+        if self._count_from is None:
+            if everyone_there:
+                self.first_tick = now
+                self._count_from = tick + 1 + warmup
+            return
+        if tick >= self._count_from:
+            self.counting = True
+            self.ticks += 1
+            self.wait += wait
+            self.step += step
+            self.publish += publish
+
+    def other_done(self, seconds: float) -> None:
+        """Time spent after a tick on statuses and views."""
+        if self.counting:
+            self.other += seconds
 
     def per_tick_ms(self) -> dict[str, float]:
         """Milliseconds per tick of each part (empty before the second tick)."""
@@ -37,4 +76,5 @@ class LoopTimes:
 
     def as_dict(self) -> dict:
         """The figures and the per-tick milliseconds, for JSON."""
-        return {**asdict(self), "per_tick_ms": self.per_tick_ms()}
+        figures = {k: v for k, v in asdict(self).items() if not k.startswith("_")}
+        return {**figures, "per_tick_ms": self.per_tick_ms()}
