@@ -190,6 +190,57 @@ def as_processes(scenario: str, agents: int, ticks: int, port: int, per_process:
             "wait_ms": per_tick.get("wait", 0.0), **mem, "last_line": last[0]}
 
 
+# ------------------------------------------------------------------ realtime
+
+def realtime_scenario(scenario: str, out: Path, rate: float) -> Path:
+    """A copy of `scenario` in realtime mode at `rate` ticks per second."""
+    text = (ROOT / scenario).read_text(encoding="utf-8")
+    lines = [('tick_mode = "realtime"' if line.startswith("tick_mode") else line) for line in text.splitlines()]
+    if "[world]" in lines:
+        lines.insert(lines.index("[world]") + 1, f"tick_rate = {rate}")
+    else:
+        lines += ["", "[world]", f"tick_rate = {rate}"]
+    out.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return out
+
+
+def realtime(scenario: str, agents: int, seconds: float, port: int, per_process: int, rate: float) -> dict:
+    """Run `conag run` in realtime mode at `rate`; once every agent is alive, `seconds` more
+    (after the world's own 2 s warm-up), then stop it; the world's profile says how fast it
+    ticked and how far behind the agents' commands were."""
+    with tempfile.TemporaryDirectory() as tmp:
+        profile = Path(tmp) / "world.json"
+        sc = realtime_scenario(scenario, Path(tmp) / "realtime.toml", rate)
+        cmd = [sys.executable, "-m", "conag", "run", str(sc), "--agents", str(agents), "--stall-ticks", "0",
+               "--headless", "--listen", f"tcp/127.0.0.1:{port}", "--profile", str(profile),
+               "--per-process", str(per_process)]
+        proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        assert proc.stdout is not None
+        everyone = f"agents alive {agents}/{agents}"
+        for line in proc.stdout:
+            if everyone in line:
+                break
+        time.sleep(seconds + 2.0)
+        proc.send_signal(2)  # SIGINT: conag run stops the world, which writes its profile
+        proc.communicate(timeout=120)
+        prof = json.loads(profile.read_text())
+    busy = sum(prof[k] for k in ("step", "publish", "wait", "other"))
+    return {"agents": agents, "per_process": per_process, "target": rate,
+            "rate": prof["ticks"] / busy if busy else 0.0, "commands": prof["commands"],
+            "stale_share": prof["stale_commands"] / max(prof["commands"], 1), "max_lag": prof["max_lag"]}
+
+
+def realtime_table(rows: list[dict]) -> str:
+    head = ("| agents | per process | target ticks/s | ticks/s | commands | older than one tick | max lag (ticks) "
+            "| kept |")
+    lines = [head, "|" + "---:|" * 7 + ":---:|"]
+    for r in rows:
+        kept = r["rate"] >= 0.97 * r["target"] and r["max_lag"] <= 1
+        lines.append(f"| {r['agents']} | {r['per_process']} | {r['target']:g} | {r['rate']:.1f} | {r['commands']} "
+                     f"| {100 * r['stale_share']:.1f}% | {r['max_lag']} | {'yes' if kept else 'no'} |")
+    return "\n".join(lines)
+
+
 # ------------------------------------------------------------------ the table
 
 def row_ticks(agents: int, ticks: int, agent_ticks: int, min_ticks: int = 60) -> int:
@@ -232,6 +283,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--agent-ticks", type=int, default=20000,
                    help="at most this many agent steps per row: fewer ticks for large teams (default 20000)")
     p.add_argument("--no-sim", action="store_true", help="skip the in-process runs (their columns say nan)")
+    p.add_argument("--realtime", type=_ints, default=[], metavar="N,N,...",
+                   help="also run these agent counts in realtime mode at --rate: does the tick keep up?")
+    p.add_argument("--rate", type=float, default=20.0, help="realtime ticks per second (default 20)")
+    p.add_argument("--seconds", type=float, default=10.0, help="seconds measured per realtime row (default 10)")
     p.add_argument("--port", type=int, default=17900)
     p.add_argument("--json", metavar="PATH", help="write every figure as JSON")
     args = p.parse_args(argv)
@@ -255,11 +310,25 @@ def main(argv: list[str] | None = None) -> int:
                   f"{proc['first_tick_s']:.1f} s, {proc.get('total_pss_mb', 0):.0f} MB PSS in total "
                   f"({time.monotonic() - t0:.0f} s)", file=sys.stderr, flush=True)
             rows.append({"agents": n, "per_process": k, "ticks": ticks, "sim": sim, "proc": proc})
-    print(f"{args.scenario}, lockstep, {os.cpu_count()} cores, load average at the end "
-          f"{os.getloadavg()[0]:.1f}\n")
-    print(table(rows))
+    live = []
+    for n in args.realtime:
+        for k in args.per_process:
+            if k > 1 and k >= n * 2:
+                continue
+            port += 1
+            live.append(realtime(args.scenario, n, args.seconds, port, k, args.rate))
+            r = live[-1]
+            print(f"{n} agents, {k} per process, realtime {args.rate:g} Hz: {r['rate']:.1f} ticks/s, "
+                  f"{100 * r['stale_share']:.1f}% of commands older than one tick", file=sys.stderr, flush=True)
+    print(f"{args.scenario}, {os.cpu_count()} cores, load average at the end {os.getloadavg()[0]:.1f}\n")
+    if rows:
+        print(table(rows))
+    if live:
+        print()
+        print(realtime_table(live))
     if args.json:
-        Path(args.json).write_text(json.dumps(rows, indent=2) + "\n", encoding="utf-8")
+        Path(args.json).write_text(json.dumps({"lockstep": rows, "realtime": live}, indent=2) + "\n",
+                                   encoding="utf-8")
     return 0
 
 
