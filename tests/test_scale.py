@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
+import pytest
+
 from conag.run import TickRate
 
 
@@ -43,8 +48,6 @@ def test_border_seed_is_the_octile_distance_to_the_nearest_target_beyond_the_map
 
 
 def test_parse_ids_takes_ranges_and_lists_and_refuses_nonsense():
-    import pytest
-
     from nodes.agent_host import parse_ids
 
     assert parse_ids("a1..a3") == ["a1", "a2", "a3"]
@@ -107,3 +110,53 @@ def test_loop_times_count_from_when_everyone_is_there_and_realtime_lag():
     assert t.ticks == 2 and t.per_tick_ms() == {"step": 2.0, "publish": 1.0, "wait": 10.0, "other": 1.0}
     assert (t.commands, t.stale_commands, t.max_lag) == (3, 1, 3)
     assert "_count_from" not in t.as_dict() and t.as_dict()["per_tick_ms"]["wait"] == 10.0
+
+
+# ---------------------------------------------------------------- conag run, many agents (slow)
+
+
+@pytest.mark.slow
+def test_hosted_agents_build_and_a_restarted_one_rejoins_as_a_process_of_its_own(tmp_path):
+    import subprocess
+    import sys
+
+    from tests.conftest import LONG_WALL, ROOT, conag, free_port
+
+    out, ep = tmp_path / "summary.json", f"tcp/127.0.0.1:{free_port()}"
+    scenario = tmp_path / "long_wall.toml"
+    scenario.write_text(LONG_WALL)
+    run = subprocess.Popen([sys.executable, "-m", "conag", "run", str(scenario), "--agents", "4", "--per-process", "2",
+                            "--headless", "--summary", str(out), "--listen", ep], cwd=ROOT, stdout=subprocess.PIPE,
+                           stderr=subprocess.STDOUT, text=True)
+    try:
+        for line in run.stdout:  # wait until the build is under way
+            if line.startswith("tick ") and int(line.split()[1]) > 0:
+                break
+        restarted = conag("restart", "a2", "--connect", ep)
+        assert restarted.returncode == 0 and "stopped a2 in its host" in restarted.stdout, restarted.stderr
+        rest, _ = run.communicate(timeout=300)
+        assert run.returncode == 0, rest
+    finally:
+        if run.poll() is None:
+            run.kill()
+            run.wait(10)
+    s = json.loads(out.read_text())
+    assert s["completed"] and s["bricks_total"] == 32
+    # a2 alone came back (as a process of its own); a1, its host mate, and the other host went on
+    assert {a["id"]: a["restarts"] for a in s["agents"]} == {"a1": 0, "a2": 1, "a3": 0, "a4": 0}
+
+
+@pytest.mark.slow
+def test_a_hundred_agents_build_a_generated_layout_to_completion(tmp_path):
+    from tests.conftest import conag, free_port
+
+    out = tmp_path / "summary.json"
+    layout = Path(__file__).resolve().parent / "layouts" / "hundred_agents.toml"
+    r = conag("run", layout, "--agents", 100, "--per-process", 20, "--headless", "--summary", out,
+              "--listen", f"tcp/127.0.0.1:{free_port()}", timeout=1200)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    s = json.loads(out.read_text())
+    assert s["completed"] and s["sites_filled"] == s["sites_total"] == 53 and s["bricks_total"] == 58
+    assert len(s["agents"]) == 100 and sum(a["drops"] for a in s["agents"]) >= 42
+    lines = [line for line in r.stdout.splitlines() if line.startswith("tick ")]
+    assert any("agents alive 100/100" in line and "ticks/s" in line for line in lines)
