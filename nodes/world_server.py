@@ -100,8 +100,12 @@ class WorldServer:
         self.wait_agents = wait_agents
         self.clock = clock
         self.on_status = on_status
-        # Frames are "latest wins" (DROP); a driver that must see every frame (conag.env) asks for BLOCK.
-        self._frame_congestion = zenoh.CongestionControl.BLOCK if block_frames else zenoh.CongestionControl.DROP
+        # Realtime frames are "latest wins" (DROP); a driver that must see every frame (conag.env)
+        # asks for BLOCK. Lockstep frames always BLOCK: the world waits for each one's answer, and
+        # zenoh drops a DROP message that finds the link's queue full for a moment (a burst of
+        # frames to a host of 20 agents, a busy machine): a lost frame cost a lockstep timeout (1 s).
+        block = block_frames or self.mode == "lockstep"
+        self._frame_congestion = zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
         self.cfg = world.cfg
         self._events: queue.SimpleQueue = queue.SimpleQueue()
         self._tokens: set[str] = set()
