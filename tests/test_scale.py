@@ -147,7 +147,8 @@ def test_hosted_agents_build_and_a_restarted_one_rejoins_as_a_process_of_its_own
 
 
 @pytest.mark.slow
-def test_a_hundred_agents_build_a_generated_layout_to_completion(tmp_path):
+@pytest.mark.timeout(1200)
+def test_a_hundred_agents_build_a_wall_to_completion(tmp_path):
     from tests.conftest import conag, free_port
 
     out = tmp_path / "summary.json"
@@ -156,7 +157,7 @@ def test_a_hundred_agents_build_a_generated_layout_to_completion(tmp_path):
               "--listen", f"tcp/127.0.0.1:{free_port()}", timeout=1200)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     s = json.loads(out.read_text())
-    assert s["completed"] and s["sites_filled"] == s["sites_total"] == 53 and s["bricks_total"] == 58
-    assert len(s["agents"]) == 100 and sum(a["drops"] for a in s["agents"]) >= 42
+    assert s["completed"] and s["sites_filled"] == s["sites_total"] == 40 and s["bricks_total"] == 42
+    assert len(s["agents"]) == 100 and sum(a["drops"] for a in s["agents"]) >= 40
     lines = [line for line in r.stdout.splitlines() if line.startswith("tick ")]
     assert any("agents alive 100/100" in line and "ticks/s" in line for line in lines)
