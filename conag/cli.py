@@ -391,7 +391,7 @@ def cmd_run(args) -> int:
                                         *(("--nearest-first",) if args.nearest_first else ())),
                       teacher=args.teacher, weights_dir=args.weights_dir, stall_ticks=args.stall_ticks,
                       record=args.record, view=args.view, maps_every=args.maps_every, profile=args.profile,
-                      per_process=args.per_process)
+                      per_process=args.per_process, agent_mode=args.agent_mode)
     with _stop_on_signals() as stop:
         try:
             summary = run(opts, stop)
@@ -580,6 +580,10 @@ def _add_run(sub) -> None:
     u.add_argument("--per-process", type=int, default=1, metavar="K",
                    help="host up to K agents in each agent process (conag agents): less memory and a quicker "
                         "start-up for large teams; a crash of a host takes its K agents (default 1)")
+    u.add_argument("--agent-mode", choices=("auto", "peer", "client"), default="auto",
+                   help="zenoh mode of the agent processes: peers reach each other directly (a full mesh), "
+                        "clients only the world, which routes for them; auto: peers up to 32 agent processes, "
+                        "clients beyond (default auto)")
     u.add_argument("--profile", metavar="PATH", help="the world writes where its loop's time went (conag world "
                                                      "--profile)")
     u.add_argument("--nearest-first", action="store_true",

@@ -57,6 +57,7 @@ class RunOptions:
     maps_every: int = 0               # the recorder and viewer ask for the agents' maps every N ticks
     profile: str | None = None        # the world writes its loop's times here (conag world --profile)
     per_process: int = 1              # agents per agent process; > 1: `conag agents` hosts
+    agent_mode: str = "auto"          # zenoh mode of agent processes: peer, client, auto (`agent_bus_mode`)
 
 
 class RunEnding(RuntimeError):
@@ -73,13 +74,19 @@ class Fleet:
     lock: threading.Lock = field(default_factory=threading.Lock)
     closed: bool = False  # stop_all has begun: a `conag restart` then starts nothing (it would outlive the run)
 
+    def _bus_args(self) -> list[str]:
+        o = self.opts
+        n = o.agents if o.agents is not None else o.scenario.agents
+        return ["--world-id", o.world_id, "--connect", o.endpoint,
+                "--mode", agent_bus_mode(o.agent_mode, -(-n // max(o.per_process, 1)))]
+
     def start_host(self, first: int, last: int) -> subprocess.Popen:
         """One `conag agents` process for agents a<first>..a<last>; `kill` stops one alone
         through its stdin."""
         o = self.opts
         cmd = [sys.executable, "-m", "conag", "agents", "--ids", f"a{first}..a{last}", "--stdin-control",
-               "--world-id", o.world_id, "--connect", o.endpoint,
-               "--seed", str(o.seed if o.seed is not None else o.scenario.seed), *o.extra_agent_args]
+               *self._bus_args(), "--seed", str(o.seed if o.seed is not None else o.scenario.seed),
+               *o.extra_agent_args]
         ids = [f"a{i}" for i in range(first, last + 1)]
         with self.lock:
             if self.closed:
@@ -92,9 +99,8 @@ class Fleet:
 
     def start(self, agent_id: str) -> subprocess.Popen:
         o = self.opts
-        cmd = [sys.executable, "-m", "conag", "agent", "--id", agent_id, "--world-id", o.world_id,
-               "--connect", o.endpoint, "--seed", str(o.seed if o.seed is not None else o.scenario.seed),
-               *o.extra_agent_args]
+        cmd = [sys.executable, "-m", "conag", "agent", "--id", agent_id, *self._bus_args(),
+               "--seed", str(o.seed if o.seed is not None else o.scenario.seed), *o.extra_agent_args]
         if o.weights_dir:
             weights = Path(o.weights_dir) / f"{agent_id}.json"
             cmd += ["--weights-out", str(weights)]
@@ -154,6 +160,20 @@ class Fleet:
             except subprocess.TimeoutExpired:
                 p.kill()
                 p.wait(5)
+
+
+MAX_PEER_AGENTS = 32  # agent processes that still connect as peers with agent_mode "auto"
+
+
+def agent_bus_mode(mode: str, processes: int) -> str:
+    """The zenoh mode of a run's agent processes. Peers reach each other directly (zenoh's
+    gossip makes a full mesh, n(n-1)/2 connections): quickest for a few, but 100 agent
+    processes opening 4,950 connections on two cores did not attach within 30 s. Clients
+    connect to the world alone, which routes for them. "auto": peers up to MAX_PEER_AGENTS
+    processes, clients beyond."""
+    if mode != "auto":
+        return mode
+    return "peer" if processes <= MAX_PEER_AGENTS else "client"
 
 
 class RunBus:

@@ -161,3 +161,11 @@ def test_a_hundred_agents_build_a_wall_to_completion(tmp_path):
     assert len(s["agents"]) == 100 and sum(a["drops"] for a in s["agents"]) >= 40
     lines = [line for line in r.stdout.splitlines() if line.startswith("tick ")]
     assert any("agents alive 100/100" in line and "ticks/s" in line for line in lines)
+
+
+def test_agent_processes_are_peers_for_a_few_and_clients_of_the_world_for_many():
+    from conag.run import MAX_PEER_AGENTS, agent_bus_mode
+
+    assert agent_bus_mode("auto", 1) == agent_bus_mode("auto", MAX_PEER_AGENTS) == "peer"
+    assert agent_bus_mode("auto", MAX_PEER_AGENTS + 1) == agent_bus_mode("auto", 100) == "client"
+    assert agent_bus_mode("peer", 100) == "peer" and agent_bus_mode("client", 1) == "client"
