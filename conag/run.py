@@ -77,8 +77,11 @@ class Fleet:
     def _bus_args(self) -> list[str]:
         o = self.opts
         n = o.agents if o.agents is not None else o.scenario.agents
-        return ["--world-id", o.world_id, "--connect", o.endpoint,
-                "--mode", agent_bus_mode(o.agent_mode, -(-n // max(o.per_process, 1)))]
+        processes = -(-n // max(o.per_process, 1))
+        # The world is on its way: wait for it longer than a lone agent would. A hundred
+        # interpreters starting on two cores took over 30 s before the first one attached.
+        return ["--world-id", o.world_id, "--connect", o.endpoint, "--mode", agent_bus_mode(o.agent_mode, processes),
+                "--attach-timeout", str(max(30, 2 * processes))]
 
     def start_host(self, first: int, last: int) -> subprocess.Popen:
         """One `conag agents` process for agents a<first>..a<last>; `kill` stops one alone
