@@ -5,7 +5,7 @@
     python3 -m bench.bench_scale --per-process 1,20       # processes of 1 agent, and of 20 (conag agents)
     python3 -m bench.bench_scale --json scale.json
 
-For each agent count, on one scenario and seed (`scenarios/scale.toml` by default: a
+For each agent count, on one scenario and seed (`scenarios/large/scale.toml` by default: a
 generated 60 x 60 world, 136 open sites, room for 100 agents round its starts), one after
 the other on the same machine:
 
@@ -44,7 +44,7 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-SCENARIO = "scenarios/scale.toml"
+SCENARIO = "scenarios/large/scale.toml"
 
 
 # ------------------------------------------------------------------ memory
@@ -289,7 +289,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seconds", type=float, default=10.0, help="seconds measured per realtime row (default 10)")
     p.add_argument("--port", type=int, default=17900)
     p.add_argument("--json", metavar="PATH", help="write every figure as JSON")
+    p.add_argument("--quick", action="store_true",
+                   help="a smoke run (1 and 2 agents, 300 ticks, 1 s of realtime), not a measurement")
     args = p.parse_args(argv)
+    if args.quick:
+        args.agents, args.per_process, args.ticks, args.realtime, args.seconds = [1, 2], [1, 2], 300, [2], 1.0
     rows = []
     port = args.port
     for n in args.agents:

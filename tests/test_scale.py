@@ -169,3 +169,24 @@ def test_agent_processes_are_peers_for_a_few_and_clients_of_the_world_for_many()
     assert agent_bus_mode("auto", 1) == agent_bus_mode("auto", MAX_PEER_AGENTS) == "peer"
     assert agent_bus_mode("auto", MAX_PEER_AGENTS + 1) == agent_bus_mode("auto", 100) == "client"
     assert agent_bus_mode("peer", 100) == "peer" and agent_bus_mode("client", 1) == "client"
+
+
+@pytest.mark.slow
+def test_the_scale_benchmark_quick_run_prints_both_tables(tmp_path):
+    import subprocess
+    import sys
+
+    from tests.conftest import ROOT, free_port
+
+    out = tmp_path / "scale.json"
+    r = subprocess.run([sys.executable, "bench/bench_scale.py", "--quick", "--port", str(free_port()),
+                        "--json", str(out)], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-3000:]
+    rows = json.loads(out.read_text())
+    # 1 agent alone; 2 agents one process each and in one host of 2
+    assert [(row["agents"], row["per_process"]) for row in rows["lockstep"]] == [(1, 1), (2, 1), (2, 2)]
+    for row in rows["lockstep"]:
+        assert row["sim"]["rate"] > 0 and row["proc"]["rate"] > 0 and row["proc"]["first_tick_s"] > 0
+        assert row["proc"]["agent_pss_mb"] > 0 and row["proc"]["total_pss_mb"] > row["proc"]["agent_pss_mb"]
+    assert [(r_["agents"], r_["target"]) for r_ in rows["realtime"]] == [(2, 20.0), (2, 20.0)]
+    assert "| 2 | 2 | 300 |" in r.stdout and "| kept |" in r.stdout
