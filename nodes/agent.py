@@ -5,6 +5,13 @@ body back and rebuilds its maps from its sensors), then for every sensor frame: 
 decision step, the command to the world, the Decision for the teacher. Frames are
 "latest wins"; a slow agent acts on the newest one.
 
+When its world goes (the world's liveliness token disappears: killed, or stopped), the
+agent says so in its log ("waiting for world w0 ..." once it has been gone `WAIT_QUIET`
+seconds, again every `WAIT_REPORT` seconds),
+waits for a world with that id to come back (`conag run` restarts it from its last
+checkpoint) and attaches again like a restarted agent: a new Welcome, maps rebuilt from
+the sensors (the body is where the checkpoint left it, not where the old maps think).
+
 With `learning` (`conag agent --learn`) the construction network is a `Student`
 (random weights from the seed, or loaded from a file) instead of the engineered one:
 before each step the agent applies every reinforcement that has arrived to the decision
@@ -20,6 +27,7 @@ on exit.
 from __future__ import annotations
 
 import logging
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,11 +38,13 @@ from agent_runtime.learning import Student
 from bus import undeclare
 from nodes.agent_feeds import AgentFeeds
 from nodes.student_link import StudentLink
-from nodes.world_link import WorldLink
+from nodes.world_link import AttachError, WorldLink
 from protocol import keys
 from protocol.codec import encode
 
 log = logging.getLogger("conag.agent")
+WAIT_QUIET = 1.0    # seconds a world may be gone before the agent warns that it waits for it
+WAIT_REPORT = 30.0  # seconds between "waiting for world" lines
 
 
 @dataclass(frozen=True)
@@ -115,6 +125,7 @@ class AgentProcess:
         self.feeds = AgentFeeds(session, w, a)  # before attaching: no blueprint change is missed
         self.brain: Brain | None = None
         self.tick = 0
+        self.reattaches = 0  # worlds lost and found again
         self.teacher = StudentLink(session, w, a) if self.learning else None
         self.decisions = None if self.learning else session.declare_publisher(keys.decision(w, a), express=True)
         report.student, report.link, report.world_link = self.student, self.teacher, self.link
@@ -124,8 +135,12 @@ class AgentProcess:
         welcome = self.link.attach(timeout=self.opts.attach_timeout)
         log.info("agent %s attached to body %d at (%.2f, %.2f)%s", self.opts.agent_id, welcome.body, welcome.x,
                  welcome.y, f", restart {welcome.restarts}" if welcome.restarts else "")
+        self._new_brain(welcome)
+
+    def _new_brain(self, welcome) -> None:
         # Each incarnation gets its own stream: a restart must not replay the same choices.
-        self.brain = Brain(welcome, self.opts.cfg, np.random.default_rng([self.opts.seed, welcome.restarts]),
+        self.brain = Brain(welcome, self.opts.cfg,
+                           np.random.default_rng([self.opts.seed, welcome.restarts, self.reattaches]),
                            network=self.student)
         self.tick = welcome.tick - 1
 
@@ -135,6 +150,33 @@ class AgentProcess:
             frame = self.link.next_frame(self.tick, timeout=None if stop is None else 0.5)
             if frame is not None:
                 self.step(frame)
+            elif self.link.world_lost:
+                self.reattach(stop)
+
+    def reattach(self, stop) -> None:
+        """The world is gone: say so (unless it was only stopping along with this agent),
+        wait for it to come back, attach again."""
+        a, w = self.opts.agent_id, self.opts.world_id
+        lost_at, said = time.monotonic(), 0.0
+        log.info("agent %s: world %s is gone (last tick %d); waiting for it", a, w, self.tick)
+        while stop is None or not stop.is_set():
+            if self.link.wait_for_world(0.25):
+                try:
+                    welcome = self.link.attach(timeout=self.opts.attach_timeout)
+                except AttachError as exc:
+                    log.warning("agent %s: %s; still waiting for world %s ...", a, exc, w)
+                    continue
+                self.reattaches += 1
+                log.warning("agent %s re-attached to world %s at tick %d (body %d at (%.2f, %.2f))", a, w,
+                            welcome.tick, welcome.body, welcome.x, welcome.y)
+                self._new_brain(welcome)
+                return
+            waited = time.monotonic() - lost_at
+            # Not at once: when a run ends, its world stops a moment before its agents do.
+            if waited >= WAIT_QUIET and (not said or waited - said >= WAIT_REPORT):
+                log.warning("agent %s: world %s is gone (last tick %d, %.0f s ago); waiting for world %s to "
+                            "come back ...", a, w, self.tick, waited, w)
+                said = waited
 
     def step(self, frame) -> None:
         """Learn from the reinforcements that came, decide, act, tell the teacher, report."""
