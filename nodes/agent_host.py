@@ -89,6 +89,11 @@ class AgentHost:
                 if frame is not None:
                     agent.step(frame)
                     stepped = True
+                elif agent.link.world_lost:
+                    # The world died (`conag run` restarts it from its checkpoint): wait for it
+                    # and attach again, as a lone agent does; the others follow at once.
+                    agent.reattach(stop)
+                    stepped = True
             if stepped:
                 pause = 0.0
             else:
