@@ -7,6 +7,7 @@
     conag router              run a zenoh router (for several hosts)
     conag keys OUTDIR         write a secure deployment: router with access control, a credential per process
     conag agent --id ID       one agent process (--learn: a student learning from the teacher)
+    conag agents --ids a1..a20  several agents in one process (each its own token and state)
     conag teacher             the teacher process: reinforces learning students (paper §5.1)
     conag run SCENARIO        a world and its agents as processes, until the structure is done
     conag chaos SCENARIO      builds while agent processes are SIGKILLed at random (some restarted)
@@ -109,6 +110,9 @@ def cmd_world(args) -> int:
     print("final: " + _status_line(final), flush=True)
     if args.summary:
         write_summary(final, args.summary, server.agent_states)
+    if args.profile:
+        with open(args.profile, "w", encoding="utf-8") as f:
+            json.dump({"agents": len(final.agent_ids), **server.times.as_dict()}, f, indent=2)
     return 0
 
 
@@ -351,6 +355,47 @@ def cmd_agent(args) -> int:
     return 0
 
 
+def cmd_agents(args) -> int:
+    from agent_runtime.config import AgentConfig
+    from nodes.agent import AgentOptions
+    from nodes.agent_host import AgentHost, host_options, parse_ids, read_stop_requests
+    from nodes.world_link import AttachError
+
+    ids = parse_ids(args.ids)
+    base = AgentOptions(args.world_id, ids[0], AgentConfig(map_size=args.map_size,
+                                                           goal_sequencing=not args.nearest_first),
+                        args.seed, attach_timeout=args.attach_timeout)
+
+    def raise_stop(_signum, _frame):
+        for s in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(s, _quiet)
+        raise _Stopped()
+
+    previous = {s: signal.signal(s, raise_stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        session = open_session(_bus(args))
+        try:
+            host = AgentHost(session, host_options(base, ids))
+            try:
+                if args.stdin_control:
+                    read_stop_requests(host)
+                host.attach()
+                host.serve()
+            except AttachError as exc:
+                print(f"error: {exc}", file=sys.stderr)
+                return 1
+            finally:
+                host.close()
+        finally:
+            session.close()
+    except _Stopped:
+        pass
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
+    return 0
+
+
 def cmd_teacher(args) -> int:
     from nodes.teacher import run_teacher
 
@@ -386,6 +431,9 @@ def cmd_run(args) -> int:
     AgentConfig(map_size=args.map_size)  # a bad size is a usage error here, not in every agent
     if not args.learn and (args.eta is not None or args.weights_dir):
         raise ValueError("--eta and --weights-dir need --learn")
+    if args.per_process < 1 or (args.per_process > 1 and (args.learn or args.secure is not None)):
+        raise ValueError("--per-process must be >= 1, and 1 for learning agents (each saves its own weights) "
+                         "and on a secure bus (each agent has its own credential)")
     learn_args = ("--learn", "--eta", str(0.1 if args.eta is None else args.eta)) if args.learn else ()
     scenario = load_scenario(args.scenario)
     warn_if_unbuildable(args.scenario, scenario, args.agents)  # still runs: a repair experiment may want it
@@ -397,7 +445,8 @@ def cmd_run(args) -> int:
                                         *(("--nearest-first",) if args.nearest_first else ())),
                       teacher=args.teacher, weights_dir=args.weights_dir, stall_ticks=args.stall_ticks,
                       record=args.record, view=args.view, maps_every=args.maps_every, secure=args.secure,
-                      checkpoint_every=args.checkpoint_every or CHECKPOINT_EVERY)
+                      checkpoint_every=args.checkpoint_every or CHECKPOINT_EVERY, profile=args.profile,
+                      per_process=args.per_process, agent_mode=args.agent_mode)
     with _stop_on_signals() as stop:
         try:
             summary = run(opts, stop)
@@ -462,9 +511,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="conag", description="ConAg: agents that build structures from a blueprint.")
     p.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for add in (_add_world, _add_status, _add_perturb, _add_agent, _add_teacher, _add_run, _add_chaos, _add_control,
-                _add_render, add_layout_commands, add_recording_commands, add_view_commands, _add_router,
-                add_secure_commands):
+    for add in (_add_world, _add_status, _add_perturb, _add_agent, _add_agents, _add_teacher, _add_run, _add_chaos,
+                _add_control, _add_render, add_layout_commands, add_recording_commands, add_view_commands,
+                _add_router, add_secure_commands):
         add(sub)  # add_layout_commands: generate, check; add_recording_commands: record, replay, echo; keys
     for command in sub.choices.values():  # -v also after the subcommand: `conag world X -v`
         command.add_argument("-v", "--verbose", dest="verbose_after", action="count", default=0,
@@ -485,6 +534,9 @@ def _add_world(sub) -> None:
                    help="lockstep: do not tick before N agents have attached (default 1)")
     w.add_argument("--summary", metavar="PATH", help="write the final status as JSON")
     w.add_argument("--quiet", action="store_true", help="do not print periodic status lines")
+    w.add_argument("--profile", metavar="PATH",
+                   help="on exit, write where the loop's time went (JSON: seconds stepping, publishing frames, "
+                        "waiting for commands, per tick from the second; when the first tick was out)")
     c = w.add_argument_group("checkpoints (the world survives its own death)")
     c.add_argument("--checkpoint", metavar="FILE",
                    help="write the whole world to FILE every --checkpoint-every ticks and when stopped (SIGTERM); "
@@ -544,6 +596,24 @@ def _add_agent(sub) -> None:
     a.set_defaults(func=cmd_agent)
 
 
+def _add_agents(sub) -> None:
+    a = sub.add_parser("agents", help="run several agents in one process (each its own token, body and state)",
+                       description="Several agents in one process: the interpreter and the compiled kernels are "
+                                   "loaded once (less memory, quicker start-up); the agents take turns on one "
+                                   "core, and a crash of the process takes them all. A line `stop ID` on stdin "
+                                   "(with --stdin-control) stops one agent alone.")
+    a.add_argument("--ids", required=True, metavar="IDS", help="agent ids: ranges and commas, e.g. a1..a20 or a1,a3")
+    a.add_argument("--seed", type=int, default=0, help="seed of every agent's own randomness (as conag agent)")
+    a.add_argument("--attach-timeout", type=float, default=30.0, help="seconds to wait for the world")
+    a.add_argument("--map-size", type=int, default=AGENT_MAP_SIZE, metavar="N",
+                   help=f"cells per side of the agents' maps, odd (default {AGENT_MAP_SIZE})")
+    a.add_argument("--nearest-first", action="store_true", help="no goal sequencing (as conag agent)")
+    a.add_argument("--stdin-control", action="store_true",
+                   help="read `stop ID` lines on stdin: stop that agent alone (conag run uses it for conag kill)")
+    _bus_args(a)
+    a.set_defaults(func=cmd_agents)
+
+
 def _add_teacher(sub) -> None:
     t = sub.add_parser("teacher", help="run the teacher: reinforce learning students (paper §5.1)")
     t.add_argument("--id", default="teacher", help="teacher id for its liveliness token (default teacher)")
@@ -582,6 +652,15 @@ def _add_run(sub) -> None:
                         "the run restarts it from the last checkpoint and the agents attach again")
     u.add_argument("--map-size", type=int, default=AGENT_MAP_SIZE, metavar="N",
                    help=f"cells per side of every agent's maps, odd (default {AGENT_MAP_SIZE})")
+    u.add_argument("--per-process", type=int, default=1, metavar="K",
+                   help="host up to K agents in each agent process (conag agents): less memory and a quicker "
+                        "start-up for large teams; a crash of a host takes its K agents (default 1)")
+    u.add_argument("--agent-mode", choices=("auto", "peer", "client"), default="auto",
+                   help="zenoh mode of the agent processes: peers reach each other directly (a full mesh), "
+                        "clients only the world, which routes for them; auto: peers up to 32 agent processes, "
+                        "clients beyond (default auto)")
+    u.add_argument("--profile", metavar="PATH", help="the world writes where its loop's time went (conag world "
+                                                     "--profile)")
     u.add_argument("--nearest-first", action="store_true",
                    help="agents without goal sequencing (paper §4), for comparison with ConAg-TS (§6)")
     g = u.add_argument_group("learning (paper §5.1)")

@@ -34,6 +34,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -71,6 +72,9 @@ class RunOptions:
     record: str | None = None         # record the run to this MCAP file (`conag record`)
     view: int | None = None           # serve the browser viewer on this port (`conag view`)
     maps_every: int = 0               # the recorder and viewer ask for the agents' maps every N ticks
+    profile: str | None = None        # the world writes its loop's times here (conag world --profile)
+    per_process: int = 1              # agents per agent process; > 1: `conag agents` hosts
+    agent_mode: str = "auto"          # zenoh mode of agent processes: peer, client, auto (`agent_bus_mode`)
     secure: str | None = None         # a secure bus (conag/secure.py): a deployment dir; "" a fresh one
     checkpoint_every: int = DEFAULT_EVERY  # ticks between the world's checkpoints (it is restarted from the last)
 
@@ -85,14 +89,43 @@ class Fleet:
 
     opts: RunOptions
     procs: dict[str, subprocess.Popen] = field(default_factory=dict)
+    hosted: set[str] = field(default_factory=set)  # ids in procs served by a `conag agents` host, not stopped
     lock: threading.Lock = field(default_factory=threading.Lock)
     closed: bool = False  # stop_all has begun: a `conag restart` then starts nothing (it would outlive the run)
 
+    def _bus_args(self, agent_id: str) -> list[str]:
+        o = self.opts
+        n = o.agents if o.agents is not None else o.scenario.agents
+        processes = -(-n // max(o.per_process, 1))
+        # The world is on its way: wait for it longer than a lone agent would. A hundred
+        # interpreters starting on two cores took over 30 s before the first one attached.
+        args = ["--world-id", o.world_id, *bus_flags(o, agent_user(agent_id)),
+                "--attach-timeout", str(max(30, 2 * processes))]
+        if o.secure is None:  # a secure run's mode is its credential file's (a client of the router)
+            args += ["--mode", agent_bus_mode(o.agent_mode, processes)]
+        return args
+
+    def start_host(self, first: int, last: int) -> subprocess.Popen:
+        """One `conag agents` process for agents a<first>..a<last>; `kill` stops one alone
+        through its stdin."""
+        o = self.opts
+        cmd = [sys.executable, "-m", "conag", "agents", "--ids", f"a{first}..a{last}", "--stdin-control",
+               *self._bus_args(f"a{first}"), "--seed", str(o.seed if o.seed is not None else o.scenario.seed),
+               *o.extra_agent_args]
+        ids = [f"a{i}" for i in range(first, last + 1)]
+        with self.lock:
+            if self.closed:
+                raise RunEnding(f"the run is ending: {ids[0]}..{ids[-1]} not started")
+            proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, text=True)
+            for agent_id in ids:
+                self.procs[agent_id] = proc
+            self.hosted.update(ids)
+        return proc
+
     def start(self, agent_id: str) -> subprocess.Popen:
         o = self.opts
-        cmd = [sys.executable, "-m", "conag", "agent", "--id", agent_id, "--world-id", o.world_id,
-               *bus_flags(o, agent_user(agent_id)), "--seed", str(o.seed if o.seed is not None else o.scenario.seed),
-               *o.extra_agent_args]
+        cmd = [sys.executable, "-m", "conag", "agent", "--id", agent_id, *self._bus_args(agent_id),
+               "--seed", str(o.seed if o.seed is not None else o.scenario.seed), *o.extra_agent_args]
         if o.weights_dir:
             weights = Path(o.weights_dir) / f"{agent_id}.json"
             cmd += ["--weights-out", str(weights)]
@@ -105,17 +138,33 @@ class Fleet:
                 raise RunEnding(f"the run is ending: {agent_id} not started")
             proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL)
             self.procs[agent_id] = proc
+            self.hosted.discard(agent_id)
         return proc
 
     def kill(self, agent_id: str) -> str:
         with self.lock:
             proc = self.procs.get(agent_id)
+            hosted = agent_id in self.hosted
+            self.hosted.discard(agent_id)
         if proc is None:
             raise KeyError(agent_id)
+        if hosted:
+            return self._stop_hosted(agent_id, proc)
         if proc.poll() is None:
             proc.kill()  # SIGKILL: the point is to show the world survives a crash
             proc.wait(10)
         return f"killed {agent_id} (pid {proc.pid})"
+
+    @staticmethod
+    def _stop_hosted(agent_id: str, proc: subprocess.Popen) -> str:
+        """A hosted agent is stopped alone (its host reads `stop ID`), not its whole host."""
+        if proc.poll() is None and proc.stdin is not None:
+            try:
+                proc.stdin.write(f"stop {agent_id}\n")
+                proc.stdin.flush()
+            except (BrokenPipeError, OSError):
+                pass  # the host has just exited: the agent is gone anyway
+        return f"stopped {agent_id} in its host (pid {proc.pid})"
 
     def restart(self, agent_id: str) -> str:
         killed = self.kill(agent_id) + ", " if agent_id in self.procs else ""
@@ -125,7 +174,7 @@ class Fleet:
     def stop_all(self, grace: float = 5.0) -> None:
         with self.lock:
             self.closed = True
-            procs = list(self.procs.values())
+            procs = list({id(p): p for p in self.procs.values()}.values())  # a host once
         for p in procs:
             if p.poll() is None:
                 p.send_signal(signal.SIGTERM)
@@ -138,6 +187,20 @@ class Fleet:
                 p.wait(5)
 
 
+MAX_PEER_AGENTS = 32  # agent processes that still connect as peers with agent_mode "auto"
+
+
+def agent_bus_mode(mode: str, processes: int) -> str:
+    """The zenoh mode of a run's agent processes. Peers reach each other directly (zenoh's
+    gossip makes a full mesh, n(n-1)/2 connections): quickest for a few, but 100 agent
+    processes opening 4,950 connections on two cores did not attach within 30 s. Clients
+    connect to the world alone, which routes for them. "auto": peers up to MAX_PEER_AGENTS
+    processes, clients beyond."""
+    if mode != "auto":
+        return mode
+    return "peer" if processes <= MAX_PEER_AGENTS else "client"
+
+
 class RunBus:
     """The supervisor's session: the world's statuses (to the stall watch and the progress
     line), the agents' AgentStates (to the stall watch) and the RunControl queryable of
@@ -148,6 +211,7 @@ class RunBus:
         self.opts, self.watch, self.tty = opts, watch, tty
         self.world_restarts = 0
         self._started = time.monotonic()
+        self.rate = TickRate()
         self.session = open_session(run_bus_options(opts))
         self._declared = Declarations()
         w, add = opts.world_id, self._declared.add
@@ -162,8 +226,9 @@ class RunBus:
         except ProtocolError:
             return
         self.watch.observe(st)
+        rate = self.rate.observe(st.tick)
         if not self.opts.quiet and not self.watch.stalled:
-            line = _progress(st, self._started, self.world_restarts)
+            line = _progress(st, self._started, rate, self.world_restarts)
             print(("\r" + line) if self.tty else line, end="" if self.tty else "\n", flush=True)
 
     def on_state(self, sample) -> None:
@@ -190,9 +255,31 @@ class RunBus:
         self.close()
 
 
-def _progress(st: WorldStatus, started: float, world_restarts: int = 0) -> str:
+class TickRate:
+    """Ticks per second over the statuses of the last `window` seconds (the world publishes
+    one every `status_period`, 0.5 s): steady enough to read, quick to follow a change."""
+
+    def __init__(self, window: float = 2.0, clock: Callable[[], float] = time.monotonic):
+        self.window, self.clock = window, clock
+        self._seen: deque[tuple[float, int]] = deque()
+
+    def observe(self, tick: int) -> float | None:
+        """Take a status's tick; the rate since the oldest status in the window (None: too few yet)."""
+        now = self.clock()
+        if self._seen and tick < self._seen[-1][1]:
+            self._seen.clear()  # a world started again
+        self._seen.append((now, tick))
+        while len(self._seen) > 2 and now - self._seen[1][0] >= self.window:
+            self._seen.popleft()
+        (t0, k0), (t1, k1) = self._seen[0], self._seen[-1]
+        return (k1 - k0) / (t1 - t0) if t1 > t0 else None
+
+
+def _progress(st: WorldStatus, started: float, rate: float | None = None, world_restarts: int = 0) -> str:
     return (f"tick {st.tick:>7}  sites {st.sites_filled}/{st.sites_total}  "
-            f"agents alive {st.agents_alive}/{len(st.agent_ids)}  {time.monotonic() - started:6.1f} s"
+            f"agents alive {st.agents_alive}/{len(st.agent_ids)}  "
+            + (f"{rate:7.1f} ticks/s  " if rate is not None else " " * 16)
+            + f"{time.monotonic() - started:6.1f} s"
             + (f"  world restarts {world_restarts}" if world_restarts else "")
             + ("  COMPLETE" if st.completed else ""))
 
@@ -274,8 +361,12 @@ def _run(opts: RunOptions, stop: threading.Event, tmp: Path) -> dict:
                     raise RuntimeError(f"the recorder exited ({recorder.returncode}) before the run started")
             if opts.view is not None:
                 viewer = _start_viewer(opts)
-            for i in range(n_agents):
-                fleet.start(f"a{i + 1}")
+            k = max(opts.per_process, 1)
+            for first in range(1, n_agents + 1, k):
+                if k == 1:
+                    fleet.start(f"a{first}")
+                else:
+                    fleet.start_host(first, min(first + k - 1, n_agents))
             while True:
                 _wait_until(lambda: world.proc.poll() is not None, stop.is_set, lambda: watch.stalled)
                 if stop.is_set() or watch.stalled or not world.died():
@@ -350,6 +441,8 @@ def _start_world(opts: RunOptions, n_agents: int, final_path: Path, checkpoint: 
         cmd += ["--resume", str(resume)]
     elif opts.seed is not None:
         cmd += ["--seed", str(opts.seed)]
+    if opts.profile:
+        cmd += ["--profile", opts.profile]
     return subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
 
 

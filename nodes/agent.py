@@ -103,7 +103,7 @@ def run_agent(session, opts: AgentOptions, stop=None, report: AgentReport | None
     returned.
     """
     report = report if report is not None else AgentReport()
-    agent = _AgentProcess(session, opts, report)
+    agent = AgentProcess(session, opts, report)
     try:
         agent.attach()
         agent.serve(stop)
@@ -112,8 +112,9 @@ def run_agent(session, opts: AgentOptions, stop=None, report: AgentReport | None
     return report
 
 
-class _AgentProcess:
-    """One agent process's links, brain and last tick, between `attach` and `close`."""
+class AgentProcess:
+    """One agent's links, brain and last tick, between `attach` and `close` (a process of
+    its own, or one of several in a `conag agents` host: `nodes.agent_host`)."""
 
     def __init__(self, session, opts: AgentOptions, report: AgentReport):
         self.opts, self.report, self.learning = opts, report, opts.learning
@@ -130,6 +131,7 @@ class _AgentProcess:
         report.student, report.link, report.world_link = self.student, self.teacher, self.link
 
     def attach(self) -> None:
+        """Attach to the world and make the brain from the Welcome."""
         welcome = self.link.attach(timeout=self.opts.attach_timeout)
         log.info("agent %s attached to body %d at (%.2f, %.2f)%s", self.opts.agent_id, welcome.body, welcome.x,
                  welcome.y, f", restart {welcome.restarts}" if welcome.restarts else "")
@@ -143,6 +145,7 @@ class _AgentProcess:
         self.tick = welcome.tick - 1
 
     def serve(self, stop) -> None:
+        """Step on every new frame until `stop` is set."""
         while stop is None or not stop.is_set():
             frame = self.link.next_frame(self.tick, timeout=None if stop is None else 0.5)
             if frame is not None:

@@ -33,6 +33,8 @@ tick that is a multiple of `view_every` and after each perturbation, only while 
 (zenoh's matching status: a world nobody watches builds none); the `view` queryable
 answers a fresh one, built by the loop thread like everything that reads the world.
 
+The loop keeps where its time goes (`self.times`, `world_server.loop_times.LoopTimes`:
+stepping, publishing frames, waiting for commands; `conag world --profile PATH` writes it).
 With a `CheckpointPlan` the server checkpoints the world (`world_server.checkpoint`) after
 every tick that is a multiple of its interval, and once more when it stops (SIGTERM): the
 world is written atomically and its physics rebuilt from what was written, so a world
@@ -77,6 +79,7 @@ from protocol.messages import (
 )
 from world_server.checkpoint import CheckpointError, CheckpointPlan, checkpoint_world, write_checkpoint
 from world_server.lockstep import LockstepWaits
+from world_server.loop_times import LoopTimes
 from world_server.world import World
 
 log = logging.getLogger("conag.world")
@@ -109,8 +112,12 @@ class WorldServer:
         self.wait_agents = wait_agents
         self.clock = clock
         self.on_status = on_status
-        # Frames are "latest wins" (DROP); a driver that must see every frame (conag.env) asks for BLOCK.
-        self._frame_congestion = zenoh.CongestionControl.BLOCK if block_frames else zenoh.CongestionControl.DROP
+        # Realtime frames are "latest wins" (DROP); a driver that must see every frame (conag.env)
+        # asks for BLOCK. Lockstep frames always BLOCK: the world waits for each one's answer, and
+        # zenoh drops a DROP message that finds the link's queue full for a moment (a burst of
+        # frames to a host of 20 agents, a busy machine): a lost frame cost a lockstep timeout (1 s).
+        block = block_frames or self.mode == "lockstep"
+        self._frame_congestion = zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
         self.cfg = world.cfg
         self._events: queue.SimpleQueue = queue.SimpleQueue()
         self._tokens: set[str] = set()
@@ -125,6 +132,7 @@ class WorldServer:
         self.view_every = view_every  # ticks between WorldView publications (0: only on query)
         self._view_failed = False
         self.lockstep = LockstepWaits(self.cfg.lockstep_miss_limit)
+        self.times = LoopTimes()  # where the loop's time goes (conag world --profile)
         self.checkpoint = checkpoint
         self.checkpoints_written = 0
         self._checkpointed = -1  # the tick of the last checkpoint written
@@ -189,11 +197,20 @@ class WorldServer:
             self._declare()
             self._publish_status()
             last_tick = self.clock()
+            timer = time.perf_counter
+            # Realtime ticks before anyone is there: count from two seconds after all came.
+            warmup = int(2 * self.cfg.tick_rate) if self.mode == "realtime" else 0
+            t0 = timer()
             while self._wait_for_tick(last_tick, stop):
+                t1 = timer()
                 self.world.step()
-                last_tick = self.clock()
+                last_tick = self._tick_time(last_tick)
                 self._answered.clear()
+                t2 = timer()
                 self._publish_frames()
+                t3 = timer()
+                self.times.tick_done(self.world.tick, len(self.world.agents) >= self.wait_agents, warmup,
+                                     time.monotonic(), wait=t1 - t0, step=t2 - t1, publish=t3 - t2)
                 if self.checkpoint is not None and self.checkpoint.due(self.world.tick):
                     self._checkpoint()
                 if (self.max_ticks is not None and self.world.tick >= self.max_ticks) or (
@@ -202,11 +219,23 @@ class WorldServer:
                 self._publish_status_if_due()
                 if self.view_every and self.world.tick % self.view_every == 0:
                     self._publish_view()
+                t0 = timer()
+                self.times.other_done(t0 - t3)
             self._publish_view()
             if self.checkpoint is not None and self.checkpoint.path and self._checkpointed != self.world.tick:
                 self._checkpoint()  # stopped (SIGTERM), complete or out of ticks: the state as it ends
             return self._publish_status()
 
+    def _tick_time(self, last_tick: float) -> float:
+        """When this tick counts as taken, for the next one's deadline. Lockstep: now (the
+        timeout runs from here). Realtime: when it was due, so stepping and publishing do not
+        stretch the period (they had made 50 Hz come out at about 46); after a stall of more
+        than a period, now (no burst of ticks to catch up)."""
+        now = self.clock()
+        if self.mode != "realtime":
+            return now
+        due = last_tick + 1.0 / self.cfg.tick_rate
+        return due if now - due < 1.0 / self.cfg.tick_rate else now
     def _checkpoint(self) -> None:
         """Checkpoint the world now (its space rebuilt from what is written; see the module)."""
         started = time.monotonic()
@@ -312,6 +341,7 @@ class WorldServer:
                           f"{self.world.tick} (answer the newest frame's tick)", cmd.agent_id)
             else:
                 self.world.set_command(cmd.agent_id, cmd.speed, cmd.turn, cmd.action)
+                self.times.command(self.world.tick - cmd.tick)
                 if cmd.tick == self.world.tick:
                     self._answered.add(cmd.agent_id)
         elif kind == "live":

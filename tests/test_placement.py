@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from world_server.placement import body_cell, brick_drop_cell
+from world_server.placement import body_cell, brick_drop_cell, extra_start_cells
 
 
 def grid(text: str) -> tuple[np.ndarray, np.ndarray]:
@@ -79,3 +79,26 @@ def test_a_body_comes_back_at_the_nearest_free_cell():
 """)
     assert body_cell(free, (0.2, 0.2)) == (1, 1)
     assert body_cell(np.zeros((2, 2), bool), (0.0, 0.0)) is None
+
+
+def test_extra_starts_grow_from_the_starts_by_walking_distance():
+    cells = np.array([list(line) for line in """
+A....
+####.
+.....
+....A""".strip().splitlines()])
+    empty, passable = cells == ".", cells != "#"
+    order = [tuple(int(v) for v in c) for c in extra_start_cells(empty, passable, np.argwhere(cells == "A")[:, ::-1])]
+    assert sorted(order) == sorted(tuple(int(v) for v in c) for c in np.argwhere(empty)[:, ::-1])
+    # one step from either start first (reading order), then two steps; (0, 2) is one row
+    # below the first start but seven steps round the wall, so it comes last
+    assert order[:4] == [(1, 0), (4, 2), (3, 3), (2, 0)]
+    assert order[-1] == (0, 2)
+
+
+def test_extra_starts_without_a_start_are_in_reading_order_and_walled_off_cells_come_last():
+    cells = np.array([list(line) for line in ["..#.", "..#A"]])
+    order = extra_start_cells(cells == ".", cells != "#", np.zeros((0, 2), np.int64))
+    assert [tuple(c) for c in order.tolist()] == [(0, 0), (1, 0), (3, 0), (0, 1), (1, 1)]
+    order = extra_start_cells(cells == ".", cells != "#", np.array([[3, 1]]))
+    assert [tuple(c) for c in order.tolist()] == [(3, 0), (0, 0), (1, 0), (0, 1), (1, 1)]

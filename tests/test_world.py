@@ -607,18 +607,31 @@ def test_new_agents_get_free_starts_and_never_overlap():
     b = w.attach("b")
     assert (a.x, a.y, a.body) == (0.5, 2.5, 0)
     assert (b.x, b.y, b.body) == (2.5, 0.5, 1)
-    c = w.attach("c")  # no A left: the first empty cell in reading order
+    c = w.attach("c")  # no A left: an empty cell one step from a start (the first in reading order)
     assert (c.x, c.y) == (1.5, 2.5)
     # a leaves its start for an empty cell; a newcomer gets the freed A, not a's cell
     drive_to(w, "a", (0.5, 1.5))
     d = w.attach("d")
     assert (d.x, d.y) == (0.5, 2.5)
-    e = w.attach("e")
-    assert (e.x, e.y) == (2.5, 2.5)
+    e = w.attach("e")  # (1, 0) holds c, (0, 1) holds a: the next cell one step from a start
+    assert (e.x, e.y) == (2.5, 1.5)
     xy = w.agent_poses()[:, :2]
     dist = np.hypot(*(xy[:, None] - xy[None]).transpose(2, 0, 1))
     assert dist[np.triu_indices(len(xy), 1)].min() >= 2 * w.cfg.agent_radius
     assert w.status().agents_alive == 5
+
+
+def test_agents_beyond_the_starts_gather_round_them_on_their_side_of_a_wall():
+    w = make("""
+............
+............
+#########...
+A...........
+............""", agents=1)
+    cells = w.scenario.to_cell([(m.x, m.y) for m in (w.attach(f"a{i}") for i in range(7))])
+    # nearest the start by walking, ties in reading order: not the top-left corner, which is
+    # two cells away in a straight line but beyond the wall
+    assert [tuple(c) for c in cells] == [(0, 3), (1, 3), (0, 4), (2, 3), (1, 4), (3, 3), (2, 4)]
 
 
 def test_reattach_returns_the_same_body_and_pose():

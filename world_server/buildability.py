@@ -12,8 +12,8 @@ says why not. The model is the layout itself, one cell a step:
   one agent that reaches both: agents in separate areas each serve their own area.
 
 The starts are where the world puts the scenario's `agents`: the `A` cells in reading
-order, then (more agents than `A` cells) the first empty cells; a layout with no `A` has
-no start. Sites already holding `B` are obstacles like any other.
+order, then (more agents than `A` cells) the empty cells nearest them by walking distance;
+a layout with no `A` has no start. Sites already holding `B` are obstacles like any other.
 
 A layout is buildable if some order fills every open site. The search is the paper's
 goal sequencing (§6) as a fixed priority - deepest first, where the depth of a site is
@@ -39,6 +39,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
+
+from world_server.placement import extra_start_cells
 
 Cell = tuple[int, int]  # (col, row), row 0 is the north, as Scenario.cells_col_row
 
@@ -140,13 +142,18 @@ def _cell(i: int, cols: int) -> Cell:
 
 def _starts(layout: Sequence[str], agents: int | None) -> np.ndarray:
     """Padded indices of the agents' start cells, as the world hands them out: the `A`
-    cells in reading order, then (more agents than `A` cells) the first empty cells."""
+    cells in reading order, then (more agents than `A` cells) the empty cells nearest them
+    (`placement.extra_start_cells`)."""
     width = len(layout[0]) + 2
-    cells = [(r + 1) * width + c + 1 for r, row in enumerate(layout) for c, ch in enumerate(row) if ch == "A"]
+    chars = np.array([list(row) for row in layout])
+    a_rows, a_cols = np.nonzero(chars == "A")
+    cells = list((a_rows + 1) * width + a_cols + 1)
     if agents is None or not cells:
         return np.array(cells, np.int64)  # no `A` at all is a layout without a start
-    empty = ((r + 1) * width + c + 1 for r, row in enumerate(layout) for c, ch in enumerate(row) if ch == ".")
-    extra = [i for _, i in zip(range(max(agents - len(cells), 0)), empty)]
+    extra: list[int] = []
+    if agents > len(cells):
+        order = extra_start_cells(chars == ".", ~np.isin(chars, list("#FWbB")), np.column_stack([a_cols, a_rows]))
+        extra = [(r + 1) * width + c + 1 for c, r in order[:agents - len(cells)]]
     return np.array(cells[:max(agents, 0)] + extra, np.int64)
 
 

@@ -1,7 +1,8 @@
 """Where the world puts things an agent can no longer place itself: pure functions on grids.
 
-A dead agent's brick must land where nothing needs it (`brick_drop_cell`), and a restarted
-agent's body where it overlaps nothing (`body_cell`). Both take bool grids indexed
+A dead agent's brick must land where nothing needs it (`brick_drop_cell`), a restarted
+agent's body where it overlaps nothing (`body_cell`), and agents beyond a scenario's `A`
+cells near those starts (`extra_start_cells`). Both take bool grids indexed
 [row, col] like `Scenario.grid` (row 0 is the north) and a start in fractional cell
 coordinates (col, row), the centre of cell (c, r) being (c + 0.5, r + 0.5); they return
 the nearest cell that qualifies, by straight-line distance from the start, ties in
@@ -9,6 +10,8 @@ reading order (row, then column), so the choice is deterministic.
 """
 
 from __future__ import annotations
+
+from collections import deque
 
 import numpy as np
 
@@ -64,3 +67,34 @@ def brick_drop_cell(free: np.ndarray, site: np.ndarray, start: tuple[float, floa
 def body_cell(free: np.ndarray, start: tuple[float, float]) -> tuple[int, int] | None:
     """The free cell nearest `start` for a body to come back at; None if there is none."""
     return _by_distance(np.asarray(free, bool), start)
+
+
+def extra_start_cells(empty: np.ndarray, passable: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """(k, 2) (col, row) of the `empty` cells in the order extra agents get them: by walking
+    distance from the nearest start (4-connected steps through `passable` cells, which the
+    starts and empty cells are), ties in reading order; then the empty cells no start can
+    walk to, in reading order. With no start at all: every empty cell in reading order.
+
+    So a scenario's `A` cells are the seeds of a growing patch of agents, on the starts' side
+    of any wall, instead of a pile in the top-left corner.
+    """
+    empty = np.asarray(empty, bool)
+    passable = np.asarray(passable, bool) | empty
+    rows, cols = empty.shape
+    dist = np.full(empty.shape, -1, np.int64)
+    queue: deque[tuple[int, int]] = deque()
+    for c, r in np.asarray(starts, np.int64).reshape(-1, 2):
+        if 0 <= r < rows and 0 <= c < cols and dist[r, c] < 0:
+            dist[r, c] = 0
+            queue.append((int(r), int(c)))
+    while queue:
+        r, c = queue.popleft()
+        for nr, nc in ((r - 1, c), (r + 1, c), (r, c - 1), (r, c + 1)):
+            if 0 <= nr < rows and 0 <= nc < cols and passable[nr, nc] and dist[nr, nc] < 0:
+                dist[nr, nc] = dist[r, c] + 1
+                queue.append((nr, nc))
+    er, ec = np.nonzero(empty)  # reading order
+    d = dist[er, ec]
+    key = np.where(d < 0, np.iinfo(np.int64).max, d)
+    order = np.argsort(key, kind="stable")  # stable: ties keep reading order
+    return np.column_stack([ec[order], er[order]]).astype(np.int64)

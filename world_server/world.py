@@ -30,7 +30,7 @@ from protocol.messages import (
 )
 from world_server.discs import BRICK_DISC, FOOD_DISC, IN_WORLD, WATER_DISC, DiscStore
 from world_server.physics import Physics, motor_update
-from world_server.placement import body_cell, brick_drop_cell
+from world_server.placement import body_cell, brick_drop_cell, extra_start_cells
 from world_server.scenario import Scenario
 from world_server.sensors import sense, warm_up
 
@@ -98,6 +98,7 @@ class World:
         self._site_codes = self._cell_code(self.sites_xy)
         self.blueprint_version = 0  # +1 per site added or removed (a Blueprint message each time)
         self._starts = scenario.to_world(cells["A"])
+        self._extra_start_xy: np.ndarray | None = None  # `_extra_starts`, once needed
         self.agents: dict[str, AgentRecord] = {}
         self._order: list[AgentRecord] = []
         n = 0
@@ -277,18 +278,33 @@ class World:
         self._ranges = np.vstack([self._ranges, np.zeros((1, *self._ranges.shape[1:]))])
 
     def _free_start(self) -> np.ndarray:
-        """First `A` start not taken by a body, else the first clear empty cell (reading order)."""
+        """First `A` start not taken by a body, else the clear empty cell nearest the starts
+        (by walking distance, `placement.extra_start_cells`; ties in reading order)."""
         taken = self.physics.state()[0][self.solid]
         clear = self.cfg.agent_radius * 2 + 0.1
-        candidates = [self._starts, self.scenario.to_world(self.scenario.cells_col_row("."))]
         present = self.discs.xy[self.discs.present()]
-        for xy in np.vstack(candidates):
-            if taken.size and np.min(np.hypot(*(taken - xy).T)) < clear:
-                continue
-            if present.size and np.min(np.hypot(*(present - xy).T)) < self.cfg.disc_radius + self.cfg.agent_radius:
-                continue
-            return xy
+        for group in (self._starts, self._extra_starts()):
+            # In chunks, vectorised: with 100 agents and thousands of cells a loop over the
+            # candidates in Python would be the slowest part of start-up.
+            for at in range(0, len(group), 256):
+                chunk = group[at:at + 256]
+                ok = np.ones(len(chunk), bool)
+                for xy, reach in ((taken, clear), (present, self.cfg.disc_radius + self.cfg.agent_radius)):
+                    if len(xy):
+                        near = np.hypot(chunk[:, None, 0] - xy[None, :, 0], chunk[:, None, 1] - xy[None, :, 1])
+                        ok &= near.min(axis=1) >= reach
+                if ok.any():
+                    return chunk[int(np.argmax(ok))]
         raise RuntimeError("no free cell left for a new agent body")
+
+    def _extra_starts(self) -> np.ndarray:
+        """World centres of the empty cells, in the order agents beyond the `A` cells get them
+        (worked out once: the layout does not change)."""
+        if self._extra_start_xy is None:
+            sc = self.scenario
+            cells = extra_start_cells(sc.grid("."), ~sc.grid("#FWbB"), sc.cells_col_row("A"))
+            self._extra_start_xy = sc.to_world(cells)
+        return self._extra_start_xy
 
     # commands and ticks ----------------------------------------------------------------
     def set_command(self, agent_id: str, speed: float, turn: float, action: str) -> bool:

@@ -1,0 +1,340 @@
+"""Scale (issue 15): the same build in one process and as `conag run` processes, 1 to 100 agents.
+
+    python3 -m bench.bench_scale                          # 1, 3, 10, 30, 100 agents: a few minutes
+    python3 -m bench.bench_scale --agents 1,3,10 --ticks 300
+    python3 -m bench.bench_scale --per-process 1,20       # processes of 1 agent, and of 20 (conag agents)
+    python3 -m bench.bench_scale --json scale.json
+
+For each agent count, on one scenario and seed (`scenarios/large/scale.toml` by default: a
+generated 60 x 60 world, 136 open sites, room for 100 agents round its starts), one after
+the other on the same machine:
+
+* in-process: `sim.start` and `SimRun.step` in a fresh interpreter (the simulator the
+  experiments use: one core, the agents one after another);
+* processes: `conag run --agents N --max-ticks T --stall-ticks 0 --profile ...`: a world
+  process and one process per agent (with `--per-process K`, `conag agents` processes of K
+  agents each), over zenoh on loopback, in lockstep.
+
+Every row runs a fixed number of ticks (`--ticks`, fewer for large teams: at most
+`--agent-ticks` agent steps), so the bench ends in bounded time. Reported per row:
+
+* ticks/s from the second tick to the last (start-up left out), and processes / in-process;
+* the time from launching the interpreter(s) to the first tick (the world's first frames
+  out), which includes imports, loading the compiled kernels and attaching;
+* memory as PSS and USS (from /proc/PID/smaps_rollup; RSS counts shared pages in every
+  process), sampled halfway through the ticks: per agent process and in total (the world,
+  the supervisor and the agents; in-process: the one process);
+* where a tick's time goes: in-process, the world's step and the agents' decisions; in the
+  world process, its step, publishing the frames and waiting for the agents' commands
+  (`conag world --profile`, `world_server/loop_times.py`).
+
+Progress goes to stderr; the markdown table (and with `--json` every figure) at the end.
+The machine should be otherwise idle: on a shared one the figures swing widely.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+SCENARIO = "scenarios/large/scale.toml"
+
+
+# ------------------------------------------------------------------ memory
+
+def smaps(pid: int) -> tuple[int, int]:
+    """(PSS, USS) of a process in bytes, from /proc/PID/smaps_rollup; (0, 0) if it is gone."""
+    fields: dict[str, int] = {}
+    try:
+        with open(f"/proc/{pid}/smaps_rollup", encoding="ascii") as f:
+            for line in f:
+                parts = line.split()
+                if len(parts) >= 2 and parts[0].endswith(":") and parts[1].isdigit():
+                    fields[parts[0][:-1]] = int(parts[1]) * 1024
+    except OSError:
+        return 0, 0
+    return fields.get("Pss", 0), fields.get("Private_Clean", 0) + fields.get("Private_Dirty", 0)
+
+
+def process_tree(root: int) -> dict[int, str]:
+    """pid -> command line of `root` and all its descendants."""
+    parent: dict[int, int] = {}
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat", encoding="ascii", errors="replace") as f:
+                    parent[int(entry)] = int(f.read().rsplit(")", 1)[1].split()[1])
+            except (OSError, IndexError, ValueError):
+                continue
+    tree, frontier = {root}, [root]
+    while frontier:
+        p = frontier.pop()
+        kids = [c for c, pp in parent.items() if pp == p and c not in tree]
+        tree.update(kids)
+        frontier.extend(kids)
+    out = {}
+    for pid in tree:
+        try:
+            with open(f"/proc/{pid}/cmdline", "rb") as f:
+                out[pid] = f.read().replace(b"\0", b" ").decode(errors="replace")
+        except OSError:
+            pass
+    return out
+
+
+def memory_of_run(root: int) -> dict:
+    """PSS/USS in MB of a `conag run` tree: in total, and per agent process (mean)."""
+    procs = process_tree(root)
+    sizes = {pid: smaps(pid) for pid in procs}
+    agents = [pid for pid, cmd in procs.items() if " conag agent" in cmd]
+    mb = 1 / 2**20
+    hosted = max(sum(_agents_in(procs[pid]) for pid in agents), 1)
+    return {"processes": len(procs), "agent_processes": len(agents),
+            "total_pss_mb": sum(p for p, _ in sizes.values()) * mb,
+            "total_uss_mb": sum(u for _, u in sizes.values()) * mb,
+            "agent_pss_mb": sum(sizes[p][0] for p in agents) * mb / hosted,
+            "agent_uss_mb": sum(sizes[p][1] for p in agents) * mb / hosted}
+
+
+def _agents_in(cmd: str) -> int:
+    """How many agents an agent process's command line serves (`conag agents --ids a1..a20`)."""
+    words = cmd.split()
+    if "--ids" in words:
+        from nodes.agent_host import parse_ids
+
+        return len(parse_ids(words[words.index("--ids") + 1]))
+    return 1
+
+
+# ------------------------------------------------------------------ in-process
+
+def sim_child(scenario: str, agents: int, ticks: int, launched: float, out: str) -> None:
+    """The in-process row, run in a fresh interpreter (`--child`): imports count in its start-up."""
+    from sim.loop import start
+    from world_server.scenario import load_scenario
+
+    run = start(load_scenario(scenario), agents=agents)
+    run.step()
+    first = time.monotonic() - launched
+    world_s = agents_s = 0.0
+    mem = (0, 0)
+    t_start = time.perf_counter()
+    for i in range(ticks - 1):
+        t0 = time.perf_counter()
+        frames = run.world.frames()
+        t1 = time.perf_counter()
+        for frame in frames:
+            s = run.brains[frame.agent_id].step(frame)
+            run.world.set_command(frame.agent_id, s.speed, s.turn, s.action)
+        t2 = time.perf_counter()
+        run.world.step()
+        world_s += time.perf_counter() - t2 + (t1 - t0)
+        agents_s += t2 - t1
+        if i == ticks // 2:
+            mem = smaps(os.getpid())
+    seconds = time.perf_counter() - t_start
+    n = max(ticks - 1, 1)
+    Path(out).write_text(json.dumps({
+        "rate": n / seconds, "first_tick_s": first, "world_ms": 1000 * world_s / n, "agents_ms": 1000 * agents_s / n,
+        "total_pss_mb": mem[0] / 2**20, "total_uss_mb": mem[1] / 2**20,
+        "sites": f"{int(run.world.sites_filled().sum())}/{len(run.world.sites_xy)}"}))
+
+
+def in_process(scenario: str, agents: int, ticks: int) -> dict:
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "sim.json"
+        launched = time.monotonic()
+        subprocess.run([sys.executable, "-m", "bench.bench_scale", "--child", scenario, str(agents), str(ticks),
+                        repr(launched), str(out)], cwd=ROOT, check=True)
+        return json.loads(out.read_text())
+
+
+# ------------------------------------------------------------------ processes
+
+def as_processes(scenario: str, agents: int, ticks: int, port: int, per_process: int) -> dict:
+    with tempfile.TemporaryDirectory() as tmp:
+        profile = Path(tmp) / "world.json"
+        cmd = [sys.executable, "-m", "conag", "run", scenario, "--agents", str(agents), "--max-ticks", str(ticks),
+               "--stall-ticks", "0", "--headless", "--listen", f"tcp/127.0.0.1:{port}", "--profile", str(profile)]
+        if per_process > 1:
+            cmd += ["--per-process", str(per_process)]
+        launched = time.monotonic()
+        proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        mem: dict = {}
+        last = [""]
+
+        def sample_when_halfway(line: str) -> None:
+            parts = line.split()
+            if not mem and len(parts) > 1 and parts[0] == "tick" and int(parts[1]) >= ticks // 2:
+                mem.update(memory_of_run(proc.pid))
+
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            last[0] = line.strip() or last[0]
+            sample_when_halfway(line)
+        proc.wait()
+        if not profile.exists():
+            raise RuntimeError(f"{' '.join(cmd)} wrote no profile (exit {proc.returncode}): {last[0]}")
+        prof = json.loads(profile.read_text())
+    busy = sum(prof[k] for k in ("step", "publish", "wait", "other"))
+    per_tick = prof["per_tick_ms"]
+    return {"rate": prof["ticks"] / busy if busy else 0.0, "first_tick_s": prof["first_tick"] - launched,
+            "step_ms": per_tick.get("step", 0.0), "publish_ms": per_tick.get("publish", 0.0),
+            "wait_ms": per_tick.get("wait", 0.0), **mem, "last_line": last[0]}
+
+
+# ------------------------------------------------------------------ realtime
+
+def realtime_scenario(scenario: str, out: Path, rate: float) -> Path:
+    """A copy of `scenario` in realtime mode at `rate` ticks per second."""
+    text = (ROOT / scenario).read_text(encoding="utf-8")
+    lines = [('tick_mode = "realtime"' if line.startswith("tick_mode") else line) for line in text.splitlines()]
+    if "[world]" in lines:
+        lines.insert(lines.index("[world]") + 1, f"tick_rate = {rate}")
+    else:
+        lines += ["", "[world]", f"tick_rate = {rate}"]
+    out.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return out
+
+
+def realtime(scenario: str, agents: int, seconds: float, port: int, per_process: int, rate: float) -> dict:
+    """Run `conag run` in realtime mode at `rate`; once every agent is alive, `seconds` more
+    (after the world's own 2 s warm-up), then stop it; the world's profile says how fast it
+    ticked and how far behind the agents' commands were."""
+    with tempfile.TemporaryDirectory() as tmp:
+        profile = Path(tmp) / "world.json"
+        sc = realtime_scenario(scenario, Path(tmp) / "realtime.toml", rate)
+        cmd = [sys.executable, "-m", "conag", "run", str(sc), "--agents", str(agents), "--stall-ticks", "0",
+               "--headless", "--listen", f"tcp/127.0.0.1:{port}", "--profile", str(profile),
+               "--per-process", str(per_process)]
+        proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        assert proc.stdout is not None
+        everyone = f"agents alive {agents}/{agents}"
+        for line in proc.stdout:
+            if everyone in line:
+                break
+        time.sleep(seconds + 2.0)
+        proc.send_signal(2)  # SIGINT: conag run stops the world, which writes its profile
+        proc.communicate(timeout=120)
+        prof = json.loads(profile.read_text())
+    busy = sum(prof[k] for k in ("step", "publish", "wait", "other"))
+    return {"agents": agents, "per_process": per_process, "target": rate,
+            "rate": prof["ticks"] / busy if busy else 0.0, "commands": prof["commands"],
+            "stale_share": prof["stale_commands"] / max(prof["commands"], 1), "max_lag": prof["max_lag"]}
+
+
+def realtime_table(rows: list[dict]) -> str:
+    head = ("| agents | per process | target ticks/s | ticks/s | commands | older than one tick | max lag (ticks) "
+            "| kept |")
+    lines = [head, "|" + "---:|" * 7 + ":---:|"]
+    for r in rows:
+        kept = r["rate"] >= 0.97 * r["target"] and r["max_lag"] <= 1
+        lines.append(f"| {r['agents']} | {r['per_process']} | {r['target']:g} | {r['rate']:.1f} | {r['commands']} "
+                     f"| {100 * r['stale_share']:.1f}% | {r['max_lag']} | {'yes' if kept else 'no'} |")
+    return "\n".join(lines)
+
+
+# ------------------------------------------------------------------ the table
+
+def row_ticks(agents: int, ticks: int, agent_ticks: int, min_ticks: int = 60) -> int:
+    """The row's tick budget: `ticks`, fewer for large teams (at most `agent_ticks` agent steps)."""
+    return max(min_ticks, min(ticks, agent_ticks // agents))
+
+
+def table(rows: list[dict]) -> str:
+    head = ("| agents | per process | ticks | in-process ticks/s | processes ticks/s | ratio | first tick in-process s "
+            "| first tick processes s | PSS per agent MB | USS per agent MB | total PSS MB (in-process) "
+            "| in-process: world / agents ms | world process: step / publish / wait ms |")
+    lines = [head, "|" + "---:|" * 13]
+    for r in rows:
+        s, p = r["sim"], r["proc"]
+        lines.append(
+            f"| {r['agents']} | {r['per_process']} | {r['ticks']} | {s['rate']:.1f} | {p['rate']:.1f} "
+            f"| {p['rate'] / s['rate']:.2f} | {s['first_tick_s']:.1f} | {p['first_tick_s']:.1f} "
+            f"| {p.get('agent_pss_mb', float('nan')):.0f} | {p.get('agent_uss_mb', float('nan')):.0f} "
+            f"| {p.get('total_pss_mb', float('nan')):.0f} ({s['total_pss_mb']:.0f}) "
+            f"| {s['world_ms']:.2f} / {s['agents_ms']:.1f} "
+            f"| {p['step_ms']:.2f} / {p['publish_ms']:.2f} / {p['wait_ms']:.1f} |")
+    return "\n".join(lines)
+
+
+def _ints(text: str) -> list[int]:
+    return [int(v) for v in text.split(",") if v]
+
+
+def main(argv: list[str] | None = None) -> int:
+    if argv is None and len(sys.argv) > 1 and sys.argv[1] == "--child":
+        scenario, agents, ticks, launched, out = sys.argv[2:7]
+        sim_child(scenario, int(agents), int(ticks), float(launched), out)
+        return 0
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--scenario", default=SCENARIO)
+    p.add_argument("--agents", type=_ints, default=[1, 3, 10, 30, 100], metavar="N,N,...")
+    p.add_argument("--per-process", type=_ints, default=[1], metavar="K,K,...",
+                   help="agents per agent process (1: one process each; K > 1: conag agents hosts of K)")
+    p.add_argument("--ticks", type=int, default=1000, help="ticks per row (default 1000)")
+    p.add_argument("--agent-ticks", type=int, default=20000,
+                   help="at most this many agent steps per row: fewer ticks for large teams (default 20000)")
+    p.add_argument("--no-sim", action="store_true", help="skip the in-process runs (their columns say nan)")
+    p.add_argument("--realtime", type=_ints, default=[], metavar="N,N,...",
+                   help="also run these agent counts in realtime mode at --rate: does the tick keep up?")
+    p.add_argument("--rate", type=float, default=20.0, help="realtime ticks per second (default 20)")
+    p.add_argument("--seconds", type=float, default=10.0, help="seconds measured per realtime row (default 10)")
+    p.add_argument("--port", type=int, default=17900)
+    p.add_argument("--json", metavar="PATH", help="write every figure as JSON")
+    p.add_argument("--quick", action="store_true",
+                   help="a smoke run (1 and 2 agents, 300 ticks, 1 s of realtime), not a measurement")
+    args = p.parse_args(argv)
+    if args.quick:
+        args.agents, args.per_process, args.ticks, args.realtime, args.seconds = [1, 2], [1, 2], 300, [2], 1.0
+    rows = []
+    port = args.port
+    for n in args.agents:
+        ticks = row_ticks(n, args.ticks, args.agent_ticks)
+        t0 = time.monotonic()
+        sim = (in_process(args.scenario, n, ticks) if not args.no_sim else
+               {"rate": float("nan"), "first_tick_s": float("nan"), "world_ms": float("nan"),
+                "agents_ms": float("nan"), "total_pss_mb": float("nan")})
+        print(f"{n} agents, {ticks} ticks in-process: {sim['rate']:.1f} ticks/s, first tick after "
+              f"{sim['first_tick_s']:.1f} s ({time.monotonic() - t0:.0f} s)", file=sys.stderr, flush=True)
+        for k in args.per_process:
+            if k > 1 and k >= n * 2:
+                continue  # one host for everyone is the in-process row again, plus the bus
+            t0 = time.monotonic()
+            port += 1
+            proc = as_processes(args.scenario, n, ticks, port, k)
+            print(f"{n} agents, {k} per process: {proc['rate']:.1f} ticks/s, first tick after "
+                  f"{proc['first_tick_s']:.1f} s, {proc.get('total_pss_mb', 0):.0f} MB PSS in total "
+                  f"({time.monotonic() - t0:.0f} s)", file=sys.stderr, flush=True)
+            rows.append({"agents": n, "per_process": k, "ticks": ticks, "sim": sim, "proc": proc})
+    live = []
+    for n in args.realtime:
+        for k in args.per_process:
+            if k > 1 and k >= n * 2:
+                continue
+            port += 1
+            live.append(realtime(args.scenario, n, args.seconds, port, k, args.rate))
+            r = live[-1]
+            print(f"{n} agents, {k} per process, realtime {args.rate:g} Hz: {r['rate']:.1f} ticks/s, "
+                  f"{100 * r['stale_share']:.1f}% of commands older than one tick", file=sys.stderr, flush=True)
+    print(f"{args.scenario}, {os.cpu_count()} cores, load average at the end {os.getloadavg()[0]:.1f}\n")
+    if rows:
+        print(table(rows))
+    if live:
+        print()
+        print(realtime_table(live))
+    if args.json:
+        Path(args.json).write_text(json.dumps({"lockstep": rows, "realtime": live}, indent=2) + "\n",
+                                   encoding="utf-8")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,192 @@
+"""Scale (issue 15): what `conag run --agents N` shows, and many agents building at once."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from conag.run import TickRate
+
+
+def test_tick_rate_follows_the_last_seconds_and_restarts_with_a_new_world():
+    now = [0.0]
+    rate = TickRate(window=2.0, clock=lambda: now[0])
+    assert rate.observe(0) is None  # one status: no rate yet
+    for i in range(1, 5):  # 100 ticks/s for two seconds
+        now[0] = 0.5 * i
+        assert rate.observe(50 * i) == 100.0
+    for i in range(5, 13):  # then 20 ticks/s: after the window only the new rate is left
+        now[0] = 0.5 * i
+        r = rate.observe(200 + 10 * (i - 4))
+    assert r == 20.0
+    now[0] += 0.5
+    assert rate.observe(3) is None  # a lower tick: a world started again, counting anew
+
+
+def test_border_seed_is_the_octile_distance_to_the_nearest_target_beyond_the_map():
+    import math
+
+    import numpy as np
+
+    from agent_runtime.far_memory import border_seed
+
+    n = 9
+    obstacles = np.zeros((n, n), bool)
+    obstacles[0, 4] = True  # a wall on the border: no seed there
+    targets = np.array([[-3, 4], [4, 12]])  # 3 rows north of the map; 4 columns east
+    seed = border_seed(targets, n, obstacles)
+    assert np.isinf(seed[0, 4]) and np.isinf(seed[4, 4])  # walls and inner cells get none
+    assert seed[0, 3] == 3 + (math.sqrt(2) - 1) * 1  # 3 rows, 1 column away
+    assert seed[4, 8] == 4.0  # straight east to the second target
+    assert seed[8, 0] == min(11 + (math.sqrt(2) - 1) * 4, 12 + (math.sqrt(2) - 1) * 4)
+    assert border_seed(np.zeros((0, 2), np.int64), n, obstacles) is None
+
+
+# ---------------------------------------------------------------- several agents in one process
+
+
+def test_parse_ids_takes_ranges_and_lists_and_refuses_nonsense():
+    from nodes.agent_host import parse_ids
+
+    assert parse_ids("a1..a3") == ["a1", "a2", "a3"]
+    assert parse_ids("a1,a3..a4, b7") == ["a1", "a3", "a4", "b7"]
+    for bad in ("", "a3..a1", "a1..b3", "a1,a1", "a1..", ","):
+        with pytest.raises(ValueError):
+            parse_ids(bad)
+
+
+def test_a_host_serves_each_agent_its_own_body_and_stops_one_alone(bus, start_world):
+    import threading
+
+    from nodes.agent import AgentOptions
+    from nodes.agent_host import AgentHost, host_options
+    from tests.conftest import scenario, wait_until
+
+    rw = start_world(scenario("A.A.A\n.....\n..b..\n..+..", agents=3), wait_agents=3)
+    host = AgentHost(bus.client_session(), host_options(AgentOptions("w0", "a1"), ["a1", "a2", "a3"]))
+    stop = threading.Event()
+
+    def serve():
+        host.attach()
+        host.serve(stop)
+
+    thread = threading.Thread(target=serve, daemon=True)
+    thread.start()
+    try:
+        # lockstep: the world ticks only when all three hosted agents answer every frame
+        wait_until(lambda: rw.world.tick >= 20, timeout=60, what="20 lockstep ticks driven by the host")
+        assert sorted(rw.world.live_agents()) == ["a1", "a2", "a3"]
+        assert len({rec.index for rec in rw.world.agents.values()}) == 3  # three bodies
+        assert all(r.ticks >= 19 for r in host.reports.values())
+        host.stop_requests.put("a2")
+        wait_until(lambda: rw.world.live_agents() == ["a1", "a3"], timeout=30, what="a2 gone from the world")
+        tick = rw.world.tick
+        wait_until(lambda: rw.world.tick >= tick + 20, timeout=60, what="the others going on without a2")
+    finally:
+        stop.set()
+        thread.join(10)
+        host.close()
+    assert not thread.is_alive()
+
+
+def test_loop_times_count_from_when_everyone_is_there_and_realtime_lag():
+    from world_server.loop_times import LoopTimes
+
+    t = LoopTimes()
+    t.tick_done(1, False, 0, 10.0, wait=5.0, step=0.1, publish=0.1)  # agents still coming: nothing counts
+    t.command(0)
+    t.tick_done(2, True, 2, 11.0, wait=1.0, step=0.1, publish=0.1)   # all there: the first tick; 2 warm-up
+    assert t.first_tick == 11.0 and t.ticks == 0 and t.commands == 0
+    for tick in (3, 4):
+        t.tick_done(tick, True, 2, 12.0, wait=1.0, step=0.1, publish=0.1)
+    assert t.ticks == 0
+    for tick in (5, 6):
+        t.tick_done(tick, True, 2, 13.0, wait=0.010, step=0.002, publish=0.001)
+        t.other_done(0.001)
+    for lag in (0, 1, 3):
+        t.command(lag)
+    assert t.ticks == 2 and t.per_tick_ms() == {"step": 2.0, "publish": 1.0, "wait": 10.0, "other": 1.0}
+    assert (t.commands, t.stale_commands, t.max_lag) == (3, 1, 3)
+    assert "_count_from" not in t.as_dict() and t.as_dict()["per_tick_ms"]["wait"] == 10.0
+
+
+# ---------------------------------------------------------------- conag run, many agents (slow)
+
+
+@pytest.mark.slow
+def test_hosted_agents_build_and_a_restarted_one_rejoins_as_a_process_of_its_own(tmp_path):
+    import subprocess
+    import sys
+
+    from tests.conftest import LONG_WALL, ROOT, conag, free_port
+
+    out, ep = tmp_path / "summary.json", f"tcp/127.0.0.1:{free_port()}"
+    scenario = tmp_path / "long_wall.toml"
+    scenario.write_text(LONG_WALL)
+    run = subprocess.Popen([sys.executable, "-m", "conag", "run", str(scenario), "--agents", "4", "--per-process", "2",
+                            "--headless", "--summary", str(out), "--listen", ep], cwd=ROOT, stdout=subprocess.PIPE,
+                           stderr=subprocess.STDOUT, text=True)
+    try:
+        for line in run.stdout:  # wait until the build is under way
+            if line.startswith("tick ") and int(line.split()[1]) > 0:
+                break
+        restarted = conag("restart", "a2", "--connect", ep)
+        assert restarted.returncode == 0 and "stopped a2 in its host" in restarted.stdout, restarted.stderr
+        rest, _ = run.communicate(timeout=300)
+        assert run.returncode == 0, rest
+    finally:
+        if run.poll() is None:
+            run.kill()
+            run.wait(10)
+    s = json.loads(out.read_text())
+    assert s["completed"] and s["bricks_total"] == 32
+    # a2 alone came back (as a process of its own); a1, its host mate, and the other host went on
+    assert {a["id"]: a["restarts"] for a in s["agents"]} == {"a1": 0, "a2": 1, "a3": 0, "a4": 0}
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(1200)
+def test_a_hundred_agents_build_a_wall_to_completion(tmp_path):
+    from tests.conftest import conag, free_port
+
+    out = tmp_path / "summary.json"
+    layout = Path(__file__).resolve().parent / "layouts" / "hundred_agents.toml"
+    r = conag("run", layout, "--agents", 100, "--per-process", 20, "--headless", "--summary", out,
+              "--listen", f"tcp/127.0.0.1:{free_port()}", timeout=1200)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    s = json.loads(out.read_text())
+    assert s["completed"] and s["sites_filled"] == s["sites_total"] == 40 and s["bricks_total"] == 42
+    assert len(s["agents"]) == 100 and sum(a["drops"] for a in s["agents"]) >= 40
+    lines = [line for line in r.stdout.splitlines() if line.startswith("tick ")]
+    assert any("agents alive 100/100" in line and "ticks/s" in line for line in lines)
+
+
+def test_agent_processes_are_peers_for_a_few_and_clients_of_the_world_for_many():
+    from conag.run import MAX_PEER_AGENTS, agent_bus_mode
+
+    assert agent_bus_mode("auto", 1) == agent_bus_mode("auto", MAX_PEER_AGENTS) == "peer"
+    assert agent_bus_mode("auto", MAX_PEER_AGENTS + 1) == agent_bus_mode("auto", 100) == "client"
+    assert agent_bus_mode("peer", 100) == "peer" and agent_bus_mode("client", 1) == "client"
+
+
+@pytest.mark.slow
+def test_the_scale_benchmark_quick_run_prints_both_tables(tmp_path):
+    import subprocess
+    import sys
+
+    from tests.conftest import ROOT, free_port
+
+    out = tmp_path / "scale.json"
+    r = subprocess.run([sys.executable, "bench/bench_scale.py", "--quick", "--port", str(free_port()),
+                        "--json", str(out)], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-3000:]
+    rows = json.loads(out.read_text())
+    # 1 agent alone; 2 agents one process each and in one host of 2
+    assert [(row["agents"], row["per_process"]) for row in rows["lockstep"]] == [(1, 1), (2, 1), (2, 2)]
+    for row in rows["lockstep"]:
+        assert row["sim"]["rate"] > 0 and row["proc"]["rate"] > 0 and row["proc"]["first_tick_s"] > 0
+        assert row["proc"]["agent_pss_mb"] > 0 and row["proc"]["total_pss_mb"] > row["proc"]["agent_pss_mb"]
+    assert [(r_["agents"], r_["target"]) for r_ in rows["realtime"]] == [(2, 20.0), (2, 20.0)]
+    assert "| 2 | 2 | 300 |" in r.stdout and "| kept |" in r.stdout
