@@ -15,6 +15,12 @@ and on the way out. With no teacher on the bus it keeps acting on its current we
 Blueprint changes and state reports go through `nodes.agent_feeds.AgentFeeds`: the newest
 blueprint is applied before each step, an AgentState is published every 100 ticks and
 on exit.
+
+When its world goes and comes back (a network partition, a world started again),
+`nodes.reattach.Reattach` attaches again by itself; if the new Welcome says the world had
+held the agent for gone (a restart), or the blueprint changed meanwhile, the agent starts
+a fresh brain from it, as a restarted process would (its brick was put down, its body may
+stand elsewhere).
 """
 
 from __future__ import annotations
@@ -29,6 +35,7 @@ from agent_runtime.config import AgentConfig
 from agent_runtime.learning import Student
 from bus import undeclare
 from nodes.agent_feeds import AgentFeeds
+from nodes.reattach import Reattach
 from nodes.student_link import StudentLink
 from nodes.world_link import WorldLink
 from protocol import keys
@@ -112,7 +119,9 @@ class _AgentProcess:
         w, a = opts.world_id, opts.agent_id
         self.link = WorldLink(session, w, a)
         self.feeds = AgentFeeds(session, w, a)  # before attaching: no blueprint change is missed
+        self.reattach = Reattach(session, self.link, attach_timeout=min(opts.attach_timeout, 10.0))
         self.brain: Brain | None = None
+        self.welcome = None  # the Welcome the brain acts on
         self.tick = 0
         self.teacher = StudentLink(session, w, a) if self.learning else None
         self.decisions = None if self.learning else session.declare_publisher(keys.decision(w, a), express=True)
@@ -122,10 +131,26 @@ class _AgentProcess:
         welcome = self.link.attach(timeout=self.opts.attach_timeout)
         log.info("agent %s attached to body %d at (%.2f, %.2f)%s", self.opts.agent_id, welcome.body, welcome.x,
                  welcome.y, f", restart {welcome.restarts}" if welcome.restarts else "")
+        self._start_brain(welcome)
+
+    def _start_brain(self, welcome) -> None:
         # Each incarnation gets its own stream: a restart must not replay the same choices.
         self.brain = Brain(welcome, self.opts.cfg, np.random.default_rng([self.opts.seed, welcome.restarts]),
                            network=self.student)
+        self.welcome = welcome
         self.tick = welcome.tick - 1
+
+    def _adopt(self, welcome) -> None:
+        """The link attached again (`Reattach`): a fresh brain if the world had this agent
+        gone or its blueprint changed meanwhile; else the same brain goes on."""
+        old = self.welcome
+        if welcome.restarts != old.restarts or welcome.blueprint_version != old.blueprint_version \
+                or welcome.epoch != old.epoch:
+            log.warning("agent %s starts afresh from the new Welcome (restart %d)", self.opts.agent_id,
+                        welcome.restarts)
+            self._start_brain(welcome)
+        else:
+            self.welcome = welcome
 
     def serve(self, stop) -> None:
         while stop is None or not stop.is_set():
@@ -136,6 +161,8 @@ class _AgentProcess:
     def step(self, frame) -> None:
         """Learn from the reinforcements that came, decide, act, tell the teacher, report."""
         learning, student, teacher = self.learning, self.student, self.teacher
+        if self.link.welcome is not self.welcome:
+            self._adopt(self.link.welcome)
         if teacher is not None:
             for d, r in teacher.poll(wait=learning.wait):
                 student.learn(d.state, d.arm, d.motor, r.arm, r.motor, learning.eta)
@@ -162,6 +189,7 @@ class _AgentProcess:
         if self.teacher is not None:
             self.teacher.close()
         undeclare(self.decisions)
+        self.reattach.close()
         self.link.close()
 
 

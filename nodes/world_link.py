@@ -125,9 +125,12 @@ class WorldLink:
         """The newest frame with tick > `after_tick`; None if none came within `timeout`.
 
         With `timeout=None` it blocks until a frame comes (the world keeps publishing:
-        lockstep steps on after its own timeout, realtime at its rate).
+        lockstep steps on after its own timeout, realtime at its rate). Once the link has
+        attached again meanwhile (`nodes.reattach`), a frame from the new Welcome's tick on
+        is taken whatever `after_tick` says: a world started again may count from lower.
         """
         deadline = None if timeout is None else time.monotonic() + timeout
+        welcome = self.welcome
         pause = 0.0001
         while True:
             if deadline is None:
@@ -142,7 +145,8 @@ class WorldLink:
                     time.sleep(pause)
                     pause = min(pause * 2, 0.002)
                     continue
-            if frame.tick > after_tick:
+            newer = self.welcome
+            if frame.tick > after_tick or (newer is not welcome and newer is not None and frame.tick >= newer.tick):
                 if frame.tick > self._last_tick:
                     self._last_tick, self._last_time = frame.tick, self.clock()
                 return frame
