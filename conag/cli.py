@@ -78,7 +78,7 @@ def cmd_world(args) -> int:
                 print(f"lockstep: ticks start once {args.wait_agents} agent(s) have attached", flush=True)
             server = WorldServer(world, session, mode=args.mode_tick, max_ticks=args.ticks,
                                  stop_when_complete=args.stop_when_complete, wait_agents=args.wait_agents,
-                                 on_status=on_status)
+                                 on_status=on_status, max_tick_rate=args.max_tick_rate)
             final = server.run(stop)
         finally:
             session.close()
@@ -426,6 +426,8 @@ def _add_world(sub) -> None:
                    help="lockstep: do not tick before N agents have attached (default 1)")
     w.add_argument("--summary", metavar="PATH", help="write the final status as JSON")
     w.add_argument("--quiet", action="store_true", help="do not print periodic status lines")
+    w.add_argument("--max-tick-rate", type=float, metavar="HZ",
+                   help="lockstep: step at most HZ ticks per wall second (default: as fast as the agents answer)")
     _bus_args(w)
     w.set_defaults(func=cmd_world)
 
