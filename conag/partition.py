@@ -88,15 +88,18 @@ class PartitionRun:
     wall_seconds: float = 0.0
     error: str = ""
 
-    @property
-    def survived(self) -> bool:
+    def came_back(self, agent: str, cut_seconds: float) -> bool:
+        """`agent` was seen dead and its body leave during the cut, then came back and moved."""
+        dead, left, back = self.dead_after.get(agent), self.left_after.get(agent), self.back_after.get(agent)
+        return (dead is not None and left is not None and back is not None and dead < cut_seconds
+                and dead <= left <= cut_seconds + back and self.moved_after_back.get(agent, 0.0) > 0
+                and self.restarts.get(agent) == 1)
+
+    def survived(self, cut_seconds: float) -> bool:
         """Everything the partition test asks for held."""
-        cut = list(self.dead_after)
         return (self.completed and not self.error and self.kept_alive and self.same_processes
-                and self.bricks_seen == [self.bricks_expected]
-                and all(self.dead_after[a] is not None and self.left_after[a] is not None
-                        and self.back_after[a] is not None and self.moved_after_back.get(a, 0.0) > 0
-                        for a in cut))
+                and self.said_waiting and self.bricks_seen == [self.bricks_expected]
+                and bool(self.dead_after) and all(self.came_back(a, cut_seconds) for a in self.dead_after))
 
     def line(self) -> str:
         def secs(d: dict) -> str:
@@ -252,6 +255,8 @@ def partition_run(opts: PartitionOptions, log_dir: Path, log=print) -> Partition
             run.same_processes = all(p.poll() is None for p in agents.values())
             procs.stop_all()
             reader.join(5)
+            with open(log_dir / "status.jsonl", "w", encoding="utf-8") as f:
+                f.writelines(json.dumps({"t": round(t - started, 3), **st}) + "\n" for t, st in statuses)
             measure(statuses, t_cut, t_restore, cut, kept, run)
             run.said_waiting = all("waiting for it" in procs.log(a) for a in cut)
         except (RuntimeError, OSError) as exc:
@@ -300,11 +305,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"run {i}: {r.line()}", flush=True)
         results.append(r)
     if args.json:
-        out = {"options": asdict(opts), "runs": [asdict(r) | {"survived": r.survived} for r in results],
-               "survived": sum(r.survived for r in results), "total": len(results)}
+        out = {"options": asdict(opts),
+               "runs": [asdict(r) | {"survived": r.survived(opts.cut_seconds)} for r in results],
+               "survived": sum(r.survived(opts.cut_seconds) for r in results), "total": len(results)}
         Path(args.json).write_text(json.dumps(out, indent=2), encoding="utf-8")
-    print(f"{sum(r.survived for r in results)} of {len(results)} runs survived the partition")
-    return 0 if all(r.survived for r in results) else 3
+    survived = sum(r.survived(opts.cut_seconds) for r in results)
+    print(f"{survived} of {len(results)} runs survived the partition")
+    return 0 if survived == len(results) else 3
 
 
 if __name__ == "__main__":

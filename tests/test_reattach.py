@@ -53,9 +53,10 @@ def test_an_agent_the_world_had_gone_attaches_again_when_its_world_is_back(bus, 
         world.step()
         assert world.status().agent_alive == (False,) and world.status().agent_present == (False,)
         gone_at = world.tick
+        time.sleep(0.2)  # a step under way when the world stopped ends
         ticks = report.ticks
         time.sleep(0.3)
-        assert report.ticks == ticks  # no world, no steps: it waits
+        assert report.ticks == ticks  # no world, no frames, no steps: it waits
         # The world is back (the same world, on the same bus): the agent attaches again by itself.
         back = RunningWorld(world, session)
         try:
