@@ -57,6 +57,20 @@ def test_config_parses_with_the_key_settings(name):
         assert _get(config, "connect/endpoints") == connect
 
 
+@pytest.mark.parametrize("name", ["multi-host/router.json5", "multi-host/client.json5"])
+def test_multi_host_configs_give_up_a_silent_host_soon_and_queue_a_tick_of_frames(name):
+    """deploy/README.md's table: a 3 s lease (a host cut off is seen gone within it), room
+    for a burst of frames, and (clients) a reconnect within a second of the link's return."""
+    config = zenoh.Config.from_file(str(DEPLOY / name))
+    assert _get(config, "transport/link/tx/lease") == 3000
+    assert _get(config, "transport/link/tx/queue/size/data") == 16
+    if name.endswith("client.json5"):
+        assert _get(config, "connect/retry")["period_max_ms"] == 1000
+    readme = (DEPLOY / "README.md").read_text(encoding="utf-8")
+    for needle in ("transport/link/tx/lease", "transport/link/tx/queue/size/data", "connect/retry"):
+        assert needle in readme
+
+
 def test_command_line_endpoints_replace_the_placeholder():
     opts = BusOptions(zenoh_config=str(DEPLOY / "multi-host/client.json5"), connect=("tcp/10.1.2.3:7447",))
     config = make_config(opts)
