@@ -17,8 +17,7 @@ When the token disappears (process killed), its body stops, its brick is put dow
 nothing needs it, and after `body_grace_ticks` the body leaves the world; when a process
 with the same id attaches again, it gets its body back (`World.detach`, `World.attach`).
 An agent that holds its token but misses `lockstep_miss_limit` deadlines in a row is no
-longer waited for until it sends a command again (`world_server.lockstep.LockstepWaits`),
-and gets a frame only once a `lockstep_timeout` meanwhile;
+longer waited for until it sends a command again (`world_server.lockstep.LockstepWaits`);
 every step taken without some live agent's command is published as a LockstepTimeout.
 Bad input of any kind is counted in `WorldStatus.bad_messages`, logged at INFO (`-v`) and
 otherwise ignored; a rejected command (undecodable, another agent's id, an agent not
@@ -115,7 +114,6 @@ class WorldServer:
         self.view_every = view_every  # ticks between WorldView publications (0: only on query)
         self._view_failed = False
         self.lockstep = LockstepWaits(self.cfg.lockstep_miss_limit)
-        self._frame_sent: dict[str, float] = {}  # wall time of each agent's last frame
         if max_tick_rate is not None and not max_tick_rate > 0:
             raise ValueError("max_tick_rate must be > 0 ticks per second")
         self._min_period = 1.0 / max_tick_rate if max_tick_rate else 0.0  # lockstep: wall seconds between ticks
@@ -384,20 +382,9 @@ class WorldServer:
         pub.put(encode(frame))
 
     def _publish_frames(self) -> None:
-        now = self.clock()
         for frame in self.world.frames():
-            agent = frame.agent_id
-            if agent not in self._tokens:
-                continue
-            recent = now - self._frame_sent.get(agent, -1e9) < self.cfg.lockstep_timeout
-            if recent and self.lockstep.unresponsive(agent):
-                # An agent that stopped answering gets a frame once a lockstep timeout, not every
-                # tick: enough to answer again, and a host cut off from the network does not have
-                # hundreds of frames queued for it (in tests, a zenoh router whose link to such
-                # a host was full stalled every route until the link came back).
-                continue
-            self._frame_sent[agent] = now
-            self._publish_frame(frame)
+            if frame.agent_id in self._tokens:
+                self._publish_frame(frame)
 
     def _publish_status_if_due(self) -> None:
         if self.clock() - self._last_status >= self.cfg.status_period:
