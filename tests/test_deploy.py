@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import signal
 import socket
 from dataclasses import replace
@@ -163,3 +164,16 @@ def test_router_listens_where_its_config_file_says(tmp_path):
         assert str(config) in proc.out
     finally:
         proc.kill()
+
+
+def test_a_router_gets_more_receive_workers_unless_told_otherwise(monkeypatch):
+    """deploy/README.md: a link closed with bytes unsent blocks a receive worker (zenoh #1101)."""
+    from bus.session import ROUTER_RUNTIME
+
+    monkeypatch.delenv("ZENOH_RUNTIME", raising=False)
+    open_session(BusOptions(listen=(f"tcp/127.0.0.1:{free_port()}",), mode="router"), serve=True).close()
+    assert os.environ["ZENOH_RUNTIME"] == ROUTER_RUNTIME
+    monkeypatch.setenv("ZENOH_RUNTIME", "(rx: (worker_threads: 3))")
+    open_session(BusOptions(listen=(f"tcp/127.0.0.1:{free_port()}",), mode="router"), serve=True).close()
+    assert os.environ["ZENOH_RUNTIME"] == "(rx: (worker_threads: 3))"  # the user's own setting stays
+    assert "ZENOH_RUNTIME" in (DEPLOY / "README.md").read_text(encoding="utf-8")
