@@ -15,9 +15,12 @@ whether host 3's agents stayed alive throughout, the re-attached agents moved th
 bodies again, the build completed, and `bricks_total` never changed. The agent processes
 are never restarted: `same_processes` says they all still ran when the world finished.
 
-Realtime ticks by default: a lockstep world left with one agent may finish the build
-within the cut, and there would be nothing to come back to. Needs root (see
-`conag.netns.unavailable`); the namespaces are deleted however a run ends.
+The world ticks in lockstep capped at `max_tick_rate` (100 a second): uncapped, the agent
+left alone ran at several hundred ticks a second and could finish the build within the
+cut, leaving nothing to come back to. (Realtime worlds do not build through a router under
+load: a frame an agent misses takes that tick's odometry with it; RELIABILITY.md.) Needs
+root (see `conag.netns.unavailable`); the namespaces are deleted however a run ends, and
+`--logs DIR` keeps each process's log and the statuses read (`status.jsonl`).
 """
 
 from __future__ import annotations
@@ -55,6 +58,7 @@ class PartitionOptions:
     tick_mode: str = "lockstep"
     max_tick_rate: float = 100.0  # lockstep pace cap: one agent left alone must not finish the build in the cut
     timeout: float = 300.0       # wall seconds for the whole build
+    stall_seconds: float = 60.0  # give up once no site has been filled for this long (wall seconds)
     prefix: str = ""             # namespace names' prefix (default: from the process id)
     verbose: bool = False        # -v to the world and the agents (their logs: `--logs`)
 
@@ -182,6 +186,19 @@ class _Procs:
                 proc.wait(5)
 
 
+class _StallClock:
+    """Whether the statuses read show no new best count of filled sites for `seconds`."""
+
+    def __init__(self, statuses: list[tuple[float, dict]], seconds: float):
+        self.statuses, self.seconds = statuses, seconds
+        self.best, self.since = -1, time.monotonic()
+
+    def stalled(self) -> bool:
+        if self.statuses and self.statuses[-1][1]["sites_filled"] > self.best:
+            self.best, self.since = self.statuses[-1][1]["sites_filled"], time.monotonic()
+        return time.monotonic() - self.since > self.seconds
+
+
 def _wait(predicate, timeout: float, interval: float = 0.1) -> bool:
     deadline = time.monotonic() + timeout
     while not predicate():
@@ -250,8 +267,13 @@ def partition_run(opts: PartitionOptions, log_dir: Path, log=print) -> Partition
             t_restore = time.monotonic()
             run.restore_tick = statuses[-1][1]["tick"] if statuses else -1
             log(f"  tick {run.restore_tick}: host 2 back")
-            if not _wait(lambda: world.poll() is not None, max(opts.timeout - (t_restore - started), 1.0)):
+            stall = _StallClock(statuses, opts.stall_seconds)
+            if not _wait(lambda: world.poll() is not None or stall.stalled(),
+                         max(opts.timeout - (t_restore - started), 1.0)):
                 run.error = f"the world did not finish within {opts.timeout:g} s"
+            elif stall.stalled():
+                run.error = (f"stalled: no site filled for {opts.stall_seconds:g} s "
+                             f"({statuses[-1][1]['sites_filled']}/{statuses[-1][1]['sites_total']} sites)")
             run.same_processes = all(p.poll() is None for p in agents.values())
             procs.stop_all()
             reader.join(5)
@@ -285,6 +307,8 @@ def main(argv: list[str] | None = None) -> int:
                    help="lockstep: at most HZ ticks a second (default 100), so that the agents left alone "
                         "cannot finish the build while the others are cut off")
     p.add_argument("--timeout", type=float, default=300.0, help="wall seconds a build may take")
+    p.add_argument("--stall-seconds", type=float, default=60.0,
+                   help="give up once no site has been filled for this long (default 60)")
     p.add_argument("--json", metavar="PATH", help="write every run's figures as JSON")
     p.add_argument("--logs", metavar="DIR", help="keep each process's log under DIR/run-N/")
     p.add_argument("-v", "--verbose", action="store_true", help="the world and the agents log more (see --logs)")
@@ -295,7 +319,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     opts = PartitionOptions(args.scenario, args.agents_cut, args.agents_kept, args.cut_seconds, args.cut_tick,
                             args.tick_mode, args.max_tick_rate, args.timeout,
-                            verbose=args.verbose)
+                            args.stall_seconds, verbose=args.verbose)
     results = []
     for i in range(args.runs):
         with tempfile.TemporaryDirectory(prefix="conag-partition-") as tmp:
