@@ -1,25 +1,35 @@
 """Recording overhead: the same lockstep `conag run` with and without `--record`.
 
-    python3 -m bench.bench_record                      # fig6, 1500 ticks, 3 repetitions of each
-    python3 -m bench.bench_record --ticks 3000 --reps 5
+    python3 -m bench.bench_record                      # nested_squares, 3 agents, 5 repetitions of each
+    python3 -m bench.bench_record --scenario scenarios/fig6.toml --reps 3
     python3 -m bench.bench_record --main-job           # also: the size of a recording of the README's main job
 
-Each repetition runs `conag run SCENARIO --max-ticks N` as a subprocess, alternating
-without and with `--record` (so a slow spell of a shared machine hits both), and times
-the tick rate of the build itself: from the first status of tick >= 1 to the final
-status, read from the progress lines (process start-up and numba loading are left out).
-Prints the median ticks per second of each and the slowdown; the recordings' sizes too.
+Each repetition runs `conag run SCENARIO --agents N --max-ticks T` as a subprocess,
+alternating without and with `--record` (so a slow spell of a shared machine hits both),
+and times the build itself: from the first progress line of tick >= 1 to the last one
+(process start-up and numba loading are left out). The default build (nested squares,
+three agents, complete at about 1,550 ticks) lasts several seconds; fig6 completes in
+about 300 ticks, a second, too short to time. Two figures per run:
+
+* ticks per second of the build (what the 5% budget is about);
+* CPU seconds per 1,000 ticks of every process of the run, and of the recorder alone,
+  over the same span: the steadier figure on a shared machine, since the run is
+  CPU-bound (its processes outnumber the cores) and the wall rate follows the CPU it needs.
+
+Prints the medians and the slowdowns; the recordings' sizes too.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import statistics
 import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -51,44 +61,100 @@ class BuildClock:
         return (self.last[0] - self.first[0]) / seconds, seconds
 
 
-def one_run(scenario: str, ticks: int, record: Path | None, port: int) -> tuple[float, int]:
-    """(ticks per second of the build, the recording's size in bytes or 0)."""
+def _proc_table() -> dict[int, tuple[int, float, str]]:
+    """pid -> (parent pid, CPU seconds so far, command line) of every process (Linux /proc)."""
+    table = {}
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat") as f:
+                    fields = f.read().rsplit(")", 1)[1].split()
+                with open(f"/proc/{entry}/cmdline", "rb") as f:
+                    cmdline = f.read().replace(b"\0", b" ").decode(errors="replace")
+            except OSError:
+                continue
+            cpu = (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+            table[int(entry)] = (int(fields[1]), cpu, cmdline)
+    return table
+
+
+def tree_cpu(pid: int, only: str | None = None) -> float:
+    """CPU seconds used so far by process `pid` and its live descendants (Linux /proc);
+    with `only`, just those whose command line holds that text."""
+    table = _proc_table()
+    total, todo = 0.0, [pid]
+    while todo:
+        p = todo.pop()
+        if p in table and (only is None or only in table[p][2]):
+            total += table[p][1]
+        todo += [c for c, (ppid, _, _) in table.items() if ppid == p]
+    return total
+
+
+@dataclass(frozen=True)
+class RunFigures:
+    rate: float             # ticks per second of the build
+    cpu_per_kilotick: float  # CPU seconds of all the run's processes per 1,000 ticks of the build
+    recorder_per_kilotick: float  # of the recorder alone
+    size: int               # bytes of the recording, or 0
+
+
+def one_run(scenario: str, agents: int | None, ticks: int, record: Path | None, port: int) -> RunFigures:
+    """Run one build and time it (see the module)."""
     cmd = [sys.executable, "-m", "conag", "run", scenario, "--headless", "--max-ticks", str(ticks),
            "--stall-ticks", "0", "--listen", f"tcp/127.0.0.1:{port}"]
+    if agents is not None:
+        cmd += ["--agents", str(agents)]
     if record is not None:
         cmd += ["--record", str(record)]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, text=True)
     clock = BuildClock()
+    cpu: list[tuple[float, float]] = []   # (all, recorder) at the first and the newest progress line
     for line in proc.stdout:
-        clock.observe(line)
+        if clock.observe(line):
+            now = (tree_cpu(proc.pid), tree_cpu(proc.pid, only="conag record"))
+            cpu = [cpu[0] if cpu else now, now]
     proc.wait()
     rate, _ = clock.rate(cmd)
-    return rate, (record.stat().st_size if record is not None and record.exists() else 0)
+    assert clock.first is not None and clock.last is not None
+    kiloticks = (clock.last[0] - clock.first[0]) / 1000
+    return RunFigures(rate, (cpu[1][0] - cpu[0][0]) / kiloticks, (cpu[1][1] - cpu[0][1]) / kiloticks,
+                      record.stat().st_size if record is not None and record.exists() else 0)
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--scenario", default="scenarios/fig6.toml")
-    p.add_argument("--ticks", type=int, default=1500)
-    p.add_argument("--reps", type=int, default=3)
+    p.add_argument("--scenario", default="scenarios/nested_squares.toml")
+    p.add_argument("--agents", type=int, default=3, help="agents (default 3; 0: the scenario's)")
+    p.add_argument("--ticks", type=int, default=3000, help="tick limit of each build (it stops when complete)")
+    p.add_argument("--reps", type=int, default=5)
     p.add_argument("--port", type=int, default=17601)
     p.add_argument("--main-job", action="store_true",
                    help="also record the README's main job (fig6 until complete) and print the file's size")
     args = p.parse_args(argv)
-    plain, recorded, sizes = [], [], []
+    agents = args.agents or None
+    plain: list[RunFigures] = []
+    recorded: list[RunFigures] = []
     with tempfile.TemporaryDirectory() as tmp:
         for rep in range(args.reps):
-            rate, _ = one_run(args.scenario, args.ticks, None, args.port)
-            plain.append(rate)
-            rate, size = one_run(args.scenario, args.ticks, Path(tmp) / f"r{rep}.mcap", args.port)
-            recorded.append(rate)
-            sizes.append(size)
-            print(f"rep {rep + 1}: {plain[-1]:.0f} ticks/s without, {recorded[-1]:.0f} with recording "
-                  f"({size / 1e6:.2f} MB)", flush=True)
-        a, b = statistics.median(plain), statistics.median(recorded)
-        print(f"{args.scenario}, {args.ticks} ticks, {args.reps} repetitions: median {a:.0f} ticks/s without, "
-              f"{b:.0f} with recording: slowdown {100 * (a - b) / a:.1f}% "
-              f"(ranges {min(plain):.0f}-{max(plain):.0f} and {min(recorded):.0f}-{max(recorded):.0f})")
+            plain.append(one_run(args.scenario, agents, args.ticks, None, args.port))
+            recorded.append(one_run(args.scenario, agents, args.ticks, Path(tmp) / f"r{rep}.mcap", args.port))
+            a, b = plain[-1], recorded[-1]
+            print(f"rep {rep + 1}: {a.rate:.0f} ticks/s without, {b.rate:.0f} with recording "
+                  f"({b.size / 1e6:.2f} MB); CPU s per 1000 ticks {a.cpu_per_kilotick:.2f} without, "
+                  f"{b.cpu_per_kilotick:.2f} with (recorder {b.recorder_per_kilotick:.2f})", flush=True)
+
+        def median(runs: list[RunFigures], field: str) -> float:
+            return statistics.median(getattr(r, field) for r in runs)
+
+        a, b = median(plain, "rate"), median(recorded, "rate")
+        ca, cb = median(plain, "cpu_per_kilotick"), median(recorded, "cpu_per_kilotick")
+        print(f"{args.scenario}, {agents or 'its'} agents, {args.reps} repetitions: median {a:.0f} ticks/s "
+              f"without, {b:.0f} with recording: slowdown {100 * (a - b) / a:.1f}% (ranges "
+              f"{min(r.rate for r in plain):.0f}-{max(r.rate for r in plain):.0f} and "
+              f"{min(r.rate for r in recorded):.0f}-{max(r.rate for r in recorded):.0f}); CPU per 1000 ticks "
+              f"{ca:.2f} s without, {cb:.2f} s with (+{100 * (cb - ca) / ca:.1f}%), the recorder "
+              f"{median(recorded, 'recorder_per_kilotick'):.2f} s")
         if args.main_job:
             out = Path(tmp) / "main.mcap"
             t0 = time.monotonic()

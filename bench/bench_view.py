@@ -18,33 +18,12 @@ from the run on a machine whose cores the run fills.
 from __future__ import annotations
 
 import argparse
-import os
 import shutil
 import statistics
 import subprocess
 import sys
 
-from bench.bench_record import ROOT, BuildClock
-
-
-def tree_cpu(pid: int) -> float:
-    """CPU seconds used so far by process `pid` and all its live descendants (Linux /proc)."""
-    stats = {}
-    for entry in os.listdir("/proc"):
-        if entry.isdigit():
-            try:
-                with open(f"/proc/{entry}/stat") as f:
-                    fields = f.read().rsplit(")", 1)[1].split()
-            except OSError:
-                continue
-            stats[int(entry)] = (int(fields[1]), (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK"))
-    total, todo = 0.0, [pid]
-    while todo:
-        p = todo.pop()
-        if p in stats:
-            total += stats[p][1]
-        todo += [c for c, (ppid, _) in stats.items() if ppid == p]
-    return total
+from bench.bench_record import ROOT, BuildClock, tree_cpu
 
 
 def one_run(scenario: str, agents: int, ticks: int, port: int, view_port: int | None,

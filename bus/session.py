@@ -42,6 +42,7 @@ def make_config(opts: BusOptions, *, serve: bool = False):
 
     if opts.zenoh_config:
         config = zenoh.Config.from_file(opts.zenoh_config)
+        _resolve_dictionary(config, opts.zenoh_config)
         if opts.connect:
             config.insert_json5("connect/endpoints", json.dumps(list(opts.connect)))
         if opts.listen:
@@ -66,6 +67,20 @@ def make_config(opts: BusOptions, *, serve: bool = False):
     if mode == "client":
         config.insert_json5("listen/endpoints", "[]")
     return config
+
+
+def is_client(opts: BusOptions, *, serve: bool = False) -> bool:
+    """Whether these options make a zenoh client (of a router: a multi-host or secure bus)."""
+    return json.loads(make_config(opts, serve=serve).get_json("mode")) == "client"
+
+
+def _resolve_dictionary(config, path: str) -> None:
+    """A relative user/password `dictionary_file` (a secure router's, `bus.deployment`) is
+    relative to its configuration file, not to wherever the router is started from."""
+    value = json.loads(config.get_json("transport/auth/usrpwd/dictionary_file"))
+    if isinstance(value, str) and value and not os.path.isabs(value):
+        resolved = os.path.join(os.path.dirname(os.path.abspath(path)), value)
+        config.insert_json5("transport/auth/usrpwd/dictionary_file", json.dumps(resolved))
 
 
 def open_session(opts: BusOptions, *, serve: bool = False):

@@ -6,6 +6,15 @@ attached would leave a lockstep world waiting for `--wait-agents` agents for goo
 run reports whether it completed, its exit code, ticks, sites and `bricks_total` (which
 must equal the scenario's: a kill neither loses nor makes a brick).
 
+With `kill_world_every` the world process itself is SIGKILLed too, every few seconds on
+average, counted from when the restarted world's frames come again, and not before the
+world has ticked one checkpoint interval past where it started (`conag run` restarts it
+from its last checkpoint, and the agents attach again; a world that dies before it gets a
+checkpoint further, three times in a row, is taken for one that cannot start).
+For each world kill the run records the ticks lost: the newest tick any agent's frame
+showed before the kill, less the tick the restarted world's first frame shows (at most the
+checkpoint interval). `kill_every` 0 kills no agents (only the world).
+
 The kill schedule comes from one seeded generator per run (`seed`, run index): the same
 seed picks the same agents at the same wall-clock offsets, though what they were doing at
 that moment is up to the machine's timing.
@@ -14,6 +23,7 @@ that moment is up to the machine's timing.
 from __future__ import annotations
 
 import json
+import os
 import signal
 import socket
 import subprocess
@@ -30,7 +40,8 @@ from bus import BusOptions, open_session
 from conag.run import control
 from protocol import keys
 from protocol.codec import ProtocolError, decode
-from protocol.messages import WorldStatus
+from protocol.messages import SensorFrame, WorldStatus
+from world_server.checkpoint import DEFAULT_EVERY
 from world_server.scenario import load_scenario
 from world_server.world import World
 
@@ -50,12 +61,18 @@ class ChaosOptions:
     stall_ticks: int = 3000
     run_timeout: float = 600.0     # wall seconds before a run is stopped (SIGTERM)
     world_seed: int | None = None  # --seed of `conag run` (default: the scenario's)
+    kill_world_every: float = 0.0  # mean wall seconds between SIGKILLs of the world (0: never)
+    checkpoint_every: int | None = None  # `conag run --checkpoint-every` (default: its own)
 
     def __post_init__(self) -> None:
         if self.runs < 1:
             raise ValueError("--runs must be >= 1")
-        if not self.kill_every > 0:
-            raise ValueError("--kill-every must be > 0 seconds")
+        if not self.kill_every >= 0:
+            raise ValueError("--kill-every must be >= 0 seconds (0: no agent is killed)")
+        if not self.kill_world_every >= 0:
+            raise ValueError("--kill-world-every must be >= 0 seconds (0: the world is not killed)")
+        if self.kill_every == 0 and self.kill_world_every == 0:
+            raise ValueError("nothing to kill: --kill-every and --kill-world-every are both 0")
         if not 0 <= self.restart_share <= 1:
             raise ValueError("--restart-share must be in [0, 1]")
         if self.min_alive < 1:
@@ -78,6 +95,9 @@ class ChaosRun:
     kills: int = 0
     restarts: int = 0
     left_dead: list[str] = field(default_factory=list)
+    world_kills: int = 0
+    world_restarts: int = 0        # as `conag run` reports them in its summary
+    ticks_lost: list[int] = field(default_factory=list)  # per world kill (see the module)
     wall_seconds: float = 0.0
 
     @property
@@ -88,7 +108,9 @@ class ChaosRun:
         state = "complete" if self.completed else "STALLED" if self.stalled else f"NOT complete (exit {self.exit_code})"
         return (f"run {self.run}: {state}: {self.sites_filled}/{self.sites_total} sites in {self.ticks} ticks, "
                 f"{self.kills} kills ({self.restarts} restarted, left dead: {', '.join(self.left_dead) or 'none'}), "
-                f"bricks_total {self.bricks_total} (expected {self.bricks_expected}), {self.wall_seconds:.0f} s")
+                f"bricks_total {self.bricks_total} (expected {self.bricks_expected}), {self.wall_seconds:.0f} s"
+                + (f", {self.world_kills} world kills ({self.world_restarts} restarts, ticks lost "
+                   f"{', '.join(map(str, self.ticks_lost)) or '-'})" if self.world_kills else ""))
 
 
 def _free_endpoint() -> str:
@@ -97,12 +119,76 @@ def _free_endpoint() -> str:
         return f"tcp/127.0.0.1:{s.getsockname()[1]}"
 
 
+class FrameWatch:
+    """The newest tick the agents' frames show, and per world kill the ticks lost: the newest
+    tick before the kill less the first tick of the restarted world (its frames have another
+    epoch, or a lower tick)."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self.newest, self.epoch = -1, None
+        self.started_at = 0  # the first tick of the world now running (0, or where it resumed)
+        self.lost: list[int] = []
+        self._killed: tuple[int, int | None] | None = None  # (newest tick, epoch) at a kill not yet recovered
+
+    def on_frame(self, sample) -> None:
+        try:
+            f = decode(sample.payload.to_bytes(), SensorFrame)
+        except ProtocolError:
+            return
+        with self._lock:
+            if self._killed is not None:
+                before, epoch = self._killed
+                if f.epoch == epoch and f.tick >= before:
+                    return  # a frame of the world that was killed, late
+                self.lost.append(before - f.tick)
+                self._killed = None
+                self.newest, self.epoch, self.started_at = f.tick, f.epoch, f.tick
+            elif f.tick > self.newest or f.epoch != self.epoch:
+                self.newest, self.epoch = f.tick, f.epoch
+
+    def killed(self) -> None:
+        with self._lock:
+            if self._killed is None:
+                self._killed = (self.newest, self.epoch)
+
+    @property
+    def recovering(self) -> bool:
+        """A world was killed and no frame of its successor has come yet."""
+        with self._lock:
+            return self._killed is not None
+
+
+def _world_pid(run_pid: int) -> int | None:
+    """The `conag world` child of the `conag run` process `run_pid` (Linux /proc), if any."""
+    children: list[int] = []
+    for task in Path(f"/proc/{run_pid}/task").glob("*"):
+        try:
+            children += [int(c) for c in (task / "children").read_text().split()]
+        except OSError:
+            continue
+    for pid in children:
+        try:
+            argv = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
+        except OSError:
+            continue
+        if b"conag" in argv and argv[argv.index(b"conag") + 1:argv.index(b"conag") + 2] == [b"world"]:
+            return pid
+    return None
+
+
+def _draw(rng: np.random.Generator, mean: float) -> float:
+    """Seconds to the next kill: uniform in [0.5, 1.5] x mean; never for a mean of 0."""
+    return float(mean * rng.uniform(0.5, 1.5)) if mean > 0 else float("inf")
+
+
 def chaos_run(opts: ChaosOptions, index: int, stop: threading.Event, log=print) -> ChaosRun:
     """One `conag run` under kills; `stop` ends it early (the run is stopped with SIGTERM)."""
     scenario = load_scenario(opts.scenario_path)
     n_agents = scenario.agents if opts.agents is None else opts.agents
     result = ChaosRun(index, bricks_expected=World(scenario).discs.bricks_total())
     rng = np.random.default_rng([opts.seed, index])
+    world_rng = np.random.default_rng([opts.seed, index, 1])  # its own: the agents' schedule stays as it was
     endpoint = _free_endpoint()
     alive = [f"a{i + 1}" for i in range(n_agents)]
     started = time.monotonic()
@@ -115,9 +201,12 @@ def chaos_run(opts: ChaosOptions, index: int, stop: threading.Event, log=print) 
             cmd += ["--max-ticks", str(opts.max_ticks)]
         if opts.world_seed is not None:
             cmd += ["--seed", str(opts.world_seed)]
+        if opts.checkpoint_every is not None:
+            cmd += ["--checkpoint-every", str(opts.checkpoint_every)]
         proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
         session = open_session(BusOptions(connect=(endpoint,)))
         ticking = threading.Event()
+        frames = FrameWatch()
 
         def on_status(sample) -> None:
             try:
@@ -126,47 +215,76 @@ def chaos_run(opts: ChaosOptions, index: int, stop: threading.Event, log=print) 
             except ProtocolError:
                 pass
 
-        status_sub = session.declare_subscriber(keys.status("w0"), on_status)
+        subs = [session.declare_subscriber(keys.status("w0"), on_status)]
+        if opts.kill_world_every:
+            subs.append(session.declare_subscriber(keys.all_agents("w0", "sensors"), frames.on_frame))
         try:
             while proc.poll() is None and not ticking.wait(0.1) and not stop.is_set():
                 if time.monotonic() - started > opts.run_timeout:
                     break
+            now = time.monotonic()
+            next_agent, next_world = now + _draw(rng, opts.kill_every), now + _draw(world_rng, opts.kill_world_every)
+            # A world is killed only once it has got one checkpoint past where it started: one
+            # that dies before (three times in a row) is taken for one that cannot start.
+            interval = opts.checkpoint_every or DEFAULT_EVERY
             while proc.poll() is None:
-                wait = float(opts.kill_every * rng.uniform(0.5, 1.5))
                 if stop.wait(0) or time.monotonic() - started > opts.run_timeout:
                     proc.send_signal(signal.SIGTERM)
                     break
+                if next_world == float("inf") and opts.kill_world_every and not frames.recovering:
+                    next_world = time.monotonic() + _draw(world_rng, opts.kill_world_every)
                 try:
-                    proc.wait(wait)
+                    proc.wait(min(max(min(next_agent, next_world) - time.monotonic(), 0.05), 0.5))
                     break
                 except subprocess.TimeoutExpired:
                     pass
-                victim = alive[int(rng.integers(len(alive)))]
-                restart = len(alive) <= opts.min_alive or bool(rng.random() < opts.restart_share)
-                answer = control(session, "w0", "restart" if restart else "kill", victim, timeout=5.0)
-                if not answer.ok:
-                    continue  # the run is ending, or not up yet
-                result.kills += 1
-                if restart:
-                    result.restarts += 1
-                else:
-                    alive.remove(victim)
-                    result.left_dead.append(victim)
-                log(f"  run {index}: {'restarted' if restart else 'killed'} {victim}")
+                now = time.monotonic()
+                if now >= next_world and frames.newest >= frames.started_at + interval:
+                    next_world = float("inf")  # the next is drawn once the restarted world ticks
+                    pid = _world_pid(proc.pid)
+                    if pid is not None:
+                        frames.killed()
+                        os.kill(pid, signal.SIGKILL)
+                        result.world_kills += 1
+                        log(f"  run {index}: killed the world (pid {pid}) at tick {frames.newest}")
+                if now >= next_agent:
+                    next_agent = now + _draw(rng, opts.kill_every)
+                    _kill_agent(opts, session, rng, alive, result, index, log)
             result.exit_code = proc.wait(opts.run_timeout)
         finally:
-            status_sub.undeclare()
+            for sub in subs:
+                sub.undeclare()
             session.close()
             if proc.poll() is None:
                 proc.kill()
                 proc.wait(10)
+        result.ticks_lost = list(frames.lost)
         if summary_path.exists():
             s = json.loads(summary_path.read_text(encoding="utf-8"))
             result.completed, result.stalled, result.ticks = s["completed"], s["stalled"], s["ticks"]
             result.sites_filled, result.sites_total, result.bricks_total = (s["sites_filled"], s["sites_total"],
                                                                             s["bricks_total"])
+            result.world_restarts = s.get("world_restarts", 0)
     result.wall_seconds = time.monotonic() - started
     return result
+
+
+def _kill_agent(opts: ChaosOptions, session, rng: np.random.Generator, alive: list[str], result: ChaosRun,
+                index: int, log) -> None:
+    """SIGKILL a random agent through `conag kill` / `conag restart`, never leaving fewer than
+    `min_alive` alive."""
+    victim = alive[int(rng.integers(len(alive)))]
+    restart = len(alive) <= opts.min_alive or bool(rng.random() < opts.restart_share)
+    answer = control(session, "w0", "restart" if restart else "kill", victim, timeout=5.0)
+    if not answer.ok:
+        return  # the run is ending, or not up yet
+    result.kills += 1
+    if restart:
+        result.restarts += 1
+    else:
+        alive.remove(victim)
+        result.left_dead.append(victim)
+    log(f"  run {index}: {'restarted' if restart else 'killed'} {victim}")
 
 
 def chaos(opts: ChaosOptions, stop: threading.Event, log=print) -> list[ChaosRun]:
@@ -183,6 +301,8 @@ def chaos(opts: ChaosOptions, stop: threading.Event, log=print) -> list[ChaosRun
 
 def report(opts: ChaosOptions, results: list[ChaosRun]) -> dict:
     """The whole experiment as JSON: the options, each run, and the totals."""
+    lost = [n for r in results for n in r.ticks_lost]
     return {"options": asdict(opts), "runs": [asdict(r) | {"bricks_kept": r.bricks_kept} for r in results],
             "completed": sum(r.completed for r in results), "bricks_kept": sum(r.bricks_kept for r in results),
-            "total": len(results)}
+            "total": len(results), "world_kills": sum(r.world_kills for r in results),
+            "world_restarts": sum(r.world_restarts for r in results), "max_ticks_lost": max(lost, default=0)}

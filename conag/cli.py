@@ -5,6 +5,7 @@
     conag perturb OP ...      remove, add or move a disc, add or remove a drop site, in a running world
     conag render SCENARIO     draw a scenario as a bird's-eye PNG
     conag router              run a zenoh router (for several hosts)
+    conag keys OUTDIR         write a secure deployment: router with access control, a credential per process
     conag agent --id ID       one agent process (--learn: a student learning from the teacher)
     conag teacher             the teacher process: reinforces learning students (paper §5.1)
     conag run SCENARIO        a world and its agents as processes, until the structure is done
@@ -30,24 +31,28 @@ import threading
 import time
 from dataclasses import asdict
 
-from bus import BusOptions, Declarations, open_session
+from bus import BusOptions, Declarations, is_client, open_session
 from conag.common import bus_args as _bus_args
 from conag.common import bus_options as _bus
 from conag.common import stop_on_signals as _stop_on_signals
 from conag.layouts import add_commands as add_layout_commands
 from conag.recordings import add_commands as add_recording_commands
+from conag.secure import add_commands as add_secure_commands
+from conag.secure import check_agent_credential
 from conag.view import add_commands as add_view_commands
 from world_server.summary import write_summary
 
-EXIT_ERROR = 1         # something failed (conag run: e.g. the world died without a final status)
+EXIT_ERROR = 1         # something failed (conag run: e.g. the world kept dying as soon as it started)
 EXIT_USAGE = 2
 EXIT_INCOMPLETE = 3    # conag run: the tick limit passed before the structure was complete
 EXIT_STALLED = 4       # conag run: no site was filled for --stall-ticks ticks
 EXIT_INTERRUPTED = 130  # Ctrl-C or SIGTERM (128 + SIGINT, as shells report an interrupted command)
-RUN_EPILOG = f"""exit codes: 0 the structure is complete; {EXIT_ERROR} an error (e.g. the world died);
-{EXIT_USAGE} a usage or scenario error; {EXIT_INCOMPLETE} not complete when the tick limit passed; {EXIT_STALLED}
-stalled: no site was filled for --stall-ticks ticks (a report of every agent's position, behaviour and blocker is
-printed first); {EXIT_INTERRUPTED} interrupted (Ctrl-C or SIGTERM) before the structure was complete"""
+RUN_EPILOG = f"""exit codes: 0 the structure is complete; {EXIT_ERROR} an error (e.g. the world kept dying as
+it started; a world that dies is otherwise restarted from its last checkpoint); {EXIT_USAGE} a usage or scenario
+error; {EXIT_INCOMPLETE} not complete when the tick limit passed; {EXIT_STALLED} stalled: no site was filled for
+--stall-ticks ticks (a report of every agent's position, behaviour and blocker is printed first); {EXIT_INTERRUPTED}
+interrupted (Ctrl-C or SIGTERM) before the structure was complete"""
+CHECKPOINT_EVERY = 100  # world_server.checkpoint.DEFAULT_EVERY, without importing it for --help
 AGENT_MAP_SIZE = 41  # AgentConfig's default, without importing the agent for --help
 
 
@@ -61,24 +66,43 @@ def cmd_world(args) -> int:
     import numpy as np
 
     from nodes.world_server import WorldServer
+    from world_server.checkpoint import DEFAULT_EVERY, CheckpointPlan
     from world_server.scenario import load_scenario
     from world_server.world import World
 
-    scenario = load_scenario(args.scenario)
-    seed = scenario.seed if args.seed is None else args.seed
-    world = World(scenario, np.random.default_rng(seed), world_id=args.world_id)
+    plan = None
+    if args.resume:
+        world, every = _resumed_world(args)
+        scenario = world.scenario
+        path = args.checkpoint or args.resume  # a resumed world goes on checkpointing where it came from
+        plan = CheckpointPlan(path, args.checkpoint_every or every or DEFAULT_EVERY)
+    else:
+        if args.scenario is None:
+            raise ValueError("conag world needs a SCENARIO file (or --resume CHECKPOINT)")
+        scenario = load_scenario(args.scenario)
+        seed = scenario.seed if args.seed is None else args.seed
+        world = World(scenario, np.random.default_rng(seed), world_id=args.world_id)
+        if args.checkpoint:
+            plan = CheckpointPlan(args.checkpoint, args.checkpoint_every or DEFAULT_EVERY)
     on_status = None if args.quiet else (lambda st: print(_status_line(st), flush=True))
     with _stop_on_signals() as stop:  # before the session opens: no signal finds us unprepared
         session = open_session(_bus(args), serve=True)
         try:
-            print(f"world {args.world_id}: {scenario.name} ({scenario.cols}x{scenario.rows} cells, "
+            print(f"world {world.world_id}: {scenario.name} ({scenario.cols}x{scenario.rows} cells, "
                   f"{len(world.sites_xy)} sites, {world.discs.bricks_total()} bricks), "
-                  f"{args.mode_tick or scenario.tick_mode} mode", flush=True)
-            if (args.mode_tick or scenario.tick_mode) == "lockstep":
+                  f"{args.mode_tick or scenario.tick_mode} mode"
+                  + (f", resumed from {args.resume} at tick {world.tick}" if args.resume else "")
+                  + (f", checkpoint every {plan.every} ticks to {plan.path}" if plan else ""), flush=True)
+            if (args.mode_tick or scenario.tick_mode) == "lockstep" and not args.resume:
                 print(f"lockstep: ticks start once {args.wait_agents} agent(s) have attached", flush=True)
+            # Through a router, frames sent "latest wins" (DROP) were lost under load, each costing a
+            # lockstep timeout and the agent's odometry of that tick (RELIABILITY.md); lockstep waits
+            # for every agent anyway, so there frames are sent BLOCK.
+            block = (args.mode_tick or scenario.tick_mode) == "lockstep" and is_client(_bus(args), serve=True)
             server = WorldServer(world, session, mode=args.mode_tick, max_ticks=args.ticks,
                                  stop_when_complete=args.stop_when_complete, wait_agents=args.wait_agents,
-                                 on_status=on_status, max_tick_rate=args.max_tick_rate)
+                                 on_status=on_status, block_frames=block, checkpoint=plan,
+                                 resumed=bool(args.resume), max_tick_rate=args.max_tick_rate)
             final = server.run(stop)
         finally:
             session.close()
@@ -86,6 +110,27 @@ def cmd_world(args) -> int:
     if args.summary:
         write_summary(final, args.summary, server.agent_states)
     return 0
+
+
+def _resumed_world(args):
+    """The world of `--resume FILE` and the interval it was checkpointed at (CheckpointError
+    is a ValueError: a usage error, exit 2)."""
+    from world_server.checkpoint import load_state, restore_world, resumed_epoch
+    from world_server.scenario import load_scenario
+
+    if args.seed is not None:
+        raise ValueError("--seed cannot be used with --resume: the checkpoint holds the generator's state")
+    state = load_state(args.resume)
+    world = restore_world(state)
+    if args.world_id != world.world_id:
+        raise ValueError(f"{args.resume} holds world {world.world_id!r}, not {args.world_id!r} (--world-id)")
+    if args.scenario is not None:
+        given = load_scenario(args.scenario)
+        if (given.name, given.layout) != (world.scenario.name, world.scenario.layout):
+            raise ValueError(f"{args.resume} holds a world of scenario {world.scenario.name!r}, not of "
+                             f"{args.scenario} ({given.name!r}); leave SCENARIO out to resume it")
+    world.epoch = resumed_epoch(world)  # a new run of the world: frames of the dead one are refused
+    return world, state.get("checkpoint_every")
 
 
 def _query(session, key: str, payload: bytes | None, timeout: float):
@@ -158,6 +203,13 @@ def _non_negative(text: str) -> int:
         value = -1
     if value < 0:
         raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}")
+    return value
+
+
+def _positive(text: str) -> int:
+    value = _non_negative(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
     return value
 
 
@@ -266,6 +318,7 @@ def cmd_agent(args) -> int:
     from nodes.world_link import AttachError
 
     opts = _agent_options(args)
+    check_agent_credential(args.zenoh_config, args.id)
     report = AgentReport()
 
     def raise_stop(_signum, _frame):
@@ -343,7 +396,8 @@ def cmd_run(args) -> int:
                       extra_agent_args=("--map-size", str(args.map_size), *learn_args,
                                         *(("--nearest-first",) if args.nearest_first else ())),
                       teacher=args.teacher, weights_dir=args.weights_dir, stall_ticks=args.stall_ticks,
-                      record=args.record, view=args.view, maps_every=args.maps_every)
+                      record=args.record, view=args.view, maps_every=args.maps_every, secure=args.secure,
+                      checkpoint_every=args.checkpoint_every or CHECKPOINT_EVERY)
     with _stop_on_signals() as stop:
         try:
             summary = run(opts, stop)
@@ -372,12 +426,15 @@ def cmd_chaos(args) -> int:
 
     opts = ChaosOptions(args.scenario, runs=args.runs, kill_every=args.kill_every, restart_share=args.restart_share,
                         min_alive=args.min_alive, seed=args.seed, agents=args.agents, max_ticks=args.max_ticks,
-                        stall_ticks=args.stall_ticks, run_timeout=args.run_timeout, world_seed=args.world_seed)
+                        stall_ticks=args.stall_ticks, run_timeout=args.run_timeout, world_seed=args.world_seed,
+                        kill_world_every=args.kill_world_every, checkpoint_every=args.checkpoint_every)
     with _stop_on_signals() as stop:
         results = chaos(opts, stop, log=lambda line: print(line, flush=True))
     out = report(opts, results)
     print(f"chaos {args.scenario}: {out['completed']}/{out['total']} runs complete, bricks_total kept in "
-          f"{out['bricks_kept']}/{out['total']}")
+          f"{out['bricks_kept']}/{out['total']}"
+          + (f", {out['world_kills']} world kills survived, at most {out['max_ticks_lost']} ticks lost per kill"
+             if out["world_kills"] else ""))
     if args.json:
         with open(args.json, "w", encoding="utf-8") as f:
             json.dump(out, f, indent=2)
@@ -406,8 +463,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for add in (_add_world, _add_status, _add_perturb, _add_agent, _add_teacher, _add_run, _add_chaos, _add_control,
-                _add_render, add_layout_commands, add_recording_commands, add_view_commands, _add_router):
-        add(sub)  # add_layout_commands: generate, check; add_recording_commands: record, replay, echo
+                _add_render, add_layout_commands, add_recording_commands, add_view_commands, _add_router,
+                add_secure_commands):
+        add(sub)  # add_layout_commands: generate, check; add_recording_commands: record, replay, echo; keys
     for command in sub.choices.values():  # -v also after the subcommand: `conag world X -v`
         command.add_argument("-v", "--verbose", dest="verbose_after", action="count", default=0,
                              help="more log output (-vv for debug); also accepted before the subcommand")
@@ -416,7 +474,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _add_world(sub) -> None:
     w = sub.add_parser("world", help="serve a world from a scenario file")
-    w.add_argument("scenario", help="scenario TOML file, e.g. scenarios/quick_wall.toml")
+    w.add_argument("scenario", nargs="?",
+                   help="scenario TOML file, e.g. scenarios/quick_wall.toml (may be left out with --resume)")
     w.add_argument("--ticks", type=int, help="stop after this many ticks")
     w.add_argument("--tick-mode", dest="mode_tick", choices=("lockstep", "realtime"),
                    help="override the scenario's tick mode")
@@ -428,6 +487,16 @@ def _add_world(sub) -> None:
     w.add_argument("--quiet", action="store_true", help="do not print periodic status lines")
     w.add_argument("--max-tick-rate", type=float, metavar="HZ",
                    help="lockstep: step at most HZ ticks per wall second (default: as fast as the agents answer)")
+    c = w.add_argument_group("checkpoints (the world survives its own death)")
+    c.add_argument("--checkpoint", metavar="FILE",
+                   help="write the whole world to FILE every --checkpoint-every ticks and when stopped (SIGTERM); "
+                        "atomic, the one before kept as FILE.prev")
+    c.add_argument("--checkpoint-every", type=_positive, metavar="N",
+                   help=f"ticks between checkpoints (default {CHECKPOINT_EVERY}; with --resume, the checkpoint's own, "
+                        "so the resumed world steps exactly as one that never stopped)")
+    c.add_argument("--resume", metavar="FILE",
+                   help="continue the world saved in checkpoint FILE from its tick (and go on checkpointing to FILE "
+                        "unless --checkpoint says otherwise); a truncated or corrupt FILE is refused")
     _bus_args(w)
     w.set_defaults(func=cmd_world)
 
@@ -500,6 +569,9 @@ def _add_run(sub) -> None:
     u.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
                    help="where the world listens (default tcp/127.0.0.1:7447)")
     u.add_argument("--world-id", default="w0")
+    u.add_argument("--secure", nargs="?", const="", metavar="DIR",
+                   help="a secure bus: a zenoh router with access control on the --listen endpoint, every "
+                        "process its own credential (from DIR, written by `conag keys`; fresh ones without DIR)")
     u.add_argument("--record", metavar="OUT.mcap",
                    help="record every message of the run to an MCAP file (conag record; see conag replay)")
     u.add_argument("--view", nargs="?", type=int, const=8765, metavar="PORT",
@@ -507,6 +579,9 @@ def _add_run(sub) -> None:
     u.add_argument("--maps-every", type=_non_negative, default=0, metavar="N",
                    help="the agents publish their maps every N ticks for --record (default 0: off) and --view "
                         "(default: conag view's)")
+    u.add_argument("--checkpoint-every", type=_positive, metavar="N",
+                   help=f"the world checkpoints every N ticks (default {CHECKPOINT_EVERY}); when its process dies "
+                        "the run restarts it from the last checkpoint and the agents attach again")
     u.add_argument("--map-size", type=int, default=AGENT_MAP_SIZE, metavar="N",
                    help=f"cells per side of every agent's maps, odd (default {AGENT_MAP_SIZE})")
     u.add_argument("--nearest-first", action="store_true",
@@ -527,9 +602,14 @@ def _add_chaos(sub) -> None:
     c.add_argument("scenario")
     c.add_argument("--runs", type=int, default=1, help="conag runs, one after the other (default 1)")
     c.add_argument("--kill-every", type=float, default=3.0, metavar="S",
-                   help="mean wall seconds between kills (default 3)")
+                   help="mean wall seconds between agent kills (default 3; 0: no agent is killed)")
     c.add_argument("--restart-share", type=float, default=0.5, metavar="P",
                    help="chance that a killed agent is started again at once (default 0.5)")
+    c.add_argument("--kill-world-every", type=float, default=0.0, metavar="S",
+                   help="also SIGKILL the world process every S wall seconds on average (default 0: never); "
+                        "conag run restarts it from its last checkpoint")
+    c.add_argument("--checkpoint-every", type=_positive, metavar="N",
+                   help=f"the world's checkpoint interval in ticks (default {CHECKPOINT_EVERY})")
     c.add_argument("--min-alive", type=int, default=1, metavar="N",
                    help="never leave fewer agents alive (a kill then restarts; default 1)")
     c.add_argument("--seed", type=int, default=0, help="seed of the kill schedule (default 0)")

@@ -280,7 +280,7 @@ def partition_run(opts: PartitionOptions, log_dir: Path, log=print) -> Partition
             with open(log_dir / "status.jsonl", "w", encoding="utf-8") as f:
                 f.writelines(json.dumps({"t": round(t - started, 3), **st}) + "\n" for t, st in statuses)
             measure(statuses, t_cut, t_restore, cut, kept, run)
-            run.said_waiting = all("waiting for it" in procs.log(a) for a in cut)
+            run.said_waiting = all("waiting for world" in procs.log(a) for a in cut)
         except (RuntimeError, OSError) as exc:
             run.error = str(exc)
         finally:

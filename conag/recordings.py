@@ -169,6 +169,7 @@ def _verify(args, rec, entries, world_id: str) -> int:
     from nodes.replayer import drive_world
     from nodes.world_server import WorldServer
     from recording.replay import LockstepScript
+    from world_server.checkpoint import CheckpointPlan
     from world_server.scenario import parse_scenario
     from world_server.world import World
 
@@ -182,6 +183,9 @@ def _verify(args, rec, entries, world_id: str) -> int:
     # never times out itself (a busy machine makes the replay slower, not different).
     scenario = replace(scenario, world=replace(scenario.world, lockstep_timeout=VERIFY_TIMEOUT))
     world = World(scenario, np.random.default_rng(int(rec.info["seed"])), world_id=world_id)
+    # A world that checkpointed rebuilt its physics at every checkpoint: so does this one.
+    every = rec.info.get("checkpoint_every")
+    plan = CheckpointPlan(None, int(every)) if every else None
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         endpoint = f"tcp/127.0.0.1:{s.getsockname()[1]}"
@@ -191,7 +195,8 @@ def _verify(args, rec, entries, world_id: str) -> int:
         client = open_session(BusOptions(connect=(endpoint,)))
         try:
             server = WorldServer(world, serve, mode="lockstep", max_ticks=script.last_tick + 1,
-                                 wait_agents=len(script.attaches.get(first, ())))
+                                 wait_agents=len({w.agent_id for w in script.attaches.get(first, ())}),
+                                 checkpoint=plan)
             world_stop = threading.Event()
             thread = threading.Thread(target=server.run, args=(world_stop,), daemon=True)
             thread.start()

@@ -9,9 +9,20 @@ run summary. A run that fills no site for `stall_ticks` ticks is stalled: it pri
 everything and is marked `stalled` in the summary, so a stuck build never just sits
 there until the limit.
 
+The run supervises the world: the world checkpoints into the run's temporary directory
+every `checkpoint_every` ticks, and when its process dies without a final status (SIGKILL,
+a crash) the run says so and starts it again from its last good checkpoint (from the
+start if it had written none yet); the agents wait for it and attach again by themselves.
+A world that dies `MAX_QUICK_DEATHS` times in a row within `QUICK_DEATH` seconds of
+starting, before it got a checkpoint further, ends the run as an error.
+
 With `record`, a `conag record` process records the run (`nodes/recorder.py`): it starts
 after the world and before the agents, which start once it has heard the world, so the
 recording holds every tick; it stops last, after the agents' final state reports.
+
+With `secure` (`conag run --secure`, `conag/secure.py`), a zenoh router with access control
+listens on the run's endpoint, every process is a client of it with its own credential, and
+this process's session is the operator's.
 """
 
 from __future__ import annotations
@@ -27,12 +38,18 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from bus import BusOptions, Declarations, open_session
+from bus import Declarations, open_session
+from bus.acl import OBSERVER, TEACHER, WORLD, agent_user
+from conag.secure import bus_flags, run_bus_options, secure_bus
 from protocol import keys
 from protocol.codec import ProtocolError, decode, encode
 from protocol.messages import AgentState, RunControl, RunControlResult, WorldStatus
+from world_server.checkpoint import DEFAULT_EVERY, CheckpointError, newest_good, read_checkpoint
 from world_server.scenario import Scenario
 from world_server.stall import DEFAULT_STALL_TICKS, StallWatch
+
+MAX_QUICK_DEATHS = 3  # a world dying this many times in a row soon after starting is not restarted again
+QUICK_DEATH = 10.0    # wall seconds: a death sooner than this after starting counts as quick
 
 
 @dataclass
@@ -54,6 +71,8 @@ class RunOptions:
     record: str | None = None         # record the run to this MCAP file (`conag record`)
     view: int | None = None           # serve the browser viewer on this port (`conag view`)
     maps_every: int = 0               # the recorder and viewer ask for the agents' maps every N ticks
+    secure: str | None = None         # a secure bus (conag/secure.py): a deployment dir; "" a fresh one
+    checkpoint_every: int = DEFAULT_EVERY  # ticks between the world's checkpoints (it is restarted from the last)
 
 
 class RunEnding(RuntimeError):
@@ -72,7 +91,7 @@ class Fleet:
     def start(self, agent_id: str) -> subprocess.Popen:
         o = self.opts
         cmd = [sys.executable, "-m", "conag", "agent", "--id", agent_id, "--world-id", o.world_id,
-               "--connect", o.endpoint, "--seed", str(o.seed if o.seed is not None else o.scenario.seed),
+               *bus_flags(o, agent_user(agent_id)), "--seed", str(o.seed if o.seed is not None else o.scenario.seed),
                *o.extra_agent_args]
         if o.weights_dir:
             weights = Path(o.weights_dir) / f"{agent_id}.json"
@@ -127,8 +146,9 @@ class RunBus:
 
     def __init__(self, opts: RunOptions, fleet: Fleet, watch: StallWatch, tty: bool):
         self.opts, self.watch, self.tty = opts, watch, tty
+        self.world_restarts = 0
         self._started = time.monotonic()
-        self.session = open_session(BusOptions(connect=(opts.endpoint,)))
+        self.session = open_session(run_bus_options(opts))
         self._declared = Declarations()
         w, add = opts.world_id, self._declared.add
         add(self.session.declare_subscriber(keys.status(w), self.on_status))
@@ -143,7 +163,7 @@ class RunBus:
             return
         self.watch.observe(st)
         if not self.opts.quiet and not self.watch.stalled:
-            line = _progress(st, self._started)
+            line = _progress(st, self._started, self.world_restarts)
             print(("\r" + line) if self.tty else line, end="" if self.tty else "\n", flush=True)
 
     def on_state(self, sample) -> None:
@@ -170,21 +190,74 @@ class RunBus:
         self.close()
 
 
-def _progress(st: WorldStatus, started: float) -> str:
+def _progress(st: WorldStatus, started: float, world_restarts: int = 0) -> str:
     return (f"tick {st.tick:>7}  sites {st.sites_filled}/{st.sites_total}  "
             f"agents alive {st.agents_alive}/{len(st.agent_ids)}  {time.monotonic() - started:6.1f} s"
+            + (f"  world restarts {world_restarts}" if world_restarts else "")
             + ("  COMPLETE" if st.completed else ""))
 
 
 def run(opts: RunOptions, stop: threading.Event) -> dict:
     """Run the scenario; returns the run summary (also written to opts.summary)."""
     with tempfile.TemporaryDirectory(prefix="conag-run-") as tmp:  # gone however the run ends
-        return _run(opts, stop, Path(tmp) / "final.json")
+        n_agents = opts.scenario.agents if opts.agents is None else opts.agents
+        with secure_bus(opts, n_agents, Path(tmp)) as bus_opts:
+            return _run(bus_opts, stop, Path(tmp))
 
 
-def _run(opts: RunOptions, stop: threading.Event, final_path: Path) -> dict:
+@dataclass
+class WorldProcess:
+    """The run's world process, started again from its last checkpoint when it dies."""
+
+    opts: RunOptions
+    n_agents: int
+    final_path: Path
+    checkpoint: Path
+    proc: subprocess.Popen | None = None
+    restarts: int = 0
+    started: float = 0.0
+    from_tick: int = -1      # the tick of the checkpoint it started from (-1: the start)
+    quick_deaths: int = 0
+
+    def start(self, resume: Path | None = None) -> None:
+        self.proc = _start_world(self.opts, self.n_agents, self.final_path, self.checkpoint, resume)
+        self.started = time.monotonic()
+        self.from_tick = _checkpoint_tick(resume) if resume else -1
+
+    def died(self) -> bool:
+        """The process exited without writing the final status (killed, crashed)."""
+        return self.proc.poll() is not None and not self.final_path.exists()
+
+    def restart(self) -> str:
+        """Start it again from the newest good checkpoint; what happened, for the user."""
+        code = self.proc.returncode
+        resume = newest_good(self.checkpoint)
+        tick = _checkpoint_tick(resume) if resume else -1
+        # Quick: soon after starting, and before it got one checkpoint further (a world that
+        # cannot even start; not one that was killed while it worked).
+        quick = time.monotonic() - self.started < QUICK_DEATH and tick <= self.from_tick
+        self.quick_deaths = self.quick_deaths + 1 if quick else 0
+        if self.quick_deaths >= MAX_QUICK_DEATHS:
+            raise RuntimeError(f"the world exited ({code}) {self.quick_deaths} times in a row within "
+                               f"{QUICK_DEATH:g} s of starting; not starting it again")
+        where = f"its checkpoint of tick {tick}" if resume else "the start (no checkpoint yet)"
+        self.restarts += 1
+        self.start(resume)
+        return f"the world died (exit {code}); restarted it from {where} (world restart {self.restarts})"
+
+
+def _checkpoint_tick(path: Path) -> int:
+    try:
+        return int(read_checkpoint(path)["tick"])
+    except (OSError, CheckpointError, KeyError, TypeError, ValueError):
+        return -1
+
+
+def _run(opts: RunOptions, stop: threading.Event, tmp: Path) -> dict:
     n_agents = opts.scenario.agents if opts.agents is None else opts.agents
-    world = _start_world(opts, n_agents, final_path)
+    world = WorldProcess(opts, n_agents, tmp / "final.json", tmp / "world.ckpt")
+    world.start()
+    final_path = world.final_path
     if opts.weights_dir:
         Path(opts.weights_dir).mkdir(parents=True, exist_ok=True)
     teacher = _start_teacher(opts) if opts.teacher else None
@@ -203,11 +276,17 @@ def _run(opts: RunOptions, stop: threading.Event, final_path: Path) -> dict:
                 viewer = _start_viewer(opts)
             for i in range(n_agents):
                 fleet.start(f"a{i + 1}")
-            _wait_until(lambda: world.poll() is not None, stop.is_set, lambda: watch.stalled)
+            while True:
+                _wait_until(lambda: world.proc.poll() is not None, stop.is_set, lambda: watch.stalled)
+                if stop.is_set() or watch.stalled or not world.died():
+                    break
+                message = world.restart()
+                run_bus.world_restarts = world.restarts
+                print(("\n" if tty else "") + message, flush=True)
             if watch.stalled:
                 print(("\n" if tty else "") + "\n".join(watch.report), flush=True)
         finally:
-            _stop(world, grace=10.0)
+            _stop(world.proc, grace=10.0)
             fleet.stop_all()
             if teacher is not None:
                 _stop(teacher)
@@ -217,8 +296,9 @@ def _run(opts: RunOptions, stop: threading.Event, final_path: Path) -> dict:
                 _stop(recorder, grace=60.0)  # last: it writes what is queued, the summary and the footer
     if tty and not watch.stalled:
         print()
-    summary = _final_summary(final_path, world)
+    summary = _final_summary(final_path, world.proc)
     summary["stalled"] = watch.stalled
+    summary["world_restarts"] = world.restarts
     if opts.summary and opts.summary != "-":
         Path(opts.summary).write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
     return summary
@@ -233,22 +313,23 @@ def _wait_until(*conditions: Callable[[], bool], poll: float = 0.1) -> None:
 
 def _start_teacher(opts: RunOptions) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "conag", "teacher", "--world-id", opts.world_id,
-                             "--connect", opts.endpoint, "--quiet"], stdin=subprocess.DEVNULL,
+                             *bus_flags(opts, TEACHER), "--quiet"], stdin=subprocess.DEVNULL,
                             stdout=subprocess.DEVNULL)
 
 
 def _start_recorder(opts: RunOptions) -> subprocess.Popen:
     seed = opts.seed if opts.seed is not None else opts.scenario.seed
     cmd = [sys.executable, "-m", "conag", "record", opts.record, "--world-id", opts.world_id,
-           "--connect", opts.endpoint, "--scenario", opts.scenario_path, "--seed", str(seed),
+           *bus_flags(opts, OBSERVER), "--scenario", opts.scenario_path, "--seed", str(seed),
            "--note", f"agents={opts.agents if opts.agents is not None else opts.scenario.agents}",
-           "--note", "agent_args=" + " ".join(opts.extra_agent_args), "--maps-every", str(opts.maps_every)]
+           "--note", "agent_args=" + " ".join(opts.extra_agent_args), "--maps-every", str(opts.maps_every),
+           "--note", f"checkpoint_every={opts.checkpoint_every}"]
     return subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
 
 
 def _start_viewer(opts: RunOptions) -> subprocess.Popen:
     """`conag view` on the run's bus; it prints the page's address (stdout is the run's)."""
-    cmd = [sys.executable, "-m", "conag", "view", "--world-id", opts.world_id, "--connect", opts.endpoint,
+    cmd = [sys.executable, "-m", "conag", "view", "--world-id", opts.world_id, *bus_flags(opts, OBSERVER),
            "--port", str(opts.view)]
     if opts.maps_every:
         cmd += ["--maps-every", str(opts.maps_every)]  # else the viewer's default
@@ -257,12 +338,17 @@ def _start_viewer(opts: RunOptions) -> subprocess.Popen:
     return subprocess.Popen(cmd, stdin=subprocess.DEVNULL)
 
 
-def _start_world(opts: RunOptions, n_agents: int, final_path: Path) -> subprocess.Popen:
-    """The world process; it stops by itself when complete or out of ticks, writing `final_path`."""
+def _start_world(opts: RunOptions, n_agents: int, final_path: Path, checkpoint: Path,
+                 resume: Path | None = None) -> subprocess.Popen:
+    """The world process; it stops by itself when complete or out of ticks, writing `final_path`.
+    It checkpoints to `checkpoint`; with `resume` it continues from that checkpoint."""
     cmd = [sys.executable, "-m", "conag", "world", opts.scenario_path, "--world-id", opts.world_id,
-           "--listen", opts.endpoint, "--ticks", str(opts.max_ticks or opts.scenario.max_ticks),
-           "--stop-when-complete", "--wait-agents", str(max(n_agents, 1)), "--quiet", "--summary", str(final_path)]
-    if opts.seed is not None:
+           *bus_flags(opts, WORLD, world=True), "--ticks", str(opts.max_ticks or opts.scenario.max_ticks),
+           "--stop-when-complete", "--wait-agents", str(max(n_agents, 1)), "--quiet", "--summary", str(final_path),
+           "--checkpoint", str(checkpoint), "--checkpoint-every", str(opts.checkpoint_every)]
+    if resume is not None:
+        cmd += ["--resume", str(resume)]
+    elif opts.seed is not None:
         cmd += ["--seed", str(opts.seed)]
     return subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
 

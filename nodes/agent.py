@@ -5,6 +5,13 @@ body back and rebuilds its maps from its sensors), then for every sensor frame: 
 decision step, the command to the world, the Decision for the teacher. Frames are
 "latest wins"; a slow agent acts on the newest one.
 
+When its world goes (the world's liveliness token disappears: killed, or stopped), the
+agent says so in its log ("waiting for world w0 ..." once it has been gone `WAIT_QUIET`
+seconds, again every `WAIT_REPORT` seconds),
+waits for a world with that id to come back (`conag run` restarts it from its last
+checkpoint) and attaches again like a restarted agent: a new Welcome, maps rebuilt from
+the sensors (the body is where the checkpoint left it, not where the old maps think).
+
 With `learning` (`conag agent --learn`) the construction network is a `Student`
 (random weights from the seed, or loaded from a file) instead of the engineered one:
 before each step the agent applies every reinforcement that has arrived to the decision
@@ -15,17 +22,12 @@ and on the way out. With no teacher on the bus it keeps acting on its current we
 Blueprint changes and state reports go through `nodes.agent_feeds.AgentFeeds`: the newest
 blueprint is applied before each step, an AgentState is published every 100 ticks and
 on exit.
-
-When its world goes and comes back (a network partition, a world started again),
-`nodes.reattach.Reattach` attaches again by itself; if the new Welcome says the world had
-held the agent for gone (a restart), or the blueprint changed meanwhile, the agent starts
-a fresh brain from it, as a restarted process would (its brick was put down, its body may
-stand elsewhere).
 """
 
 from __future__ import annotations
 
 import logging
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -35,13 +37,14 @@ from agent_runtime.config import AgentConfig
 from agent_runtime.learning import Student
 from bus import undeclare
 from nodes.agent_feeds import AgentFeeds
-from nodes.reattach import Reattach
 from nodes.student_link import StudentLink
-from nodes.world_link import WorldLink
+from nodes.world_link import AttachError, WorldLink
 from protocol import keys
 from protocol.codec import encode
 
 log = logging.getLogger("conag.agent")
+WAIT_QUIET = 1.0    # seconds a world may be gone before the agent warns that it waits for it
+WAIT_REPORT = 30.0  # seconds between "waiting for world" lines
 
 
 @dataclass(frozen=True)
@@ -119,10 +122,9 @@ class _AgentProcess:
         w, a = opts.world_id, opts.agent_id
         self.link = WorldLink(session, w, a)
         self.feeds = AgentFeeds(session, w, a)  # before attaching: no blueprint change is missed
-        self.reattach = Reattach(session, self.link, attach_timeout=min(opts.attach_timeout, 10.0))
         self.brain: Brain | None = None
-        self.welcome = None  # the Welcome the brain acts on
         self.tick = 0
+        self.reattaches = 0  # worlds lost and found again
         self.teacher = StudentLink(session, w, a) if self.learning else None
         self.decisions = None if self.learning else session.declare_publisher(keys.decision(w, a), express=True)
         report.student, report.link, report.world_link = self.student, self.teacher, self.link
@@ -131,38 +133,51 @@ class _AgentProcess:
         welcome = self.link.attach(timeout=self.opts.attach_timeout)
         log.info("agent %s attached to body %d at (%.2f, %.2f)%s", self.opts.agent_id, welcome.body, welcome.x,
                  welcome.y, f", restart {welcome.restarts}" if welcome.restarts else "")
-        self._start_brain(welcome)
+        self._new_brain(welcome)
 
-    def _start_brain(self, welcome) -> None:
+    def _new_brain(self, welcome) -> None:
         # Each incarnation gets its own stream: a restart must not replay the same choices.
-        self.brain = Brain(welcome, self.opts.cfg, np.random.default_rng([self.opts.seed, welcome.restarts]),
+        self.brain = Brain(welcome, self.opts.cfg,
+                           np.random.default_rng([self.opts.seed, welcome.restarts, self.reattaches]),
                            network=self.student)
-        self.welcome = welcome
         self.tick = welcome.tick - 1
-
-    def _adopt(self, welcome) -> None:
-        """The link attached again (`Reattach`): a fresh brain if the world had this agent
-        gone or its blueprint changed meanwhile; else the same brain goes on."""
-        old = self.welcome
-        if welcome.restarts != old.restarts or welcome.blueprint_version != old.blueprint_version \
-                or welcome.epoch != old.epoch:
-            log.warning("agent %s starts afresh from the new Welcome (restart %d)", self.opts.agent_id,
-                        welcome.restarts)
-            self._start_brain(welcome)
-        else:
-            self.welcome = welcome
 
     def serve(self, stop) -> None:
         while stop is None or not stop.is_set():
             frame = self.link.next_frame(self.tick, timeout=None if stop is None else 0.5)
             if frame is not None:
                 self.step(frame)
+            elif self.link.world_lost:
+                self.reattach(stop)
+
+    def reattach(self, stop) -> None:
+        """The world is gone: say so (unless it was only stopping along with this agent),
+        wait for it to come back, attach again."""
+        a, w = self.opts.agent_id, self.opts.world_id
+        lost_at, said = time.monotonic(), 0.0
+        log.info("agent %s: world %s is gone (last tick %d); waiting for it", a, w, self.tick)
+        while stop is None or not stop.is_set():
+            if self.link.wait_for_world(0.25):
+                try:
+                    welcome = self.link.attach(timeout=self.opts.attach_timeout)
+                except AttachError as exc:
+                    log.warning("agent %s: %s; still waiting for world %s ...", a, exc, w)
+                    continue
+                self.reattaches += 1
+                log.warning("agent %s re-attached to world %s at tick %d (body %d at (%.2f, %.2f))", a, w,
+                            welcome.tick, welcome.body, welcome.x, welcome.y)
+                self._new_brain(welcome)
+                return
+            waited = time.monotonic() - lost_at
+            # Not at once: when a run ends, its world stops a moment before its agents do.
+            if waited >= WAIT_QUIET and (not said or waited - said >= WAIT_REPORT):
+                log.warning("agent %s: world %s is gone (last tick %d, %.0f s ago); waiting for world %s to "
+                            "come back ...", a, w, self.tick, waited, w)
+                said = waited
 
     def step(self, frame) -> None:
         """Learn from the reinforcements that came, decide, act, tell the teacher, report."""
         learning, student, teacher = self.learning, self.student, self.teacher
-        if self.link.welcome is not self.welcome:
-            self._adopt(self.link.welcome)
         if teacher is not None:
             for d, r in teacher.poll(wait=learning.wait):
                 student.learn(d.state, d.arm, d.motor, r.arm, r.motor, learning.eta)
@@ -189,7 +204,6 @@ class _AgentProcess:
         if self.teacher is not None:
             self.teacher.close()
         undeclare(self.decisions)
-        self.reattach.close()
         self.link.close()
 
 

@@ -91,7 +91,8 @@ class AgentFeeds:
 
     def after_step(self, brain, tick: int) -> None:
         """Publish the brain's state report if `every` ticks have passed since the last one."""
-        if self._last_report is None or tick - self._last_report >= self.every:
+        # A lower tick: a world resumed from a checkpoint, counting from there again.
+        if self._last_report is None or not 0 <= tick - self._last_report < self.every:
             self.report(brain, tick)
         every = self.maps_every
         if every and tick % every == 0:

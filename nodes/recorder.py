@@ -2,8 +2,8 @@
 
 It subscribes to everything published under one world's root (`<root>/world/<id>/**`:
 frames, commands, decisions, reinforcements, statuses, blueprints, agent states, the
-world's welcomes and perturbations). zenoh's callback only stamps each sample with the
-clock and queues it; the loop thread writes them, ends a chunk every `flush_every`
+world's welcomes and perturbations). zenoh queues them in a FIFO channel; the loop
+thread takes each, stamps it with the clock and writes it, ends a chunk every `flush_every`
 seconds (what a SIGKILL can lose) and, once stopped, writes what is still queued, the
 summary and the footer, and renames the file into place.
 
@@ -18,7 +18,6 @@ request token, see nodes/agent_feeds.py), so they are recorded too.
 from __future__ import annotations
 
 import logging
-import queue
 import threading
 import time
 from collections.abc import Callable, Mapping
@@ -34,6 +33,9 @@ from protocol.messages import WorldStatus
 from recording.mcap_log import DEFAULT_TICK_NS, McapRecorder
 
 log = logging.getLogger("conag.record")
+
+QUEUE_DEPTH = 65_536   # samples zenoh may hold for the writer; when full, zenoh's receiving thread waits
+IDLE_SLEEP = 0.002     # seconds the writer sleeps when nothing is waiting
 
 
 @dataclass
@@ -53,40 +55,31 @@ def run_recorder(session: zenoh.Session, world_id: str, out: str | Path, stop: t
                  clock: Callable[[], int] = time.time_ns, report: RecordReport | None = None) -> RecordReport:
     """Record world `world_id` into `out` until `stop` is set; returns (and fills in) `report`."""
     report = report if report is not None else RecordReport()
-    samples: queue.SimpleQueue = queue.SimpleQueue()
     status_key = keys.status(world_id)
-
-    def on_sample(sample: zenoh.Sample) -> None:
-        samples.put((str(sample.key_expr), sample.payload.to_bytes(), clock()))
-
     recorder = McapRecorder(out, metadata, tick_ns=tick_ns)
     try:
         with Declarations() as declared:
-            declared.add(session.declare_subscriber(f"{keys.world_root(world_id)}/**", on_sample))
+            # A FIFO channel drained by this thread, not a Python callback: the callback's
+            # hand-off from zenoh's thread (and a queue) cost more than writing the message.
+            sub = declared.add(session.declare_subscriber(f"{keys.world_root(world_id)}/**",
+                                                          zenoh.handlers.FifoChannel(QUEUE_DEPTH)))
+            inbox = sub.handler
             if maps_every:  # the agents' map snapshots, every `maps_every` ticks
                 declared.add(session.liveliness().declare_token(keys.maps_request_token(world_id, recorder_id,
                                                                                          maps_every)))
             last_flush = time.monotonic()
             while not stop.is_set():
-                try:
-                    item = samples.get(timeout=0.1)
-                except queue.Empty:
-                    item = None
-                if item is not None:
-                    _write(recorder, item, status_key, report)
-                    if not report.heard_world.is_set() and item[0] == status_key:
-                        report.heard_world.set()
-                        declared.add(session.liveliness().declare_token(keys.recorder_token(world_id, recorder_id)))
-                        log.info("recorder %s: heard world %s", recorder_id, world_id)
+                if not _drain(inbox, recorder, status_key, report, clock):
+                    time.sleep(IDLE_SLEEP)
+                if not report.heard_world.is_set() and report.status is not None:
+                    report.heard_world.set()
+                    declared.add(session.liveliness().declare_token(keys.recorder_token(world_id, recorder_id)))
+                    log.info("recorder %s: heard world %s", recorder_id, world_id)
                 if time.monotonic() - last_flush >= flush_every:
                     recorder.flush()
                     last_flush = time.monotonic()
-        # Undeclared: nothing more arrives; write what is queued.
-        while True:
-            try:
-                _write(recorder, samples.get_nowait(), status_key, report)
-            except queue.Empty:
-                break
+        # Undeclared: nothing more arrives; write what is still in the channel.
+        _drain(inbox, recorder, status_key, report, clock)
     finally:
         st = report.status
         end = {} if st is None else {"scenario_name": st.scenario, "seed": st.seed, "mode": st.mode,
@@ -96,8 +89,23 @@ def run_recorder(session: zenoh.Session, world_id: str, out: str | Path, stop: t
     return report
 
 
-def _write(recorder: McapRecorder, item: tuple[str, bytes, int], status_key: str, report: RecordReport) -> None:
-    key, data, t = item
+def _drain(inbox, recorder: McapRecorder, status_key: str, report: RecordReport,
+           clock: Callable[[], int]) -> int:
+    """Write every sample waiting in `inbox`; returns how many (the channel, once closed
+    by the undeclare and emptied, says so with an error: nothing is left then)."""
+    n = 0
+    while True:
+        try:
+            sample = inbox.try_recv()
+        except zenoh.ZError:
+            return n
+        if sample is None:
+            return n
+        _write(recorder, str(sample.key_expr), sample.payload.to_bytes(), clock(), status_key, report)
+        n += 1
+
+
+def _write(recorder: McapRecorder, key: str, data: bytes, t: int, status_key: str, report: RecordReport) -> None:
     recorder.add(key, data, t)
     if key == status_key:
         try:

@@ -142,7 +142,10 @@ def _attach(session: zenoh.Session, world_id: str, agent: str, timeout: float) -
     deadline = time.monotonic() + timeout
     error = "no world answered"
     while time.monotonic() < deadline:
-        for reply in session.get(keys.attach(world_id, agent), payload=hello, timeout=1.0):
+        # One Hello at a time, answered or refused: a Hello sent again while a slow world is still
+        # on the first one would be answered twice, and each attach draws on the world's generator.
+        wait = max(deadline - time.monotonic(), 0.1)
+        for reply in session.get(keys.attach(world_id, agent), payload=hello, timeout=wait):
             if reply.ok is not None:
                 return
             error = reply.err.payload.to_bytes().decode(errors="replace")

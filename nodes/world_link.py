@@ -14,23 +14,34 @@ the world this agent attached to), or whose tick is further ahead of the last fr
 than the world could have stepped meanwhile (`tick_slack` plus `max_tick_rate` ticks per
 second since then: a frame of tick 2^62 would otherwise make the agent wait for ever for a
 newer one) is refused and counted in `refused_frames`.
+
+The link also watches the world's liveliness token. When it goes (the world process died
+or stopped) `world_lost` is set and a wait for a frame returns at once (a session-local
+empty sample wakes a blocked `recv`); the agent then waits for a world to come back
+(`wait_for_world`) and attaches again. The new Welcome resets what frames are checked
+against: a world resumed from a checkpoint is at a lower tick than the last frame taken,
+and has an epoch of its own, so frames of the dead world are refused from then on.
 """
 
 from __future__ import annotations
 
 import logging
 import os
+import threading
 import time
 from collections.abc import Callable
 
 import zenoh
 
-from bus import Declarations
+from bus import Declarations, watch_tokens
 from protocol import keys
 from protocol.codec import ProtocolError, decode, encode
 from protocol.messages import AgentCommand, Hello, SensorFrame, Welcome
 
 log = logging.getLogger("conag.agent")
+
+
+WAKE = b""  # the payload that wakes a frame wait: no frame is empty
 
 
 class AttachError(RuntimeError):
@@ -66,12 +77,35 @@ class WorldLink:
             if block else {}
         self._pub = self._declared.add(session.declare_publisher(keys.command(world_id, agent_id), express=True,
                                                                  **qos))
+        self._world_up = threading.Event()  # the world's liveliness token is there
+        self.world_lost = False             # the token went since the last attach
+        self._declared.add(watch_tokens(session, keys.world_token(world_id), self._on_world_token))
+
+    def _on_world_token(self, _world: str, alive: bool) -> None:
+        if alive:
+            self._world_up.set()
+            return
+        self._world_up.clear()
+        self.world_lost = True
+        # Wake a frame wait blocked in recv (only this session's subscriber gets it).
+        try:
+            self.session.put(keys.sensors(self.world_id, self.agent_id), WAKE,
+                             allowed_destination=zenoh.Locality.SESSION_LOCAL)
+        except zenoh.ZError:
+            pass  # this session is closing (the process stops): nobody waits for a frame any more
+
+    def wait_for_world(self, timeout: float) -> bool:
+        """Wait up to `timeout` seconds for the world's liveliness token; whether it is there."""
+        return self._world_up.wait(timeout)
 
     def _decode(self, sample: zenoh.Sample | None) -> SensorFrame | None:
         if sample is None:
             return None
+        payload = sample.payload.to_bytes()
+        if payload == WAKE:
+            return None  # the world's token went (see _on_world_token), or an empty sample
         try:
-            frame = decode(sample.payload.to_bytes(), SensorFrame)
+            frame = decode(payload, SensorFrame)
         except ProtocolError:
             self.bad_frames += 1
             return None
@@ -102,6 +136,9 @@ class WorldLink:
     def attach(self, timeout: float = 10.0, retry: float = 0.05) -> Welcome:
         """Ask the world for this agent's body; retry until it answers or `timeout` passes."""
         hello = encode(Hello(self.agent_id, os.getpid()))
+        self.world_lost = False  # a world that goes from now on is lost again
+        while self._sub.try_recv() is not None:
+            pass  # a frame of a world that died must not pass for the new one's
         deadline = time.monotonic() + timeout
         last_error = "no world answered"
         while time.monotonic() < deadline:
@@ -122,19 +159,21 @@ class WorldLink:
         raise AttachError(f"agent {self.agent_id} could not attach to world {self.world_id}: {last_error}")
 
     def next_frame(self, after_tick: int = -1, timeout: float | None = 5.0) -> SensorFrame | None:
-        """The newest frame with tick > `after_tick`; None if none came within `timeout`.
+        """The newest frame with tick > `after_tick`; None if none came within `timeout`, or
+        at once when the world is lost (`world_lost`: its liveliness token went).
 
         With `timeout=None` it blocks until a frame comes (the world keeps publishing:
-        lockstep steps on after its own timeout, realtime at its rate). Once the link has
-        attached again meanwhile (`nodes.reattach`), a frame from the new Welcome's tick on
-        is taken whatever `after_tick` says: a world started again may count from lower.
+        lockstep steps on after its own timeout, realtime at its rate) or the world is lost.
         """
         deadline = None if timeout is None else time.monotonic() + timeout
-        welcome = self.welcome
         pause = 0.0001
         while True:
+            if self.world_lost:
+                return None
             if deadline is None:
                 frame = self._decode(self._sub.recv())
+                if frame is None:
+                    continue
             else:
                 frame = self._decode(self._sub.try_recv())
                 if frame is None:
@@ -145,8 +184,7 @@ class WorldLink:
                     time.sleep(pause)
                     pause = min(pause * 2, 0.002)
                     continue
-            newer = self.welcome
-            if frame.tick > after_tick or (newer is not welcome and newer is not None and frame.tick >= newer.tick):
+            if frame.tick > after_tick:
                 if frame.tick > self._last_tick:
                     self._last_tick, self._last_time = frame.tick, self.clock()
                 return frame

@@ -35,6 +35,17 @@ tick that is a multiple of `view_every` and after each perturbation, only while 
 (zenoh's matching status: a world nobody watches builds none); the `view` queryable
 answers a fresh one, built by the loop thread like everything that reads the world.
 
+With a `CheckpointPlan` the server checkpoints the world (`world_server.checkpoint`) after
+every tick that is a multiple of its interval, and once more when it stops (SIGTERM): the
+world is written atomically and its physics rebuilt from what was written, so a world
+resumed from the file steps on as this one does. A write that fails is logged and the
+checkpoint before it kept; the world goes on. A server started on a resumed world
+(`resumed`) waits for the agents to come back: it does not tick before every agent the
+checkpoint holds alive whose process still holds its liveliness token has attached again
+(or `RESUME_WAIT` seconds have passed), and then lets go of every such agent without a
+token (it died while the world was down: its body stops and its brick is put down, as for
+any agent that dies).
+
 A perturbation that changes the blueprint (add_site, remove_site) is followed by the new
 Blueprint, published reliably (RELIABLE, congestion control BLOCK: an agent must not miss
 a site); a queryable on the same key answers the current one. The agents' AgentState
@@ -51,7 +62,7 @@ from collections.abc import Callable
 
 import zenoh
 
-from bus import Declarations, watch_tokens
+from bus import Declarations, token_event, watch_tokens
 from protocol import keys
 from protocol.codec import ProtocolError, decode, encode
 from protocol.messages import (
@@ -66,10 +77,12 @@ from protocol.messages import (
     Perturbed,
     WorldStatus,
 )
+from world_server.checkpoint import CheckpointError, CheckpointPlan, checkpoint_world, write_checkpoint
 from world_server.lockstep import LockstepWaits
 from world_server.world import World
 
 log = logging.getLogger("conag.world")
+RESUME_WAIT = 10.0  # wall seconds a resumed world waits for its live agents to attach again
 
 
 class WorldServer:
@@ -89,7 +102,8 @@ class WorldServer:
                  max_ticks: int | None = None, stop_when_complete: bool = False, wait_agents: int = 1,
                  clock: Callable[[], float] = time.monotonic,
                  on_status: Callable[[WorldStatus], None] | None = None, block_frames: bool = False,
-                 view_every: int = 10, max_tick_rate: float | None = None):
+                 view_every: int = 10, checkpoint: CheckpointPlan | None = None, resumed: bool = False,
+                 max_tick_rate: float | None = None):
         self.world = world
         self.session = session
         self.mode = mode or world.scenario.tick_mode
@@ -114,6 +128,12 @@ class WorldServer:
         self.view_every = view_every  # ticks between WorldView publications (0: only on query)
         self._view_failed = False
         self.lockstep = LockstepWaits(self.cfg.lockstep_miss_limit)
+        self.checkpoint = checkpoint
+        self.checkpoints_written = 0
+        self._checkpointed = -1  # the tick of the last checkpoint written
+        self._unclaimed = resumed  # a resumed world: agents without a token are let go before the first tick
+        self._resume_deadline: float | None = clock() + RESUME_WAIT if resumed else None
+        self._attached: set[str] = set()  # agents that attached to this server
         if max_tick_rate is not None and not max_tick_rate > 0:
             raise ValueError("max_tick_rate must be > 0 ticks per second")
         self._min_period = 1.0 / max_tick_rate if max_tick_rate else 0.0  # lockstep: wall seconds between ticks
@@ -180,6 +200,8 @@ class WorldServer:
                 last_tick = self.clock()
                 self._answered.clear()
                 self._publish_frames()
+                if self.checkpoint is not None and self.checkpoint.due(self.world.tick):
+                    self._checkpoint()
                 if (self.max_ticks is not None and self.world.tick >= self.max_ticks) or (
                         self.stop_when_complete and self.world.completed()):
                     break
@@ -187,7 +209,50 @@ class WorldServer:
                 if self.view_every and self.world.tick % self.view_every == 0:
                     self._publish_view()
             self._publish_view()
+            if self.checkpoint is not None and self.checkpoint.path and self._checkpointed != self.world.tick:
+                self._checkpoint()  # stopped (SIGTERM), complete or out of ticks: the state as it ends
             return self._publish_status()
+
+    def _checkpoint(self) -> None:
+        """Checkpoint the world now (its space rebuilt from what is written; see the module)."""
+        started = time.monotonic()
+        data = checkpoint_world(self.world, self.checkpoint.every)
+        if not self.checkpoint.path:
+            return
+        try:
+            write_checkpoint(self.checkpoint.path, data)
+        except (OSError, CheckpointError) as exc:
+            log.error("tick %d: checkpoint not written (%s); the one before it is kept", self.world.tick, exc)
+            return
+        self.checkpoints_written += 1
+        self._checkpointed = self.world.tick
+        log.debug("tick %d: checkpoint written to %s (%d bytes, %.1f ms)", self.world.tick, self.checkpoint.path,
+                  len(data), 1000 * (time.monotonic() - started))
+
+    def _resuming(self, live: list[str]) -> bool:
+        """A resumed world still waits for some live agent to attach again (see the module)."""
+        if self._resume_deadline is None:
+            return False
+        waiting = not live or any(a not in self._attached for a in live)  # (no token seen yet: realtime)
+        if waiting and self.clock() < self._resume_deadline:
+            return True
+        self._resume_deadline = None
+        return False
+
+    def _let_go_of_unclaimed(self) -> None:
+        """A resumed world, about to tick for the first time: agents the checkpoint holds alive
+        whose process has no token died while the world was down; they are let go as usual."""
+        self._unclaimed = False
+        missing = [a for a in self.world.live_agents() if a not in self._tokens]
+        if not missing:
+            return
+        # One query for every token there is (not one per agent: a world may hold hundreds).
+        held = {token_event(r.ok)[0] for r in self.session.liveliness().get(
+            keys.all_agent_tokens(self.world.world_id), timeout=0.5) if r.ok is not None}
+        for agent in missing:
+            if agent not in held:
+                log.info("agent %s did not come back to the resumed world; its body stops", agent)
+                self.world.detach(agent)
 
     def _live(self) -> list[str]:
         return [a for a in self.world.live_agents() if a in self._tokens]
@@ -200,6 +265,10 @@ class WorldServer:
             awaited = self.lockstep.awaited(live)
             # Realtime ticks by the clock; lockstep only once agents are there to drive it.
             armed = self.mode == "realtime" or (bool(live) and len(self.world.agents) >= self.wait_agents)
+            armed = armed and not self._resuming(live)
+            if self._unclaimed and armed:
+                self._let_go_of_unclaimed()
+                continue
             if self.mode == "lockstep" and armed and self._answered.issuperset(awaited):
                 early = last_tick + self._min_period - self.clock()
                 if early <= 0:
@@ -316,6 +385,7 @@ class WorldServer:
             return
         welcome = self.world.attach(hello.agent_id, hello.pid)
         self.lockstep.forget(hello.agent_id)
+        self._attached.add(hello.agent_id)
         data = encode(welcome)
         query.reply(query.key_expr, data)
         query.drop()

@@ -118,10 +118,7 @@ class LockstepScript:
             except ProtocolError:
                 continue  # what the world did not understand either changed nothing
         for welcomes in script.attaches.values():
-            # The world numbers bodies in the order it attached them; the recorder may hear the
-            # Welcomes of one tick in another order (they are published on different keys), and
-            # an agent attached later sees the bodies attached before it.
-            welcomes.sort(key=lambda w: w.body)
+            _order_welcomes(welcomes)
         script._add_stand_ins()
         return script
 
@@ -147,6 +144,23 @@ class LockstepScript:
     def attached_by(self, tick: int) -> list[str]:
         """The agents attached at or before `tick` (every one of them is then waited for)."""
         return list(dict.fromkeys(w.agent_id for t in sorted(self.attaches) if t <= tick for w in self.attaches[t]))
+
+
+def _order_welcomes(welcomes: list[Welcome]) -> None:
+    """Put one tick's Welcomes in the order the world gave them, in place. The world numbers
+    bodies in the order it attached them, but the recorder may hear the Welcomes of one
+    tick in another order (they are published on different keys), and an agent attached
+    later sees the bodies attached before it: so first attaches go in body order. A repeated
+    Welcome of the same incarnation (a Hello the agent sent again on a busy machine, answered
+    twice) keeps its recorded place among them: its body number says nothing of when it came."""
+    seen: set[tuple[str, int]] = set()
+    firsts = []
+    for i, w in enumerate(welcomes):
+        if (w.agent_id, w.restarts) not in seen:
+            seen.add((w.agent_id, w.restarts))
+            firsts.append(i)
+    for i, w in zip(firsts, sorted((welcomes[i] for i in firsts), key=lambda w: w.body), strict=True):
+        welcomes[i] = w
 
 
 @dataclass

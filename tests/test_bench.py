@@ -48,3 +48,11 @@ def test_budgets_quick_run_measures_every_budget():
     assert [row[1].split("(")[0].strip() for row in rows] == [
         "map update", "realtime world, no agent", "buildability, 120 x 120, 400 sites", "buildability, refused"]
     assert all(row[4].strip() in ("yes", "NO") for row in rows)
+
+
+def test_checkpoint_benchmark_quick_run_prints_its_table():
+    r = subprocess.run([sys.executable, "-m", "bench.bench_checkpoint", "--quick"], cwd=ROOT, capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    rows = [line for line in r.stdout.splitlines() if line.startswith("| nested_squares")]
+    assert len(rows) == 1 and float(rows[0].split("|")[2].split()[0]) > 0

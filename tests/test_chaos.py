@@ -27,3 +27,21 @@ def test_nested_squares_completes_under_random_kills_with_bricks_total_kept(tmp_
     assert all(run["bricks_total"] == run["bricks_expected"] > 0 for run in runs)
     assert sum(run["kills"] for run in runs) >= 2, r.stdout  # it did kill
     assert "2/2 runs complete" in r.stdout
+
+
+@pytest.mark.timeout(600)
+def test_nested_squares_completes_while_its_world_is_sigkilled(tmp_path):
+    # The world process itself is SIGKILLed every second or so once it ticks (again);
+    # `conag run` restarts it from its last checkpoint and the agents attach again by
+    # themselves. Two agents: a build of about 2,000 ticks, long enough for a few kills even
+    # on an idle machine (with three it can end after one).
+    out = tmp_path / "chaos.json"
+    r = conag("chaos", "scenarios/nested_squares.toml", "--agents", 2, "--runs", 1, "--kill-every", 0,
+              "--kill-world-every", 1, "--checkpoint-every", 50, "--seed", 2, "--json", out, timeout=600)
+    assert r.returncode == 0, r.stdout + r.stderr
+    report = json.loads(out.read_text())
+    run = report["runs"][0]
+    assert run["completed"] and run["bricks_total"] == run["bricks_expected"] > 0, r.stdout
+    assert run["world_restarts"] >= 2, r.stdout  # it did kill the world, more than once
+    # Every restarted world went on from at most one checkpoint interval before the kill.
+    assert len(run["ticks_lost"]) >= 2 and all(0 <= n <= 50 for n in run["ticks_lost"]), r.stdout

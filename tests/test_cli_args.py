@@ -24,3 +24,43 @@ def test_verbosity_is_accepted_before_and_after_the_subcommand(argv, level):
 def test_perturb_force_reaches_the_request():
     args = build_parser().parse_args(["perturb", "add", "--at", "2.5,5.5", "--force"])
     assert args.force and not build_parser().parse_args(["perturb", "add", "--at", "2.5,5.5"]).force
+
+
+def _checkpoint(tmp_path):
+    from tests.conftest import SCENARIOS
+    from world_server.checkpoint import checkpoint_world, write_checkpoint
+    from world_server.scenario import load_scenario
+    from world_server.world import World
+
+    path = tmp_path / "w.ckpt"
+    write_checkpoint(path, checkpoint_world(World(load_scenario(SCENARIOS / "quick_wall.toml"))))
+    return path
+
+
+@pytest.mark.parametrize("extra, words", [
+    ([], "is corrupt"),
+    (["--seed", "3"], "--seed cannot be used with --resume"),
+    (["FIG6"], "leave SCENARIO out"),
+    (["--world-id", "w9"], "holds world 'w0'"),
+])
+def test_conag_world_refuses_a_bad_resume_with_a_usage_error(tmp_path, capsys, extra, words):
+    from conag.cli import EXIT_USAGE, main
+    from tests.conftest import SCENARIOS
+
+    path = _checkpoint(tmp_path)
+    extra = [str(SCENARIOS / "fig6.toml") if a == "FIG6" else a for a in extra]
+    if not extra:
+        data = bytearray(path.read_bytes())
+        data[-3] ^= 0xFF  # one flipped byte
+        path.write_bytes(bytes(data))
+    assert main(["world", "--resume", str(path), *extra]) == EXIT_USAGE  # before any session is opened
+    assert words in capsys.readouterr().err
+
+
+def test_conag_world_needs_a_scenario_or_a_checkpoint(capsys):
+    from conag.cli import EXIT_USAGE, main
+
+    assert main(["world"]) == EXIT_USAGE
+    assert "needs a SCENARIO file (or --resume CHECKPOINT)" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["world", "x.toml", "--checkpoint-every", "0"])

@@ -124,6 +124,18 @@ def test_welcomes_heard_out_of_order_are_replayed_in_the_order_the_world_attache
     assert [w.agent_id for w in script.attaches[0]] == ["a1", "a2", "a3"]
 
 
+def test_a_hello_answered_twice_keeps_its_recorded_place_among_the_attaches(tmp_path):
+    # On a busy machine an agent sends its Hello again before the world answered the first:
+    # the world attaches it twice (same body, no restart), and the second attach sees the
+    # bodies attached in between. Body order says nothing of when the repeat came.
+    with McapRecorder(tmp_path / "r.mcap") as rec:
+        for t, (agent, body) in enumerate((("a3", 1), ("a1", 0), ("a1", 0), ("a2", 2))):
+            rec.add(keys.welcome(W, agent), encode(Welcome(W, agent, body, 0, 1.0, 1.0, 0.0, False, 0, 1, 6.0, 1.0,
+                                                           (), ())), 1 + t)
+    script = LockstepScript.from_entries(read_recording(tmp_path / "r.mcap").entries)
+    assert [w.agent_id for w in script.attaches[0]] == ["a1", "a3", "a1", "a2"]
+
+
 def test_a_frame_the_recorder_missed_is_no_difference_but_a_changed_one_is():
     def frame(holding=False, heading=0.0):
         return encode(SensorFrame("a1", 0, heading, 0.0, 0.0, 1, (-1.0,) * 5, holding))

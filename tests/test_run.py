@@ -22,7 +22,8 @@ def test_run_builds_fig6_with_three_agent_processes_and_writes_the_summary(tmp_p
     assert any(line.startswith("tick ") and "sites" in line for line in r.stdout.splitlines())  # progress
     s = json.loads(out.read_text())
     assert set(s) == {"scenario", "seed", "completed", "stalled", "ticks", "sites_total", "sites_filled",
-                      "bricks_total", "total_distance", "agents"}
+                      "bricks_total", "total_distance", "agents", "world_restarts"}
+    assert s["world_restarts"] == 0
     assert s["stalled"] is False and all(a["behaviour_ticks"] for a in s["agents"])
     assert s["completed"] and s["sites_filled"] == s["sites_total"] == 4 and s["bricks_total"] == 5
     assert [a["id"] for a in s["agents"]] == ["a1", "a2", "a3"]

@@ -69,16 +69,23 @@ class Physics:
     def add_agent(self, xy: tuple[float, float] | np.ndarray) -> int:
         """Add a round agent body; returns its index. Its collision group is index + 1,
         which a brick it drops shares until the agent has moved off it."""
-        body = pymunk.Body(self.cfg.agent_mass, math.inf)
-        body.position = (float(xy[0]), float(xy[1]))
-        shape = pymunk.Circle(body, self.cfg.agent_radius)
-        shape.filter = pymunk.ShapeFilter(group=len(self._bodies) + 1)
-        self.space.add(body, shape)
-        self._bodies.append(body)
-        self._shapes.append(shape)
+        return self.add_agents(np.asarray(xy, np.float64).reshape(1, 2))[0]
+
+    def add_agents(self, positions: np.ndarray) -> range:
+        """Add one body per row of `positions` (as `add_agent`, mapping the batch rows once:
+        a space rebuilt with many bodies would otherwise take quadratic time); their indices."""
+        first = len(self._bodies)
+        for xy in np.asarray(positions, np.float64).reshape(-1, 2):
+            body = pymunk.Body(self.cfg.agent_mass, math.inf)
+            body.position = (float(xy[0]), float(xy[1]))
+            shape = pymunk.Circle(body, self.cfg.agent_radius)
+            shape.filter = pymunk.ShapeFilter(group=len(self._bodies) + 1)
+            self.space.add(body, shape)
+            self._bodies.append(body)
+            self._shapes.append(shape)
         self._map_rows()
         self._state = None
-        return len(self._bodies) - 1
+        return range(first, len(self._bodies))
 
     def set_solid(self, index: int, solid: bool) -> None:
         """Whether agent body `index` collides with anything: a dead agent's body stops
@@ -94,6 +101,11 @@ class Physics:
         body.position = (float(xy[0]), float(xy[1]))
         body.velocity = (0.0, 0.0)
         self.space.reindex_shapes_for_body(body)
+        self._state = None
+
+    def set_velocity(self, index: int, velocity: tuple[float, float] | np.ndarray) -> None:
+        """Give agent body `index` this velocity (a space rebuilt from a checkpoint)."""
+        self._bodies[index].velocity = (float(velocity[0]), float(velocity[1]))
         self._state = None
 
     def _map_rows(self) -> None:

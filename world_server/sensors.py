@@ -190,3 +190,11 @@ def sense(agent_xy: np.ndarray, sensing: np.ndarray, disc_xy: np.ndarray, disc_c
                np.asarray(disc_channel, np.int64), np.asarray(sensing, np.bool_), sectors,
                float(radius), float(size[0]), float(size[1]), float(noise), int(seed), out, AGENT_CHANNEL)
     return out
+
+
+def warm_up() -> None:
+    """Load the one-agent sweep from numba's cache (compiling it on a first run) now, not at
+    the first attach: that takes a second or more on a busy machine, long enough for the
+    agent to time out and send its Hello again (answered twice, a duplicate Welcome)."""
+    sense(np.zeros((1, 2)), np.ones(1, np.bool_), np.ones((1, 2)), np.zeros(1, np.int64), 4, 2.0, (4.0, 4.0),
+          noise=0.1, seed=1)

@@ -28,11 +28,11 @@ from protocol.messages import (
     WorldStatus,
     WorldView,
 )
-from world_server.discs import BRICK_DISC, FOOD_DISC, WATER_DISC, DiscStore
+from world_server.discs import BRICK_DISC, FOOD_DISC, IN_WORLD, WATER_DISC, DiscStore
 from world_server.physics import Physics, motor_update
 from world_server.placement import body_cell, brick_drop_cell
 from world_server.scenario import Scenario
-from world_server.sensors import sense
+from world_server.sensors import sense, warm_up
 
 GRAB, DROP, EAT, DRINK = (ACTIONS.index(a) for a in ("grab", "drop", "eat", "drink"))
 OBSTACLE_CHANNEL = CHANNELS.index("obstacle")
@@ -93,6 +93,7 @@ class World:
         self._obstacle_xy = _obstacle_points(scenario, cells["#"])
         self._walls_xy = scenario.to_world(cells["#"]).reshape(-1, 2)  # fixed `#` cells, for views
         self._sense_inputs: tuple | None = None  # (present discs, xy, channels) with obstacles appended
+        warm_up()  # the sensor kernel, now rather than at the first attach
         self.sites_xy = scenario.to_world(np.vstack([cells["+"], cells["B"]]))
         self._site_codes = self._cell_code(self.sites_xy)
         self.blueprint_version = 0  # +1 per site added or removed (a Blueprint message each time)
@@ -238,6 +239,30 @@ class World:
         self.physics.place_body(rec.index, self.scenario.to_world(cell)[0])
         self.physics.set_solid(rec.index, True)
         self.solid[rec.index] = True
+
+    def rebuild_physics(self, positions: np.ndarray | None = None, velocities: np.ndarray | None = None) -> None:
+        """A fresh pymunk space holding what the world holds now, built in one fixed order.
+
+        pymunk keeps caches between steps (contact impulses for warm starting, the
+        spatial index's history) that no copy carries, so a space restored from a
+        checkpoint would drift from one that never stopped. A checkpointing world
+        therefore rebuilds its space at every checkpoint from the same plain state the
+        checkpoint holds (`positions`, `velocities` of every body, agent order; default:
+        the current ones), and a resumed world rebuilds from the file the same way: both
+        runs step on from identical spaces (`world_server/checkpoint.py`).
+        """
+        old_pos, old_vel = self.physics.state()
+        pos = old_pos if positions is None else np.asarray(positions, np.float64).reshape(-1, 2)
+        vel = old_vel if velocities is None else np.asarray(velocities, np.float64).reshape(-1, 2)
+        physics = Physics(self.cfg, self.size, self.scenario.to_world(self.scenario.cells_col_row("#")))
+        for i in np.flatnonzero(self.discs.state == IN_WORLD).tolist():
+            owner = self._pending_release.get(i)
+            physics.add_disc(i, self.discs.xy[i], group=0 if owner is None else owner + 1)
+        for index in physics.add_agents(pos[[rec.index for rec in self._order]]):
+            physics.set_velocity(index, vel[index])
+            physics.set_solid(index, bool(self.solid[index]))
+        self.physics = physics
+        self._positions = pos.copy()
 
     def live_agents(self) -> list[str]:
         """Ids of the attached, live agents, in attach order."""
