@@ -6,6 +6,13 @@ loopback port so that peers can also reach each other (gossip scouting, no multi
 Several hosts: pass `--zenoh-config deploy/multi-host/client.json5` (or `--connect
 tcp/ROUTER:7447 --mode client`) to every process and run a zenoh router.
 Sessions are opened inside the process that uses them, never before a fork.
+
+A router gets more receive workers than zenoh's 2 (`ROUTER_RUNTIME`, through zenoh's
+`ZENOH_RUNTIME` variable, unless it is set already): when a client's host is cut off and
+its link is closed with bytes still unsent, the close blocks a receive worker for up to
+10 s (SO_LINGER, fixed when zenoh is compiled; zenoh issue #1101). With two agents on the
+cut host that took both workers, and the router routed nothing at all, the world's own
+traffic included, until the link came back (RELIABILITY.md, "Partition survived").
 """
 
 from __future__ import annotations
@@ -16,6 +23,7 @@ from dataclasses import dataclass
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 MODES = ("peer", "client", "router")
+ROUTER_RUNTIME = "(rx: (worker_threads: 16))"
 
 
 @dataclass(frozen=True)
@@ -79,5 +87,8 @@ def open_session(opts: BusOptions, *, serve: bool = False):
     """Open a zenoh session (quiet logs unless RUST_LOG says otherwise)."""
     import zenoh
 
+    if opts.mode == "router":
+        # Read once, when zenoh first starts its receive runtime: before the first session.
+        os.environ.setdefault("ZENOH_RUNTIME", ROUTER_RUNTIME)
     zenoh.init_log_from_env_or("error")
     return zenoh.open(make_config(opts, serve=serve))

@@ -103,7 +103,7 @@ def cmd_world(args) -> int:
             server = WorldServer(world, session, mode=args.mode_tick, max_ticks=args.ticks,
                                  stop_when_complete=args.stop_when_complete, wait_agents=args.wait_agents,
                                  on_status=on_status, block_frames=block, checkpoint=plan,
-                                 resumed=bool(args.resume))
+                                 resumed=bool(args.resume), max_tick_rate=args.max_tick_rate)
             final = server.run(stop)
         finally:
             session.close()
@@ -537,6 +537,8 @@ def _add_world(sub) -> None:
     w.add_argument("--profile", metavar="PATH",
                    help="on exit, write where the loop's time went (JSON: seconds stepping, publishing frames, "
                         "waiting for commands, per tick from the second; when the first tick was out)")
+    w.add_argument("--max-tick-rate", type=float, metavar="HZ",
+                   help="lockstep: step at most HZ ticks per wall second (default: as fast as the agents answer)")
     c = w.add_argument_group("checkpoints (the world survives its own death)")
     c.add_argument("--checkpoint", metavar="FILE",
                    help="write the whole world to FILE every --checkpoint-every ticks and when stopped (SIGTERM); "

@@ -7,7 +7,9 @@ world itself is never touched concurrently. The loop:
 * lockstep: tick t is stepped once every live agent has sent its command for t, or
   after `lockstep_timeout`. Ticks are driven by agents only, never by the wall clock:
   the world does not tick before `wait_agents` agents have attached, nor while no agent
-  is live, so the same seed and the same agents give the same run;
+  is live, so the same seed and the same agents give the same run. `max_tick_rate` caps
+  the pace (a tick at most every 1/max_tick_rate wall seconds): it delays steps, it never
+  changes one, so a capped run gives the same frames;
 * realtime: a tick every 1/tick_rate seconds, the latest command of each agent wins.
 
 Agents come and go: an agent is waited for only while its liveliness token exists.
@@ -103,7 +105,8 @@ class WorldServer:
                  max_ticks: int | None = None, stop_when_complete: bool = False, wait_agents: int = 1,
                  clock: Callable[[], float] = time.monotonic,
                  on_status: Callable[[WorldStatus], None] | None = None, block_frames: bool = False,
-                 view_every: int = 10, checkpoint: CheckpointPlan | None = None, resumed: bool = False):
+                 view_every: int = 10, checkpoint: CheckpointPlan | None = None, resumed: bool = False,
+                 max_tick_rate: float | None = None):
         self.world = world
         self.session = session
         self.mode = mode or world.scenario.tick_mode
@@ -139,6 +142,9 @@ class WorldServer:
         self._unclaimed = resumed  # a resumed world: agents without a token are let go before the first tick
         self._resume_deadline: float | None = clock() + RESUME_WAIT if resumed else None
         self._attached: set[str] = set()  # agents that attached to this server
+        if max_tick_rate is not None and not max_tick_rate > 0:
+            raise ValueError("max_tick_rate must be > 0 ticks per second")
+        self._min_period = 1.0 / max_tick_rate if max_tick_rate else 0.0  # lockstep: wall seconds between ticks
 
     # zenoh callbacks: decode if cheap, then hand over to the loop thread ------------------
     def _on_command(self, sample: zenoh.Sample) -> None:
@@ -293,8 +299,12 @@ class WorldServer:
                 self._let_go_of_unclaimed()
                 continue
             if self.mode == "lockstep" and armed and self._answered.issuperset(awaited):
-                self._stepping_without(sorted(set(live) - self._answered))
-                return True
+                early = last_tick + self._min_period - self.clock()
+                if early <= 0:
+                    self._stepping_without(sorted(set(live) - self._answered))
+                    return True
+                self._next_event(early)  # every command is in: only the rate cap holds the step back
+                continue
             now = self.clock()
             if not armed:
                 last_tick = now  # a lockstep timeout counts from when there is someone to wait for
@@ -311,12 +321,16 @@ class WorldServer:
                         self._stepping_without(sorted(set(live) - self._answered))
                     return True
                 timeout = min(last_tick + period - now, 0.05)
-            try:
-                event = self._events.get(timeout=timeout)
-            except queue.Empty:
-                continue
-            self._handle(event)
+            self._next_event(timeout)
         return False
+
+    def _next_event(self, timeout: float) -> None:
+        """Handle the next bus event, if one comes within `timeout` seconds."""
+        try:
+            event = self._events.get(timeout=timeout)
+        except queue.Empty:
+            return
+        self._handle(event)
 
     def _stepping_without(self, agents: list[str]) -> None:
         """Tell a recorder that this step goes without the commands of `agents` (late, or

@@ -247,6 +247,9 @@ class WorldStatus:
     agent_x: tuple[float, ...] = ()   # where each body is now (world coordinates)
     agent_y: tuple[float, ...] = ()
     seq: int = 0  # +1 per status the world publishes: of two readings the higher seq is the newer
+    # Whether each body is in the world: False once a gone agent's body has left it (after
+    # body_grace_ticks; it collides with nothing and is not sensed), True again when it attaches.
+    agent_present: tuple[bool, ...] = ()
 
 
     def __post_init__(self) -> None:
@@ -260,7 +263,7 @@ class WorldStatus:
         _require(n <= MAX_AGENTS_IN_STATUS, "WorldStatus lists too many agents")
         _require(len(self.scenario) <= MAX_STRING, "WorldStatus.scenario too long")
         for name in ("agent_alive", "agent_distance", "agent_grabs", "agent_drops", "agent_restarts",
-                     "agent_x", "agent_y"):
+                     "agent_x", "agent_y", "agent_present"):
             _require(len(getattr(self, name)) == n, f"WorldStatus.{name} must match agent_ids")
         for a in self.agent_ids:
             check_id(a, "agent id")

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import signal
 import socket
 from dataclasses import replace
@@ -55,6 +56,20 @@ def test_config_parses_with_the_key_settings(name):
         assert _get(config, "listen/endpoints") == listen
     if connect is not None:
         assert _get(config, "connect/endpoints") == connect
+
+
+@pytest.mark.parametrize("name", ["multi-host/router.json5", "multi-host/client.json5"])
+def test_multi_host_configs_give_up_a_silent_host_soon_and_queue_a_tick_of_frames(name):
+    """deploy/README.md's table: a 3 s lease (a host cut off is seen gone within it), room
+    for a burst of frames, and (clients) a reconnect within a second of the link's return."""
+    config = zenoh.Config.from_file(str(DEPLOY / name))
+    assert _get(config, "transport/link/tx/lease") == 3000
+    assert _get(config, "transport/link/tx/queue/size/data") == 16
+    if name.endswith("client.json5"):
+        assert _get(config, "connect/retry")["period_max_ms"] == 1000
+    readme = (DEPLOY / "README.md").read_text(encoding="utf-8")
+    for needle in ("transport/link/tx/lease", "transport/link/tx/queue/size/data", "connect/retry"):
+        assert needle in readme
 
 
 def test_command_line_endpoints_replace_the_placeholder():
@@ -149,3 +164,16 @@ def test_router_listens_where_its_config_file_says(tmp_path):
         assert str(config) in proc.out
     finally:
         proc.kill()
+
+
+def test_a_router_gets_more_receive_workers_unless_told_otherwise(monkeypatch):
+    """deploy/README.md: a link closed with bytes unsent blocks a receive worker (zenoh #1101)."""
+    from bus.session import ROUTER_RUNTIME
+
+    monkeypatch.delenv("ZENOH_RUNTIME", raising=False)
+    open_session(BusOptions(listen=(f"tcp/127.0.0.1:{free_port()}",), mode="router"), serve=True).close()
+    assert os.environ["ZENOH_RUNTIME"] == ROUTER_RUNTIME
+    monkeypatch.setenv("ZENOH_RUNTIME", "(rx: (worker_threads: 3))")
+    open_session(BusOptions(listen=(f"tcp/127.0.0.1:{free_port()}",), mode="router"), serve=True).close()
+    assert os.environ["ZENOH_RUNTIME"] == "(rx: (worker_threads: 3))"  # the user's own setting stays
+    assert "ZENOH_RUNTIME" in (DEPLOY / "README.md").read_text(encoding="utf-8")

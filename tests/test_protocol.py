@@ -82,7 +82,7 @@ EXAMPLES: dict[type, object] = {
         sites_total=5, bricks_total=9, agents_alive=2, bad_messages=1, completed=False,
         agent_ids=("a1", "a2"), agent_alive=(True, False), agent_distance=(12.5, 3.0),
         agent_grabs=(2, 0), agent_drops=(1, 0), agent_restarts=(0, 3),
-        agent_x=(2.5, 7.25), agent_y=(1.5, 0.5), seq=41,
+        agent_x=(2.5, 7.25), agent_y=(1.5, 0.5), seq=41, agent_present=(True, False),
     ),
     Perturbation: Perturbation(op="move", x=1.0, y=2.0, kind="brick", to_x=3.5, to_y=-1.0, force=True),
     PerturbResult: PerturbResult(ok=True, message="moved brick", tick=501),
@@ -521,6 +521,7 @@ def test_largest_legal_messages_fit():
         EXAMPLES[WorldStatus], agent_ids=tuple(f"{i:064d}" for i in range(m)),
         agent_alive=(True,) * m, agent_distance=(1e300,) * m, agent_grabs=(2**62,) * m,
         agent_drops=(2**62,) * m, agent_restarts=(2**62,) * m, agent_x=(1e300,) * m, agent_y=(-1e300,) * m,
+        agent_present=(True,) * m,
     )
     assert decode(encode(status)) == status
 

@@ -48,7 +48,8 @@ def _status(tick: int, filled: int, total: int = 2) -> WorldStatus:
     return WorldStatus(world_id="w0", scenario="s", seed=1, mode="lockstep", tick=tick, sites_filled=filled,
                        sites_total=total, bricks_total=3, agents_alive=1, bad_messages=0, completed=filled == total,
                        agent_ids=("a1",), agent_alive=(True,), agent_distance=(0.0,), agent_grabs=(0,),
-                       agent_drops=(0,), agent_restarts=(0,), agent_x=(1.0,), agent_y=(2.0,))
+                       agent_drops=(0,), agent_restarts=(0,), agent_x=(1.0,), agent_y=(2.0,),
+                       agent_present=(True,))
 
 
 def test_the_stall_watch_keeps_the_report_once_no_site_was_filled_for_its_limit():

@@ -42,7 +42,7 @@ STATUS = WorldStatus(world_id="w0", scenario="walled", seed=5, mode="lockstep", 
                      sites_total=1, bricks_total=2, agents_alive=1, bad_messages=0, completed=False,
                      agent_ids=("a1", "a2"), agent_alive=(True, False), agent_distance=(3.0, 1.0),
                      agent_grabs=(1, 0), agent_drops=(0, 0), agent_restarts=(0, 0),
-                     agent_x=(4.25, 6.5), agent_y=(4.5, 4.5))
+                     agent_x=(4.25, 6.5), agent_y=(4.5, 4.5), agent_present=(True, True))
 
 
 # ---------------------------------------------------------------- the clock and the report

@@ -706,8 +706,10 @@ def test_a_dead_body_leaves_the_world_after_its_grace_period():
     w.detach("a")
     tick(w, n=4)
     assert (ranges(w, "b")[AGENT] != NO_READING).any()   # still there, and solid
+    assert w.status().agent_present == (True, True) and w.status().agent_alive == (False, True)
     tick(w)
     assert (ranges(w, "b")[AGENT] == NO_READING).all()   # gone: no sensor sees it
+    assert w.status().agent_present == (False, True)     # and the status says so
     # b drives through where a's body lies: nothing stops it
     tick(w, {"b": (0.0, math.pi / 2, "none")}, 2)  # face west
     tick(w, {"b": (3.0, 0.0, "none")}, 40)
@@ -730,8 +732,9 @@ def test_a_restarted_agent_gets_its_body_back_at_the_free_cell_nearest_where_it_
     w.physics.place_body(w.agents["b"].index, left)
     w.perturb(Perturbation("add", left[0] + 1, left[1], "brick", 0.0, 0.0, False))
     tick(w)
+    assert w.status().agent_present == (False, True)
     back = w.attach("a")
-    assert back.restarts == 1
+    assert back.restarts == 1 and w.status().agent_present == (True, True)
     xy = np.array([back.x, back.y])
     assert np.hypot(*(xy - left)) == pytest.approx(1.0)          # a neighbouring cell
     assert (xy % 1.0) == pytest.approx((0.5, 0.5))

@@ -457,7 +457,8 @@ class World:
             agent_grabs=tuple(r.grabs for r in self._order), agent_drops=tuple(r.drops for r in self._order),
             agent_restarts=tuple(r.restarts for r in self._order),
             agent_x=tuple(float(pos[r.index, 0]) for r in self._order),
-            agent_y=tuple(float(pos[r.index, 1]) for r in self._order), seq=seq)
+            agent_y=tuple(float(pos[r.index, 1]) for r in self._order), seq=seq,
+            agent_present=tuple(bool(self.solid[r.index]) for r in self._order))
 
     def view(self) -> WorldView:
         """What there is to draw now: discs lying in the world, sites and whether each is
