@@ -22,7 +22,8 @@ Every row runs a fixed number of ticks (`--ticks`, fewer for large teams: at mos
 * the time from launching the interpreter(s) to the first tick (the world's first frames
   out), which includes imports, loading the compiled kernels and attaching;
 * memory as PSS and USS (from /proc/PID/smaps_rollup; RSS counts shared pages in every
-  process), sampled halfway through the ticks: per agent process and in total (the world,
+  process), sampled every second while the run goes on (the sample halfway through is
+  reported): per agent process and in total (the world,
   the supervisor and the agents; in-process: the one process);
 * where a tick's time goes: in-process, the world's step and the agents' decisions; in the
   world process, its step, publishing the frames and waiting for the agents' commands
@@ -40,6 +41,7 @@ import os
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -101,6 +103,33 @@ def memory_of_run(root: int) -> dict:
             "total_uss_mb": sum(u for _, u in sizes.values()) * mb,
             "agent_pss_mb": sum(sizes[p][0] for p in agents) * mb / hosted,
             "agent_uss_mb": sum(sizes[p][1] for p in agents) * mb / hosted}
+
+
+class _MemorySampler:
+    """Samples `memory_of_run` every `period` seconds in a thread while the run lives (not
+    more often: reading smaps of a hundred processes costs CPU the run needs); `middle`
+    is the sample halfway through those that saw agents (a run too short for a progress line
+    at its halfway tick still gets one, and none is taken from processes already gone)."""
+
+    def __init__(self, root: int, period: float = 1.0):
+        self.root, self.period = root, period
+        self.samples: list[dict] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.wait(self.period):
+            sample = memory_of_run(self.root)
+            if sample["agent_processes"] and sample["agent_pss_mb"] > 0:
+                self.samples.append(sample)
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join()
+
+    def middle(self) -> dict:
+        return self.samples[len(self.samples) // 2] if self.samples else {}
 
 
 def _agents_in(cmd: str) -> int:
@@ -167,18 +196,13 @@ def as_processes(scenario: str, agents: int, ticks: int, port: int, per_process:
             cmd += ["--per-process", str(per_process)]
         launched = time.monotonic()
         proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        mem: dict = {}
         last = [""]
-
-        def sample_when_halfway(line: str) -> None:
-            parts = line.split()
-            if not mem and len(parts) > 1 and parts[0] == "tick" and int(parts[1]) >= ticks // 2:
-                mem.update(memory_of_run(proc.pid))
-
+        samples = _MemorySampler(proc.pid)
         assert proc.stdout is not None
         for line in proc.stdout:
             last[0] = line.strip() or last[0]
-            sample_when_halfway(line)
+        samples.stop()
+        mem = samples.middle()
         proc.wait()
         if not profile.exists():
             raise RuntimeError(f"{' '.join(cmd)} wrote no profile (exit {proc.returncode}): {last[0]}")
