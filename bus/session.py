@@ -36,6 +36,9 @@ class BusOptions:
     mode: str | None = None
 
 
+CONNECT_RETRY = {"period_init_ms": 100, "period_max_ms": 1000, "period_increase_factor": 2}
+
+
 def make_config(opts: BusOptions, *, serve: bool = False):
     """A zenoh.Config for a process; `serve` is True for the world (it listens by default)."""
     import zenoh
@@ -66,6 +69,10 @@ def make_config(opts: BusOptions, *, serve: bool = False):
     config.insert_json5("connect/endpoints", json.dumps(connect))
     if mode == "client":
         config.insert_json5("listen/endpoints", "[]")
+    # A process started beside the world (conag run starts them together) may find it not yet
+    # listening: try again within a tenth of a second, not after zenoh's 1 s, 2 s, 4 s backoff,
+    # by which time a short lockstep build can be over.
+    config.insert_json5("connect/retry", json.dumps(CONNECT_RETRY))
     return config
 
 

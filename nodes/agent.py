@@ -43,7 +43,7 @@ from protocol import keys
 from protocol.codec import encode
 
 log = logging.getLogger("conag.agent")
-WAIT_QUIET = 1.0    # seconds a world may be gone before the agent warns that it waits for it
+WAIT_QUIET = 3.0    # seconds a world may be gone before the agent warns (a run ending stops its agents sooner)
 WAIT_REPORT = 30.0  # seconds between "waiting for world" lines
 
 
