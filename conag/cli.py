@@ -24,6 +24,7 @@ Every process that touches the bus takes --zenoh-config FILE, --connect ENDPOINT
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import logging
 import signal
@@ -298,6 +299,26 @@ def _quiet(_signum, _frame) -> None:
     """A signal handler that does nothing: the process is already stopping."""
 
 
+@contextlib.contextmanager
+def _stopped_by_signal():
+    """The first SIGINT/SIGTERM raises `_Stopped` where the process waits (for a frame), and
+    the block ends quietly; later ones (a second Ctrl-C while closing) are let pass, so the
+    cleanup finishes without a traceback. The previous handlers come back afterwards."""
+    def raise_stop(_signum, _frame):
+        for s in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(s, _quiet)
+        raise _Stopped()
+
+    previous = {s: signal.signal(s, raise_stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    except _Stopped:
+        pass
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
+
+
 def _agent_options(args):
     """The AgentOptions `conag agent` asks for (ValueError for learning flags without --learn)."""
     from agent_runtime.config import AgentConfig
@@ -325,15 +346,7 @@ def cmd_agent(args) -> int:
     check_agent_credential(args.zenoh_config, args.id)
     report = AgentReport()
 
-    def raise_stop(_signum, _frame):
-        # The first signal ends the frame wait; later ones (a second Ctrl-C while closing)
-        # are let pass quietly, so the cleanup finishes without a traceback.
-        for s in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(s, _quiet)
-        raise _Stopped()
-
-    previous = {s: signal.signal(s, raise_stop) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
+    with _stopped_by_signal():
         session = open_session(_bus(args))
         try:
             run_agent(session, opts, report=report)
@@ -342,11 +355,6 @@ def cmd_agent(args) -> int:
             return 1
         finally:
             session.close()
-    except _Stopped:
-        pass
-    finally:
-        for s, h in previous.items():
-            signal.signal(s, h)
     if report.link is not None:
         c = report.link.counts
         saved = f"; weights saved to {opts.learning.weights_out}" if opts.learning.weights_out else ""
@@ -366,13 +374,7 @@ def cmd_agents(args) -> int:
                                                            goal_sequencing=not args.nearest_first),
                         args.seed, attach_timeout=args.attach_timeout)
 
-    def raise_stop(_signum, _frame):
-        for s in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(s, _quiet)
-        raise _Stopped()
-
-    previous = {s: signal.signal(s, raise_stop) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
+    with _stopped_by_signal():
         session = open_session(_bus(args))
         try:
             host = AgentHost(session, host_options(base, ids))
@@ -388,11 +390,6 @@ def cmd_agents(args) -> int:
                 host.close()
         finally:
             session.close()
-    except _Stopped:
-        pass
-    finally:
-        for s, h in previous.items():
-            signal.signal(s, h)
     return 0
 
 

@@ -141,6 +141,34 @@ def conag(*args, timeout: float = 60.0) -> subprocess.CompletedProcess:
                           text=True, timeout=timeout)
 
 
+def run_and_restart_mid_build(tmp_path: Path, scenario_text: str, *run_args, agent: str = "a2",
+                              timeout: float = 240.0) -> tuple[dict, subprocess.CompletedProcess]:
+    """`conag run` a scenario; once it ticks, `conag restart` one agent (SIGKILL, then a new
+    process with the same id); wait for the run to end (it must exit 0). Returns the run
+    summary and the restart command's outcome."""
+    import json
+
+    out, ep = tmp_path / "summary.json", f"tcp/127.0.0.1:{free_port()}"
+    scenario = tmp_path / "scenario.toml"
+    scenario.write_text(scenario_text)
+    run = subprocess.Popen([sys.executable, "-m", "conag", "run", str(scenario), *map(str, run_args), "--headless",
+                            "--summary", str(out), "--listen", ep], cwd=ROOT, stdout=subprocess.PIPE,
+                           stderr=subprocess.STDOUT, text=True)
+    try:
+        assert run.stdout is not None
+        for line in run.stdout:  # wait until the build is under way
+            if line.startswith("tick ") and int(line.split()[1]) > 0:
+                break
+        restarted = conag("restart", agent, "--connect", ep)
+        rest, _ = run.communicate(timeout=timeout)
+        assert run.returncode == 0, rest
+    finally:
+        if run.poll() is None:
+            run.kill()
+            run.wait(10)
+    return json.loads(out.read_text()), restarted
+
+
 class Process:
     """A `conag` subprocess whose stdout and stderr are read by threads, so that a test can
     wait for a line (the router prints its "listening" line once its signal handlers are in)."""

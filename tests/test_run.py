@@ -3,12 +3,10 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import pytest
 
-from tests.conftest import LONG_WALL, ROOT, conag, free_port
+from tests.conftest import LONG_WALL, conag, free_port, run_and_restart_mid_build
 
 pytestmark = pytest.mark.slow
 
@@ -32,29 +30,11 @@ def test_run_builds_fig6_with_three_agent_processes_and_writes_the_summary(tmp_p
 
 
 def test_an_agent_killed_mid_build_and_restarted_rejoins_and_the_structure_completes(tmp_path):
-    out = tmp_path / "summary.json"
-    ep = f"tcp/127.0.0.1:{free_port()}"
-    scenario = tmp_path / "long_wall.toml"
-    scenario.write_text(LONG_WALL)
-    run = subprocess.Popen([sys.executable, "-m", "conag", "run", str(scenario), "--headless",
-                            "--summary", str(out), "--listen", ep], cwd=ROOT, stdout=subprocess.PIPE,
-                           stderr=subprocess.STDOUT, text=True)
-    try:
-        for line in run.stdout:  # wait until the build is under way
-            if line.startswith("tick ") and int(line.split()[1]) > 0:
-                break
-        # `conag restart` SIGKILLs the process (mid-build, perhaps holding a brick) and starts
-        # a new one with the same id at once; a separate `conag kill` first would let the
-        # two others finish this small structure before the new process is up.
-        restarted = conag("restart", "a2", "--connect", ep)
-        assert restarted.returncode == 0 and "started a2" in restarted.stdout, restarted.stderr
-        rest, _ = run.communicate(timeout=240)
-        assert run.returncode == 0, rest
-    finally:
-        if run.poll() is None:
-            run.kill()
-            run.wait(10)
-    s = json.loads(out.read_text())
+    # `conag restart` SIGKILLs the process (mid-build, perhaps holding a brick) and starts
+    # a new one with the same id at once; a separate `conag kill` first would let the
+    # two others finish this small structure before the new process is up.
+    s, restarted = run_and_restart_mid_build(tmp_path, LONG_WALL)
+    assert restarted.returncode == 0 and "started a2" in restarted.stdout, restarted.stderr
     assert s["completed"] and s["bricks_total"] == 32
     restarts = {a["id"]: a["restarts"] for a in s["agents"]}
     assert restarts == {"a1": 0, "a2": 1, "a3": 0}

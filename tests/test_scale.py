@@ -117,30 +117,10 @@ def test_loop_times_count_from_when_everyone_is_there_and_realtime_lag():
 
 @pytest.mark.slow
 def test_hosted_agents_build_and_a_restarted_one_rejoins_as_a_process_of_its_own(tmp_path):
-    import subprocess
-    import sys
+    from tests.conftest import LONG_WALL, run_and_restart_mid_build
 
-    from tests.conftest import LONG_WALL, ROOT, conag, free_port
-
-    out, ep = tmp_path / "summary.json", f"tcp/127.0.0.1:{free_port()}"
-    scenario = tmp_path / "long_wall.toml"
-    scenario.write_text(LONG_WALL)
-    run = subprocess.Popen([sys.executable, "-m", "conag", "run", str(scenario), "--agents", "4", "--per-process", "2",
-                            "--headless", "--summary", str(out), "--listen", ep], cwd=ROOT, stdout=subprocess.PIPE,
-                           stderr=subprocess.STDOUT, text=True)
-    try:
-        for line in run.stdout:  # wait until the build is under way
-            if line.startswith("tick ") and int(line.split()[1]) > 0:
-                break
-        restarted = conag("restart", "a2", "--connect", ep)
-        assert restarted.returncode == 0 and "stopped a2 in its host" in restarted.stdout, restarted.stderr
-        rest, _ = run.communicate(timeout=300)
-        assert run.returncode == 0, rest
-    finally:
-        if run.poll() is None:
-            run.kill()
-            run.wait(10)
-    s = json.loads(out.read_text())
+    s, restarted = run_and_restart_mid_build(tmp_path, LONG_WALL, "--agents", 4, "--per-process", 2, timeout=300)
+    assert restarted.returncode == 0 and "stopped a2 in its host" in restarted.stdout, restarted.stderr
     assert s["completed"] and s["bricks_total"] == 32
     # a2 alone came back (as a process of its own); a1, its host mate, and the other host went on
     assert {a["id"]: a["restarts"] for a in s["agents"]} == {"a1": 0, "a2": 1, "a3": 0, "a4": 0}
