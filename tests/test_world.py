@@ -546,6 +546,26 @@ def test_a_brick_dropped_on_a_drop_site_fills_it():
     assert w.frame("a").grabbed and w.status().sites_filled == 0
 
 
+def test_a_brick_dropped_off_centre_in_an_empty_drop_site_settles_on_its_centre():
+    # Off-centre site bricks narrow the one-cell gaps between sites below a body's width.
+    w = make(".b...\n.A+..\n.....", sensor_noise=0.0)
+    w.attach("a")
+    face_nearest_brick(w)
+    tick(w, {"a": (0.0, 0.0, "grab")})
+    brick = w.agents["a"].holding
+    drive_to(w, "a", (2.8, 1.25))
+    tick(w, {"a": (0.0, 0.0, "drop")})
+    assert w.frame("a").dropped and w.status().sites_filled == 1
+    assert w.discs.xy[brick] == pytest.approx((2.5, 1.5))
+    # off every site, a brick stays where it fell
+    face_nearest_brick(w)
+    tick(w, {"a": (0.0, 0.0, "grab")})
+    drive_to(w, "a", (3.7, 0.8))
+    tick(w, {"a": (0.0, 0.0, "drop")})
+    assert w.discs.xy[brick] == pytest.approx(pose(w, "a")[:2], abs=0.05)
+    assert w.status().sites_filled == 0
+
+
 def test_a_dropped_brick_does_not_kick_the_agent_and_is_solid_once_left():
     w = make(".b........\n.A........\n..........")
     w.attach("a")

@@ -401,10 +401,27 @@ class World:
         # The brick lands under the agent (paper §3); it ignores that agent until the agent
         # has moved off it, instead of the physics kicking the two apart.
         brick = rec.holding
+        xy = self._settled(xy)
         self.discs.place(brick, xy)
         self.physics.add_disc(brick, xy, group=rec.index + 1)
         self._pending_release[brick] = rec.index
         rec.holding, rec.drops = -1, rec.drops + 1
+
+    def _settled(self, xy: np.ndarray) -> np.ndarray:
+        """Where a brick dropped at `xy` comes to rest: on the centre of the empty drop site
+        it fell in (a site is a slot in the structure), else where it fell.
+
+        Why: bricks dropped up to a third of a cell off their sites' centres narrowed the
+        one-cell gaps between sites below a body's width; an agent then wedged itself in
+        the structure for good (gen-polyomino 026). A brick that would overlap another disc
+        on the centre stays where it fell."""
+        at = np.flatnonzero(self._site_codes == self._cell_code(xy[None])[0])
+        if not at.size:
+            return xy
+        centre = self.sites_xy[at[0]]
+        if self.discs.nearest(centre, 2 * self.cfg.disc_radius * (1 - 1e-6)) >= 0:
+            return xy
+        return centre.copy()
 
     def _release_dropped(self, pos: np.ndarray) -> None:
         clear = self.cfg.agent_radius + self.cfg.disc_radius
