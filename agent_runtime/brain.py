@@ -236,7 +236,11 @@ class Brain:
         if self.cfg.goal_sequencing:
             supply = (self._source_cell() | self._supply_beyond()) & ~obstacles & ~config
             supply_bricks = brick_goals | supply
-        if sequenced and self.cfg.goal_sequencing:
+        # With no open site on the map the Matching grid pairs nothing and would leave no
+        # brick goal at all: the brick NM then followed a remembered brick beyond the border
+        # and turned back each time the sites came onto the map, for ever, a cell's step
+        # either side of the map's edge (gen-polyomino 134). Any free brick blocks nothing then.
+        if sequenced and self.cfg.goal_sequencing and open_sites.any():
             closed = config_goals & (self.maps.clear_age > self.cfg.site_memory)
             # The cells around the agent are never in doubt: it would be touching a brick there.
             c = self.centre

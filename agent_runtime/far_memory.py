@@ -113,15 +113,25 @@ class FarMemory:
     def move(self, kx: int, ky: int, free_bricks: np.ndarray) -> np.ndarray:
         """The agent crossed kx cells east and ky north; `free_bricks` is the BRICK-but-not-site
         mask as it was before the maps shifted. Bricks that leave the map are remembered;
-        returns the map mask of remembered bricks that came back onto it (to re-mark)."""
+        returns the map mask of remembered bricks that came back onto it (to re-mark): free
+        bricks, and the bricks of sites believed filled.
+
+        Why the sites: a brick deep in a one-cell slot is hidden from every sector by the
+        brick in front of it. Come back with the site shown open, the agent took the
+        hidden one's site for a goal behind a filled one and planned round the walls to
+        reach it, for ever (gen-pocket 102); the sensors still clear a site seen empty."""
         if kx == 0 and ky == 0:
             return np.zeros((self.size, self.size), bool)
         rows, cols = np.nonzero(free_bricks)
         leaving = ~self._on_map(rows + ky, cols - kx)
         if leaving.any():
             self._remember(self.from_map(rows[leaving], cols[leaving]))
+        was_on = self._on_map(*self.to_map(self.sites))
         self.pos += (kx, ky)
         back = np.zeros((self.size, self.size), bool)
+        r, c = self.to_map(self.sites)
+        entering = self._on_map(r, c) & ~was_on & ~self.site_open
+        back[r[entering], c[entering]] = True
         if len(self.bricks):
             r, c = self.to_map(self.bricks)
             on = self._on_map(r, c)

@@ -403,3 +403,30 @@ def test_bricks_beyond_the_map_stand_in_the_matching_at_the_border():
     brain.far.bricks = np.array([[30, 0]])                   # a pile 30 cells east of the attach cell
     supply = brain._supply_beyond()
     assert supply.sum() == 1 and supply[brain.centre, -1]    # the east border cell on the agent's row
+
+
+def test_a_site_believed_filled_comes_back_onto_the_map_holding_its_brick():
+    # A brick deep in a one-cell slot is hidden behind the one in front of it: shown open on
+    # return, its site looked like a goal behind a filled one (gen-pocket 102).
+    mem = FarMemory(5, np.array([[2, 0], [2, 1]]))
+    mem.site_open[:] = (False, True)              # the first seen filled, the second open
+    no_bricks = np.zeros((5, 5), bool)
+    for _ in range(3):                            # 3 cells west: both leave on the east side
+        assert not mem.move(-1, 0, no_bricks).any()
+    for _ in range(2):
+        assert not mem.move(1, 0, no_bricks).any()
+    back = mem.move(1, 0, no_bricks)              # back on the map's east column
+    assert back[2, 4] and back.sum() == 1         # the filled one's brick, not the open one's
+
+
+def test_with_no_open_site_on_the_map_any_free_brick_is_a_brick_goal():
+    # The Matching grid pairs nothing without a site on the map; following a remembered
+    # brick beyond the border instead, the agent turned back each time the sites came into
+    # view, a step either side of the map's edge (gen-polyomino 134).
+    brain = Brain(_welcome(([50.5], [80.5])), AgentConfig(map_size=11), np.random.default_rng(0))
+    c = brain.centre
+    brain.far.bricks = np.array([[0, 20]])        # remembered 20 cells north, beyond the border
+    brain.maps.maps[BRICK, c + 2, c - 2] = 1.0     # a free brick in view, south-west
+    plans = brain.plan()
+    assert plans.brick_goals[c + 2, c - 2]
+    assert plans.brick[c, c] == pytest.approx(2 * math.sqrt(2))
