@@ -31,7 +31,7 @@ import numpy as np
 from agent_runtime import steering
 from agent_runtime.config import AgentConfig
 from agent_runtime.esm import AGENT, BRICK, CONFIG, FOOD, OBSTACLE, WATER, EgocentricMaps
-from agent_runtime.far_memory import FarMemory, border_seed, on_border
+from agent_runtime.far_memory import FarMemory, on_border
 from agent_runtime.matching import Matching, calculate_matching, select_goals
 from agent_runtime.motivations import Motivations
 from agent_runtime.network import NONE, STATE_NODES, ActionNetwork, engineered
@@ -69,8 +69,10 @@ class Plans:
 # Goal sites within this many cells (on each axis) of the agent are checked for sealing.
 SEAL_RADIUS = 2
 
-# Behaviours during which standing still is the point (consuming, or heading for a source).
-_STILL_IS_FINE = frozenset({"eat", "drink", "approach_food", "approach_water"})
+# Behaviours during which standing still is the point. Not approaching food or water: a
+# source seen a cell off now and then flips the way to it, and an agent turned back and
+# forth beside a gap in a wall for 9,000 ticks (gen-letter 109).
+_STILL_IS_FINE = frozenset({"eat", "drink"})
 
 
 class Brain:
@@ -128,9 +130,10 @@ class Brain:
             layers = self.maps.maps
             free = (layers[BRICK] > 0.5) & (layers[CONFIG] <= 0.5)
             walls = layers[OBSTACLE] > 0.5
+            discs = (layers[FOOD] > 0.5) | (layers[WATER] > 0.5)
             kx, ky = self.maps.move(frame.odom_dx, frame.odom_dy, self.cell)
             if kx or ky:
-                self.far.save_walls(walls)
+                self.far.save_walls(walls, discs)
                 back = self.far.move(kx, ky, free)
                 layers[BRICK][back] = 1.0
                 layers[OBSTACLE][self.far.load_walls()] = 1.0
@@ -358,7 +361,7 @@ class Brain:
     def _field(self, goals: np.ndarray, obstacles: np.ndarray, beyond: np.ndarray) -> np.ndarray:
         """Distance field to `goals` and to the remembered cells `beyond` the map, which
         enter at the border carrying the distance that remains."""
-        seed = border_seed(beyond, self.cfg.map_size, obstacles)
+        seed = self.far.border_costs(beyond, obstacles)
         if seed is None:
             return distance_field(goals, obstacles)
         seed[goals & ~obstacles] = 0.0

@@ -15,12 +15,15 @@ world grid as the maps are):
 Nothing here is a map: the ESMs and NMs stay egocentric and of fixed size. Sites on the
 map are written into the CONFIG layer each step; remembered bricks that come back onto
 the map are written back into the BRICK layer (the sensors clear them if they are gone).
-What is still beyond the map enters the navigation maps at their border
-(`border_seed`), each border cell starting at the straight-line (octile) distance that
-remains to the nearest remembered cell behind it, so spreading activation (Eq. 2) ranks
-far goals after near ones by the whole distance.
+What is still beyond the map enters the navigation maps at their border, each border
+cell starting at the distance that remains to the nearest remembered cell behind it, so
+spreading activation (Eq. 2) ranks far goals after near ones by the whole distance
+(`border_costs`). That distance goes round the fixed walls, food and water the agent
+has seen and remembers (`walls`, `discs`), counting ground never seen as open, as a
+person plans a way through a half-known town; with the world's extent unknown it is the
+straight (octile) distance (`border_seed`).
 
-Numpy and one compiled kernel (`border_seed`), no bus.
+Numpy and the compiled distance kernels (`border_seed`, spreading's), no bus.
 """
 
 from __future__ import annotations
@@ -29,6 +32,8 @@ import math
 
 import numpy as np
 from numba import njit
+
+from agent_runtime.spreading import distance_field
 
 SQRT2_M1 = math.sqrt(2.0) - 1.0
 BLOCK = 5          # cells per side of the squares Explore keeps track of having seen
@@ -57,10 +62,16 @@ class FarMemory:
         # wall longer than the map scrolls off it while the agent follows it, and an agent
         # that forgets the far end turns back to look for a way round there, for ever.
         self.walls: np.ndarray | None = None
+        # Food and water the same way, only for the distance that remains beyond the map
+        # (a food wall longer than the map sent agents along it and back, for ever).
+        self.discs: np.ndarray | None = None
+        self._memory_version = 0          # bumped when walls or discs change (for the cache)
+        self._costs_cache: dict[tuple[int, bytes], np.ndarray] = {}
         if bounds is not None:
             x0, y0, x1, y1 = bounds
             self.seen = np.zeros((-(-(x1 - x0) // BLOCK), -(-(y1 - y0) // BLOCK)), bool)
             self.walls = np.zeros((x1 - x0, y1 - y0), bool)
+            self.discs = np.zeros_like(self.walls)
             self.ever_seen = self.seen.copy()
 
     # ------------------------------------------------------------------ frames
@@ -149,13 +160,21 @@ class FarMemory:
         cols, rows = np.flatnonzero((gx >= 0) & (gx < x1 - x0)), np.flatnonzero((gy >= 0) & (gy < y1 - y0))
         return rows, cols, gx[cols], gy[rows]
 
-    def save_walls(self, obstacles: np.ndarray) -> None:
-        """Remember the fixed obstacles of the map (a bool layer) as it is now; call it
-        before the map shifts. Cells on the map overwrite what was remembered of them."""
-        if self.walls is None:
+    def save_walls(self, obstacles: np.ndarray, discs: np.ndarray | None = None) -> None:
+        """Remember the fixed obstacles of the map (a bool layer) as it is now, and the food
+        and water (`discs`, for planning beyond the map only); call it before the map
+        shifts. Cells on the map overwrite what was remembered of them."""
+        if self.walls is None or self.discs is None:
             return
         rows, cols, gx, gy = self._wall_window()
-        self.walls[np.ix_(gx, gy)] = obstacles[np.ix_(rows, cols)].T
+        window = np.ix_(gx, gy)
+        for memory, layer in ((self.walls, obstacles), (self.discs, discs)):
+            if layer is None:
+                continue
+            now = layer[np.ix_(rows, cols)].T
+            if not np.array_equal(memory[window], now):
+                memory[window] = now
+                self._memory_version += 1
 
     def load_walls(self) -> np.ndarray:
         """The remembered fixed obstacles that lie on the map now, as a map mask."""
@@ -241,6 +260,56 @@ class FarMemory:
         """(rows, cols) as a (k, 2) array of the remembered free bricks, on the map or beyond it."""
         rows, cols = self.to_map(self.bricks)
         return np.column_stack([rows, cols])
+
+
+    def border_costs(self, targets: np.ndarray, obstacles: np.ndarray) -> np.ndarray | None:
+        """Seed costs on the map's border cells (inf: none) for `targets`, (k, 2) (row, col)
+        cells beyond the map: the length of the shortest way from each free border cell to
+        a target through the world, round what the agent remembers as blocked (fixed
+        walls, food, water) and over everything else. None if there are no targets.
+
+        Why not the straight distance: a wall longer than the map between the agent and
+        its goal made the border cell straight behind it the cheapest; the agent walked
+        into the wall, along it while its end was on the map, and back when that end
+        scrolled off (generated worlds with long walls and food fields)."""
+        if len(targets) == 0:
+            return None
+        if self.bounds is None or self.walls is None or self.discs is None:
+            return border_seed(targets, self.size, obstacles)
+        x0, y0, x1, y1 = self.bounds
+        t = np.asarray(targets, np.int64).reshape(-1, 2)
+        tx, ty = self.pos[0] + t[:, 1] - self.centre - x0, self.pos[1] + self.centre - t[:, 0] - y0
+        inside = (tx >= 0) & (tx < x1 - x0) & (ty >= 0) & (ty < y1 - y0)
+        if not inside.all():
+            return border_seed(targets, self.size, obstacles)
+        world = self._world_field(tx, ty)
+        border = _border_cells(self.size)
+        border = border[~obstacles[border[:, 0], border[:, 1]]]
+        bx = self.pos[0] + border[:, 1] - self.centre - x0
+        by = self.pos[1] + self.centre - border[:, 0] - y0
+        ok = (bx >= 0) & (bx < x1 - x0) & (by >= 0) & (by < y1 - y0)
+        seed = np.full((self.size, self.size), np.inf)
+        seed[border[ok, 0], border[ok, 1]] = world[bx[ok], by[ok]]
+        if not np.isfinite(seed).any():
+            # Remembered as unreachable: the memory may hold a misplaced mark; the straight
+            # way on is better than giving the targets up.
+            return border_seed(targets, self.size, obstacles)
+        return seed
+
+    def _world_field(self, tx: np.ndarray, ty: np.ndarray) -> np.ndarray:
+        """Distance field over the world grid [x, y] to the target cells, round the
+        remembered walls and discs; cached until the targets or the memory change."""
+        assert self.walls is not None and self.discs is not None
+        key = (self._memory_version, np.stack([tx, ty]).astype(np.int64).tobytes())
+        field = self._costs_cache.get(key)
+        if field is None:
+            goals = np.zeros_like(self.walls)
+            goals[tx, ty] = True
+            field = distance_field(goals, (self.walls | self.discs) & ~goals)
+            if len(self._costs_cache) >= 4:   # the config and brick NMs ask in turn
+                self._costs_cache.clear()
+            self._costs_cache[key] = field
+        return field
 
 
 def on_border(targets: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:

@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 import sim
 from agent_runtime.brain import Brain, _mouth_side
 from agent_runtime.config import AgentConfig
-from agent_runtime.esm import BRICK, CONFIG, OBSTACLE
+from agent_runtime.esm import BRICK, CONFIG, OBSTACLE, WATER
 from agent_runtime.far_memory import FarMemory, border_seed
 from agent_runtime.spreading import distance_field, seeded_distance_field
 from protocol.messages import BEHAVIOURS, CHANNELS, NO_READING, SensorFrame, Welcome
@@ -430,3 +430,31 @@ def test_with_no_open_site_on_the_map_any_free_brick_is_a_brick_goal():
     plans = brain.plan()
     assert plans.brick_goals[c + 2, c - 2]
     assert plans.brick[c, c] == pytest.approx(2 * math.sqrt(2))
+
+
+def test_the_distance_beyond_the_map_goes_round_the_walls_remembered_there():
+    # A wall longer than the map between the agent and its goal: the straight distance made
+    # the border cell straight behind the wall the cheapest, and the agent walked into it.
+    mem = FarMemory(5, np.zeros((0, 2)), bounds=(-20, -20, 20, 20))
+    target = np.array([[2, 12]])                   # row 2 (the agent's), 10 cells east of the map's edge
+    free = np.zeros((5, 5), bool)
+    assert mem.border_costs(target, free)[2, 4] == pytest.approx(8.0)   # nothing known: straight on
+    assert mem.walls is not None
+    mem.walls[3 + 20, -15 + 20:16 + 20] = True     # a wall at x = 3 from y = -15 to 15
+    mem._memory_version += 1
+    round_it = mem.border_costs(target, free)
+    assert np.isfinite(round_it[2, 4]) and round_it[2, 4] > 25          # round its end, 16 cells on
+    assert round_it[0, 4] < round_it[2, 4] and round_it[4, 4] < round_it[2, 4]  # towards an end
+
+
+def test_an_agent_pinned_while_it_heads_for_water_backs_off():
+    # A source seen a cell off now and then flips the way to it: an agent turned back and
+    # forth beside a gap in a wall for 9,000 ticks (gen-letter 109).
+    cfg = AgentConfig(stuck_ticks=40)
+    brain = Brain(_welcome(), cfg, np.random.default_rng(3))
+    c = brain.centre
+    brain.maps.maps[WATER, c, c + 9] = 1.0         # on the map, beyond sensor range
+    brain.motivations.thirst, brain.motivations.seeking_water = 1.0, True
+    behaviours = [brain.step(_frame(t)).behaviour for t in range(1, 120)]
+    assert behaviours[0] == "approach_water"
+    assert "unstick" in behaviours
