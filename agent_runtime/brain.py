@@ -484,7 +484,11 @@ class Brain:
             if seeking and _nearest_reading(ranges[_CH[channel]]) <= self.cfg.touch:
                 return 0.0, 0.0, act, act
         agent_near = _nearest_reading(ranges[_CH["agent"]])
-        if agent_near < self.cfg.avoid_distance:
+        # A loaded agent gives way to an unloaded one (most likely on its way out of the
+        # structure): it backs off from farther away, so in a corridor one body wide the
+        # two do not back off and meet again for ever.
+        give_way = self.cfg.avoid_distance * (1.0 if frame.holding else 0.5)
+        if agent_near < give_way:
             dx, dy = self._reading_offset(ranges[_CH["agent"]])
             return (*steering.away_from(dx, dy, frame.heading, cruise), NONE, "avoid")
         for seeking, layer, name in ((mot.seeking_water, WATER, "approach_water"),

@@ -458,3 +458,15 @@ def test_an_agent_pinned_while_it_heads_for_water_backs_off():
     behaviours = [brain.step(_frame(t)).behaviour for t in range(1, 120)]
     assert behaviours[0] == "approach_water"
     assert "unstick" in behaviours
+
+
+@pytest.mark.parametrize("holding,gives_way", [(True, True), (False, False)])
+def test_a_loaded_agent_gives_way_to_an_unloaded_one(holding, gives_way):
+    # Both backing off at the same distance, two agents in a corridor one body wide met
+    # again and again (generated pockets with 9-12 agents); the loaded one backs off first.
+    brain = Brain(_welcome(([60.5], [50.5])), AgentConfig(), np.random.default_rng(0))
+    ranges = [NO_READING] * (16 * len(CHANNELS))
+    ranges[CHANNELS.index("agent") * 16 + 0] = 0.6     # another agent 0.6 cells away, east
+    frame = SensorFrame(agent_id="a1", tick=1, heading=0.0, odom_dx=0.0, odom_dy=0.0, sectors=16,
+                        ranges=tuple(ranges), holding=holding)
+    assert (brain.step(frame).behaviour == "avoid") is gives_way
