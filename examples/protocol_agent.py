@@ -55,6 +55,8 @@ with zenoh.open(conf) as session:
         if f.tick > welcome.tick:  # the attach frame's odometry is already in the Welcome's pose
             x, y = x + f.odom_dx, y + f.odom_dy
         last, dropped = f.tick, f.dropped
+        if dropped:  # done: no more commands (a grab now would take the brick back)
+            break
         if f.holding:
             gx, gy = min(sites, key=lambda s: math.hypot(s[0] - x, s[1] - y))
             stop_at = 0.1
