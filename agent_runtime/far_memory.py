@@ -276,18 +276,13 @@ class FarMemory:
             return None
         if self.bounds is None or self.walls is None or self.discs is None:
             return border_seed(targets, self.size, obstacles)
-        x0, y0, x1, y1 = self.bounds
         t = np.asarray(targets, np.int64).reshape(-1, 2)
-        tx, ty = self.pos[0] + t[:, 1] - self.centre - x0, self.pos[1] + self.centre - t[:, 0] - y0
-        inside = (tx >= 0) & (tx < x1 - x0) & (ty >= 0) & (ty < y1 - y0)
+        tx, ty, inside = self._grid_of(t[:, 0], t[:, 1])
         if not inside.all():
             return border_seed(targets, self.size, obstacles)
         world = self._world_field(tx, ty)
-        border = _border_cells(self.size)
-        border = border[~obstacles[border[:, 0], border[:, 1]]]
-        bx = self.pos[0] + border[:, 1] - self.centre - x0
-        by = self.pos[1] + self.centre - border[:, 0] - y0
-        ok = (bx >= 0) & (bx < x1 - x0) & (by >= 0) & (by < y1 - y0)
+        border = _free_border(self.size, obstacles)
+        bx, by, ok = self._grid_of(border[:, 0], border[:, 1])
         seed = np.full((self.size, self.size), np.inf)
         seed[border[ok, 0], border[ok, 1]] = world[bx[ok], by[ok]]
         if not np.isfinite(seed).any():
@@ -295,6 +290,13 @@ class FarMemory:
             # way on is better than giving the targets up.
             return border_seed(targets, self.size, obstacles)
         return seed
+
+    def _grid_of(self, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """World-grid indices (x - x0, y - y0) of map cells (rows, cols), and which lie in the world."""
+        assert self.bounds is not None
+        x0, y0, x1, y1 = self.bounds
+        gx, gy = (self.from_map(rows, cols) - (x0, y0)).T
+        return gx, gy, (gx >= 0) & (gx < x1 - x0) & (gy >= 0) & (gy < y1 - y0)
 
     def _world_field(self, tx: np.ndarray, ty: np.ndarray) -> np.ndarray:
         """Distance field over the world grid [x, y] to the target cells, round the
@@ -324,8 +326,7 @@ def border_seed(targets: np.ndarray, size: int, obstacles: np.ndarray) -> np.nda
     target (the straight way on, as nothing is known out there). None if no targets."""
     if len(targets) == 0:
         return None
-    border = _border_cells(size)
-    border = border[~obstacles[border[:, 0], border[:, 1]]]
+    border = _free_border(size, obstacles)
     seed = np.full((size, size), np.inf)
     if len(border) == 0:
         return seed
@@ -334,6 +335,12 @@ def border_seed(targets: np.ndarray, size: int, obstacles: np.ndarray) -> np.nda
     # decision step on a large blueprint, whose every site beyond the map is a target.
     seed[border[:, 0], border[:, 1]] = _nearest_octile(border, t)
     return seed
+
+
+def _free_border(size: int, obstacles: np.ndarray) -> np.ndarray:
+    """(k, 2) (row, col) of the map's border cells that are not obstacles."""
+    border = _border_cells(size)
+    return border[~obstacles[border[:, 0], border[:, 1]]]
 
 
 _BORDERS: dict[int, np.ndarray] = {}

@@ -125,6 +125,15 @@ def _counter(session, key: str) -> list:
     return got
 
 
+def _at_once(calls: list[tuple]) -> None:
+    """Run each (function, *args) in its own thread, all together, and wait for them all."""
+    threads = [threading.Thread(target=fn, args=args) for fn, *args in calls]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+
+
 def _others(*rightful: str) -> list[str]:
     return [u for u in (A1, A2, TEACHER, OBSERVER, OPERATOR, WORLD) if u not in rightful]
 
@@ -185,11 +194,7 @@ def test_nobody_else_can_take_over_the_id_a1_but_a1s_own_credential_can(secure):
     for user in _others(A1):
         INTRUSIONS.add("attach as a1 while a1 runs", user)
         links.append(WorldLink(secure["intruders"][user], W, "a1"))  # a1's token, a1's frames, a1's Hello
-    threads = [threading.Thread(target=attempt, args=(link,)) for link in links]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join()
+    _at_once([(attempt, link) for link in links])
     assert len(refused) == len(links), "an intruder attached as a1"
     assert world.agents["a1"].restarts == restarts
     _step(secure)  # the rightful a1 still drives its body
@@ -283,15 +288,12 @@ def test_only_the_operator_perturbs(secure):
     def attempt(user, p):
         results[(user, p.op)] = _perturb(secure["intruders"][user], p, QUIET)
 
-    threads = []
+    calls = []
     for user in _others(OPERATOR):
         for p in (remove, add):
             INTRUSIONS.add(f"perturb ({p.op} a brick)", user)
-            threads.append(threading.Thread(target=attempt, args=(user, p)))
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join()
+            calls.append((attempt, user, p))
+    _at_once(calls)
     assert results == dict.fromkeys(results), "an intruder's perturbation was answered"
     assert world.discs.bricks_total() == bricks
     result = _perturb(secure["intruders"][OPERATOR], remove, 10.0)
@@ -325,16 +327,13 @@ def test_only_the_operator_kills_or_restarts(secure):
         def attempt(user, op):
             answers[(user, op)] = control(secure["intruders"][user], W, op, "a1", timeout=QUIET)
 
-        threads = []
+        calls = []
         for user in _others(OPERATOR):
             for op in ("kill", "restart"):
                 INTRUSIONS.add(f"{op} a1 (RunControl)", user)
-                threads.append(threading.Thread(target=attempt, args=(user, op)))
-        for t in threads:
-            t.start()
-        for t in threads:
-            t.join()
-        assert len(answers) == len(threads)
+                calls.append((attempt, user, op))
+        _at_once(calls)
+        assert len(answers) == len(calls)
         assert all(not r.ok and "answered" in r.message for r in answers.values()), answers
         assert fleet.calls == []
         result = control(operator, W, "restart", "a1", timeout=10.0)
