@@ -166,6 +166,15 @@ class Fleet:
                 pass  # the host has just exited: the agent is gone anyway
         return f"stopped {agent_id} in its host (pid {proc.pid})"
 
+    def exited(self) -> tuple[str, int] | None:
+        """An agent process that has exited, as (agent id, exit code), or None."""
+        with self.lock:
+            for agent_id, proc in self.procs.items():
+                code = proc.poll()
+                if code is not None:
+                    return agent_id, code
+        return None
+
     def restart(self, agent_id: str) -> str:
         killed = self.kill(agent_id) + ", " if agent_id in self.procs else ""
         proc = self.start(agent_id)
@@ -210,6 +219,7 @@ class RunBus:
     def __init__(self, opts: RunOptions, fleet: Fleet, watch: StallWatch, tty: bool):
         self.opts, self.watch, self.tty = opts, watch, tty
         self.world_restarts = 0
+        self.last_tick = -1        # the newest tick a status reported (0 until the world steps)
         self._started = time.monotonic()
         self.rate = TickRate()
         self.session = open_session(run_bus_options(opts))
@@ -225,6 +235,7 @@ class RunBus:
             st = decode(sample.payload.to_bytes(), WorldStatus)
         except ProtocolError:
             return
+        self.last_tick = max(self.last_tick, st.tick)
         self.watch.observe(st)
         rate = self.rate.observe(st.tick)
         if not self.opts.quiet and not self.watch.stalled:
@@ -368,7 +379,14 @@ def _run(opts: RunOptions, stop: threading.Event, tmp: Path) -> dict:
                 else:
                     fleet.start_host(first, min(first + k - 1, n_agents))
             while True:
-                _wait_until(lambda: world.proc.poll() is not None, stop.is_set, lambda: watch.stalled)
+                _wait_until(lambda: world.proc.poll() is not None, stop.is_set, lambda: watch.stalled,
+                            lambda: _lost_before_start(fleet, run_bus) is not None)
+                lost = _lost_before_start(fleet, run_bus)
+                if lost is not None and not stop.is_set():
+                    # The world waits for every agent before its first tick: it would wait for ever.
+                    raise RuntimeError(f"agent {lost[0]} exited (code {lost[1]}) before the world's first tick; "
+                                       f"the world waits for all {n_agents} agents, so the run cannot start "
+                                       f"(its error is above)")
                 if stop.is_set() or watch.stalled or not world.died():
                     break
                 message = world.restart()
@@ -393,6 +411,12 @@ def _run(opts: RunOptions, stop: threading.Event, tmp: Path) -> dict:
     if opts.summary and opts.summary != "-":
         Path(opts.summary).write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
     return summary
+
+
+def _lost_before_start(fleet: Fleet, run_bus: RunBus) -> tuple[str, int] | None:
+    """An agent process that exited before the world stepped once (after that, agents die
+    and return as the run goes on: `conag kill`, crashes)."""
+    return fleet.exited() if run_bus.last_tick <= 0 else None
 
 
 def _wait_until(*conditions: Callable[[], bool], poll: float = 0.1) -> None:
