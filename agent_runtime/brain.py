@@ -35,6 +35,8 @@ from agent_runtime.far_memory import FarMemory, on_border
 from agent_runtime.matching import Matching, calculate_matching, select_goals
 from agent_runtime.motivations import Motivations
 from agent_runtime.network import NONE, STATE_NODES, ActionNetwork, engineered
+from agent_runtime.seal_guard import SealGuard
+from agent_runtime.sealing import enclosed_sites
 from agent_runtime.spreading import distance_field, gradient_step, seeded_distance_field
 from protocol.messages import BEHAVIOURS, CHANNELS, NO_READING, AgentState, Decision, SensorFrame, Welcome
 
@@ -65,9 +67,6 @@ class Plans:
     config_obstacles: np.ndarray | None = None  # the obstacles each field was computed with
     brick_obstacles: np.ndarray | None = None
 
-
-# Goal sites within this many cells (on each axis) of the agent are checked for sealing.
-SEAL_RADIUS = 2
 
 # Behaviours during which standing still is the point. Not approaching food or water: a
 # source seen a cell off now and then flips the way to it, and an agent turned back and
@@ -114,6 +113,7 @@ class Brain:
         self._tick = welcome.tick
         self.motivations = Motivations()
         self.centre = self.cfg.map_size // 2
+        self.seals = SealGuard(self.maps, self.far, self.centre)
         self._attach_tick = welcome.tick
         self.plans: Plans | None = None
         self._matching: tuple[bytes, Matching] | None = None  # (inputs, result) of the last matching
@@ -131,9 +131,10 @@ class Brain:
             free = (layers[BRICK] > 0.5) & (layers[CONFIG] <= 0.5)
             walls = layers[OBSTACLE] > 0.5
             discs = (layers[FOOD] > 0.5) | (layers[WATER] > 0.5)
+            ground = self.maps.known & ~walls & ~discs      # before the maps shift
             kx, ky = self.maps.move(frame.odom_dx, frame.odom_dy, self.cell)
             if kx or ky:
-                self.far.save_walls(walls, discs)
+                self.far.save_walls(walls, discs, ground)
                 back = self.far.move(kx, ky, free)
                 layers[BRICK][back] = 1.0
                 layers[OBSTACLE][self.far.load_walls()] = 1.0
@@ -144,11 +145,22 @@ class Brain:
         if outside is not None:
             self.maps.maps[OBSTACLE][outside] = 1.0
         self.far.observe_sites(self.maps.maps[BRICK], self.maps.clear_age)
+        self.far.age_sites(self.maps.clear_age)
+        enclosed = self._enclosed_sites()
+        if enclosed.any():
+            self.maps.maps[BRICK][enclosed] = 1.0
+            self.far.observe_sites(self.maps.maps[BRICK], self.maps.clear_age)
         new = self.far.mark_seen(self.sensor_range - 1.0)
         if self.searching():
             self.searched += new
         self.motivations.update(self.cfg, frame.ate, frame.drank)
         return ranges
+
+    def _enclosed_sites(self) -> np.ndarray:
+        """Open sites on the map that no way reaches (`sealing.enclosed_sites`): believed filled."""
+        m = self.maps.maps > 0.5
+        walls = m[OBSTACLE] | m[FOOD] | m[WATER] | (m[BRICK] & m[CONFIG])
+        return enclosed_sites(m[CONFIG] & ~m[BRICK], walls, (self.centre, self.centre))
 
     # the blueprint ------------------------------------------------------------------------
     def _site_cells(self, xs, ys) -> np.ndarray:
@@ -258,69 +270,11 @@ class Brain:
                 config_goals &= ~_mouth_side(held, config_goals, depth)
         if self.cfg.goal_sequencing:
             # Also when sequencing gives way (plan's fallback): no site that seals another.
-            config_goals &= ~self.sealing(config_goals, open_sites, obstacles, supply_bricks)
+            config_goals &= ~self.seals.unsafe(config_goals, open_sites, obstacles, supply_bricks, self._tick)
         # Bricks that are not goals (the structure's, and with sequencing the unmatched free
         # ones) are in the way: a path must not lead through one to a matched brick beyond.
         return ((config_goals, self._free_centre(food | water | brick | agents)),
                 (brick_goals, self._free_centre(food | water | agents | (brick & ~brick_goals))))
-
-    def sealing(self, goals: np.ndarray, open_sites: np.ndarray, blocked: np.ndarray,
-                supply: np.ndarray) -> np.ndarray:
-        """The goal sites near the agent (within SEAL_RADIUS cells) whose brick would cut an
-        open site off from the supply, on the ground the agent has seen open.
-
-        The Matching grid plans on the maps, where a cell never seen is empty: inside a
-        corridor of food whose far walls no sensor has seen past the nearest disc, every
-        deep site seems to have a way out sideways, so the mouth is filled and the rest
-        sealed (generated pockets stalled this way). Here only cells seen free (`known`)
-        and open sites are passable, from the supply and the open ground seen around the agent; a site
-        whose filling disconnects another open site waits, and the agent goes deeper,
-        seeing the walls as it goes. A few distance fields, only for sites in reach.
-        """
-        c, r = self.centre, SEAL_RADIUS
-        unsafe = np.zeros_like(goals)
-        near = np.zeros_like(goals)
-        near[c - r:c + r + 1, c - r:c + r + 1] = goals[c - r:c + r + 1, c - r:c + r + 1]
-        if not near.any():
-            return unsafe
-        passable = (self.maps.known | open_sites) & ~blocked
-        # The outside: the supply, and open ground seen a few cells beyond the sites that
-        # are checked (the supply itself is often beyond the map, where nothing is seen).
-        outside = np.ones_like(passable)
-        outside[c - r - 3:c + r + 4, c - r - 3:c + r + 4] = False
-        reference = (supply | (outside & self.maps.known & ~open_sites)) & passable
-        if not reference.any():
-            return unsafe
-        before = np.isfinite(distance_field(reference, ~passable))
-        # An open site walled in by structure bricks near the agent is a contradiction:
-        # one of them is likely a ghost (or the site a stale belief). Count those bricks
-        # as passable, so the way the site would have is not filled over before it is seen.
-        structure = (self.maps.maps[BRICK] > 0.5) & (self.maps.maps[CONFIG] > 0.5)
-        doubtful = self._walling_in(open_sites & ~before, structure)
-        if doubtful.any():
-            passable |= doubtful
-            before = np.isfinite(distance_field(reference, ~passable))
-        for row, col in zip(*np.nonzero(near & before)):
-            wall = ~passable
-            wall[row, col] = True
-            after = np.isfinite(distance_field(reference, wall))
-            cut = open_sites & before & ~after
-            cut[row, col] = False
-            unsafe[row, col] = cut.any()
-        return unsafe
-
-    def _walling_in(self, enclosed: np.ndarray, structure: np.ndarray) -> np.ndarray:
-        """Structure bricks beside an `enclosed` open site, within SEAL_RADIUS + 1 cells of
-        the agent (where it is about to decide)."""
-        c, r = self.centre, SEAL_RADIUS + 1
-        local = np.zeros_like(enclosed)
-        local[c - r:c + r + 1, c - r:c + r + 1] = True
-        beside = np.zeros_like(enclosed)
-        beside[1:, :] |= enclosed[:-1, :]
-        beside[:-1, :] |= enclosed[1:, :]
-        beside[:, 1:] |= enclosed[:, :-1]
-        beside[:, :-1] |= enclosed[:, 1:]
-        return beside & structure & local
 
     def matching(self, bricks: np.ndarray, sites: np.ndarray, obstacles: np.ndarray,
                  closed: np.ndarray | None = None) -> Matching:
@@ -521,11 +475,25 @@ class Brain:
             target = self._brick_within(plans, self.cfg.near_brick)
             return steering.steer_to(*target, frame.heading, cruise) if target else (0.0, 0.0)
         if motor == "avoid_red":
+            if _nearest_reading(ranges[_CH["agent"]]) < self.sensor_range and self._agents_in_the_way(plans):
+                # Only other agents stand between the held brick and a site (a corridor one
+                # body wide): back away from the nearest, so it can come out. Four agents
+                # queued in a 31-cell corridor otherwise held it shut for good, the one
+                # inside unable to leave and the rest unable to enter (gen-pocket 117).
+                return steering.away_from(*self._reading_offset(ranges[_CH["agent"]]), frame.heading, cruise)
             if _nearest_reading(ranges[_CH["brick"]]) < self.sensor_range:
                 return steering.away_from(*self._reading_offset(ranges[_CH["brick"]]), frame.heading, cruise)
             return steering.explore(self.rng, self.cfg.explore_turn, cruise)
         # Explore is always excited (§4.1): the default when no construction output fires.
         return self._explore(frame.heading)
+
+    def _agents_in_the_way(self, plans: Plans) -> bool:
+        """Is a site out of reach only because of the other agents on the maps?"""
+        if plans.config_obstacles is None:
+            return False
+        c = self.centre
+        clear = plans.config_obstacles & ~(self.maps.maps[AGENT] > 0.5)
+        return bool(np.isfinite(self._field(plans.config_goals, clear, self.far.far_open_sites())[c, c]))
 
     def _explore(self, heading: float) -> tuple[float, float]:
         """Head for the nearest part of the world not yet seen (its extent came with the

@@ -50,6 +50,9 @@ class FarMemory:
         self.pos = np.zeros(2, np.int64)                 # the agent's cell, (x, y) from the attach cell
         self.sites = np.asarray(sites, np.int64).reshape(-1, 2)
         self.site_open = np.ones(len(self.sites), bool)  # belief: no brick seen on it (yet)
+        # Steps since each site was last seen empty (inf: never). A site believed open but
+        # not seen for a while may have been filled by another agent (`age_sites`).
+        self.site_clear_age = np.full(len(self.sites), np.inf)
         self.bricks = np.zeros((0, 2), np.int64)
         # (x0, y0, x1, y1): the world's cells, relative to the attach cell, x0 <= x < x1 and
         # y0 <= y < y1; None when the world did not say. Everything outside is wall.
@@ -65,6 +68,9 @@ class FarMemory:
         # Food and water the same way, only for the distance that remains beyond the map
         # (a food wall longer than the map sent agents along it and back, for ever).
         self.discs: np.ndarray | None = None
+        # Ground seen free (no wall, food or water), for judging sealing beyond the map: a
+        # corridor longer than the map is open at one end only if that end was seen open.
+        self.ground: np.ndarray | None = None
         self._memory_version = 0          # bumped when walls or discs change (for the cache)
         self._costs_cache: dict[tuple[int, bytes], np.ndarray] = {}
         if bounds is not None:
@@ -72,6 +78,7 @@ class FarMemory:
             self.seen = np.zeros((-(-(x1 - x0) // BLOCK), -(-(y1 - y0) // BLOCK)), bool)
             self.walls = np.zeros((x1 - x0, y1 - y0), bool)
             self.discs = np.zeros_like(self.walls)
+            self.ground = np.zeros_like(self.walls)
             self.ever_seen = self.seen.copy()
 
     # ------------------------------------------------------------------ frames
@@ -95,16 +102,24 @@ class FarMemory:
     def set_sites(self, sites: np.ndarray) -> None:
         """A new blueprint: keep what was believed of sites that are still in it."""
         sites = np.asarray(sites, np.int64).reshape(-1, 2)
-        old = {tuple(c): o for c, o in zip(self.sites.tolist(), self.site_open.tolist())}
-        self.site_open = np.array([old.get(tuple(c), True) for c in sites.tolist()], bool).reshape(-1)
+        old = {tuple(c): (o, a) for c, o, a in zip(self.sites.tolist(), self.site_open.tolist(),
+                                                   self.site_clear_age.tolist())}
+        kept = [old.get(tuple(c), (True, np.inf)) for c in sites.tolist()]
+        self.site_open = np.array([o for o, _ in kept], bool).reshape(-1)
+        self.site_clear_age = np.array([a for _, a in kept], float).reshape(-1)
         self.sites = sites
+
+    def map_mask(self, cells: np.ndarray) -> np.ndarray:
+        """Map mask of the `cells` (x, y from the attach cell) that fall on the map."""
+        out = np.zeros((self.size, self.size), bool)
+        rows, cols = self.to_map(cells)
+        on = self._on_map(rows, cols)
+        out[rows[on], cols[on]] = True
+        return out
 
     def config_layer(self, out: np.ndarray) -> None:
         """Write the sites that fall on the map into `out` (the CONFIG layer), clearing it first."""
-        out.fill(0.0)
-        rows, cols = self.to_map(self.sites)
-        on = self._on_map(rows, cols)
-        out[rows[on], cols[on]] = 1.0
+        out[:] = self.map_mask(self.sites)
 
     def observe_sites(self, brick_layer: np.ndarray, clear_age: np.ndarray) -> None:
         """Update beliefs from the maps: a brick on a site's cell fills it; a cell seen empty of
@@ -114,6 +129,18 @@ class FarMemory:
         r, c = rows[on], cols[on]
         self.site_open[on[brick_layer[r, c] > 0.5]] = False
         self.site_open[on[(clear_age[r, c] == 0) & (brick_layer[r, c] <= 0.5)]] = True
+
+    def age_sites(self, clear_age: np.ndarray) -> None:
+        """One step older: each site's steps since it was last seen empty of bricks, from
+        the map's `clear_age` for the sites on the map (once per step)."""
+        self.site_clear_age += 1.0
+        rows, cols = self.to_map(self.sites)
+        on = np.flatnonzero(self._on_map(rows, cols))
+        self.site_clear_age[on] = np.minimum(self.site_clear_age[on], clear_age[rows[on], cols[on]])
+
+    def fresh_sites(self, within: float) -> np.ndarray:
+        """(k, 2) cells of the sites believed open and seen empty in the last `within` steps."""
+        return self.sites[self.site_open & (self.site_clear_age <= within)]
 
     def open_sites(self) -> int:
         """How many sites of the blueprint are believed open (no brick seen on them)."""
@@ -160,14 +187,21 @@ class FarMemory:
         cols, rows = np.flatnonzero((gx >= 0) & (gx < x1 - x0)), np.flatnonzero((gy >= 0) & (gy < y1 - y0))
         return rows, cols, gx[cols], gy[rows]
 
-    def save_walls(self, obstacles: np.ndarray, discs: np.ndarray | None = None) -> None:
-        """Remember the fixed obstacles of the map (a bool layer) as it is now, and the food
-        and water (`discs`, for planning beyond the map only); call it before the map
-        shifts. Cells on the map overwrite what was remembered of them."""
+    def save_walls(self, obstacles: np.ndarray, discs: np.ndarray | None = None,
+                   ground: np.ndarray | None = None) -> None:
+        """Remember the fixed obstacles of the map (a bool layer) as it is now, the food and
+        water (`discs`, for planning beyond the map only) and the ground seen free; call it
+        before the map shifts. Cells on the map overwrite what was remembered of them."""
         if self.walls is None or self.discs is None:
             return
         rows, cols, gx, gy = self._wall_window()
         window = np.ix_(gx, gy)
+        if ground is not None and self.ground is not None:
+            # Ground once seen free stays so (walls do not grow; a disc put there later is on
+            # the map as blocked, which wins). The maps forget what shifted off them and see
+            # little beside a wall: the mouth of a corridor by the world's edge, walked
+            # through on the way in, was unknown again when the agent came back to it.
+            self.ground[window] |= ground[np.ix_(rows, cols)].T    # not in the costs' cache key
         for memory, layer in ((self.walls, obstacles), (self.discs, discs)):
             if layer is None:
                 continue
@@ -178,13 +212,48 @@ class FarMemory:
 
     def load_walls(self) -> np.ndarray:
         """The remembered fixed obstacles that lie on the map now, as a map mask."""
-        out = np.zeros((self.size, self.size), bool)
-        if self.walls is not None:
-            rows, cols, gx, gy = self._wall_window()
-            out[np.ix_(rows, cols)] = self.walls[np.ix_(gx, gy)].T
+        if self.walls is None:
+            return np.zeros((self.size, self.size), bool)
+        return self.on_map(self.walls)
+
+    def on_world(self, memory: np.ndarray, layer: np.ndarray) -> np.ndarray:
+        """A world grid [x - x0, y - y0]: `memory` (a world grid) with the map's window
+        replaced by the map mask `layer`, what the agent sees now."""
+        out = memory.copy()
+        rows, cols, gx, gy = self._wall_window()
+        out[np.ix_(gx, gy)] = layer[np.ix_(rows, cols)].T
         return out
 
+    def on_map(self, world: np.ndarray) -> np.ndarray:
+        """The map's window of a world grid, as a map mask (False beyond the world)."""
+        out = np.zeros((self.size, self.size), world.dtype)
+        rows, cols, gx, gy = self._wall_window()
+        out[np.ix_(rows, cols)] = world[np.ix_(gx, gy)].T
+        return out
+
+    def cells_grid(self, cells: np.ndarray) -> np.ndarray:
+        """World grid with `cells` ((k, 2) x, y from the attach cell) marked, those inside it."""
+        assert self.walls is not None
+        out = np.zeros_like(self.walls)
+        gx, gy, inside = self._world_cells(cells)
+        out[gx[inside], gy[inside]] = True
+        return out
+
+    def _world_cells(self, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        assert self.bounds is not None
+        x0, y0, x1, y1 = self.bounds
+        gx, gy = (np.asarray(cells, np.int64).reshape(-1, 2) - (x0, y0)).T
+        return gx, gy, (gx >= 0) & (gx < x1 - x0) & (gy >= 0) & (gy < y1 - y0)
+
     def _remember(self, cells: np.ndarray) -> None:
+        if self.bounds is not None:
+            # A brick by the world's edge, seen from afar, can be mapped a cell beyond it.
+            # Remembered there, it came back onto the map inside the edge's wall, where it
+            # is no goal, and left again as a remembered brick, which is one: the agent
+            # walked to and fro across a cell's edge for 50,000 ticks (gen-nested_rings
+            # 11230026). No brick lies outside the world: keep it on the edge's cell.
+            x0, y0, x1, y1 = self.bounds
+            cells = np.clip(cells, (x0, y0), (x1 - 1, y1 - 1))
         merged = np.unique(np.vstack([self.bricks, cells]), axis=0) if len(self.bricks) else np.unique(cells, axis=0)
         self.bricks = merged[-MAX_FAR_BRICKS:]
 
@@ -293,10 +362,7 @@ class FarMemory:
 
     def _grid_of(self, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """World-grid indices (x - x0, y - y0) of map cells (rows, cols), and which lie in the world."""
-        assert self.bounds is not None
-        x0, y0, x1, y1 = self.bounds
-        gx, gy = (self.from_map(rows, cols) - (x0, y0)).T
-        return gx, gy, (gx >= 0) & (gx < x1 - x0) & (gy >= 0) & (gy < y1 - y0)
+        return self._world_cells(self.from_map(rows, cols))
 
     def _world_field(self, tx: np.ndarray, ty: np.ndarray) -> np.ndarray:
         """Distance field over the world grid [x, y] to the target cells, round the

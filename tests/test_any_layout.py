@@ -17,6 +17,7 @@ from agent_runtime.brain import Brain, _mouth_side
 from agent_runtime.config import AgentConfig
 from agent_runtime.esm import BRICK, CONFIG, OBSTACLE, WATER
 from agent_runtime.far_memory import FarMemory, border_seed
+from agent_runtime.sealing import FRESH_SITE, SEAL_MEMORY, enclosed_sites
 from agent_runtime.spreading import distance_field, seeded_distance_field
 from protocol.messages import BEHAVIOURS, CHANNELS, NO_READING, SensorFrame, Welcome
 from world_server.scenario import load_scenario, parse_scenario
@@ -95,6 +96,7 @@ def test_a_mouth_site_waits_while_the_site_behind_it_is_open_on_seen_ground():
     goals = np.zeros((n, n), bool)
     open_sites = goals.copy()
     open_sites[c, c:c + 4] = True                       # the agent stands at the mouth
+    brain.maps.clear_age[open_sites] = 0.0              # and sees the corridor empty
     goals[c, c] = goals[c, c + 3] = True
     blocked = np.zeros((n, n), bool)
     blocked[[c - 1, c + 1], c:c + 2] = True             # the walls it has seen
@@ -102,10 +104,85 @@ def test_a_mouth_site_waits_while_the_site_behind_it_is_open_on_seen_ground():
     brain.maps.known[:, :c + 1] = True                  # seen ground: west of the agent only
     supply = np.zeros((n, n), bool)
     supply[c, c - 8] = True
-    unsafe = brain.sealing(goals, open_sites, blocked, supply)
+    unsafe = brain.seals.judge(goals, open_sites, blocked, supply)
     assert unsafe[c, c] and not unsafe[c, c + 3]        # the far end is not near: not checked
     brain.maps.known[:] = True                          # seen open all round: no seal
-    assert not brain.sealing(goals, open_sites, blocked, supply).any()
+    assert not brain.seals.judge(goals, open_sites, blocked, supply).any()
+
+
+def _corridor_with_a_far_way_out() -> tuple[Brain, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The agent at the mouth of a one-cell corridor of five open sites between walls; the
+    last site opens onto ground that leads round to the supply. All ground seen; no site
+    seen empty yet. Returns the brain and the sealing inputs (goals, open, blocked, supply)."""
+    brain = Brain(_welcome(), AgentConfig(), np.random.default_rng(0))
+    n, c = brain.cfg.map_size, brain.centre
+    open_sites = np.zeros((n, n), bool)
+    open_sites[c, c:c + 5] = True
+    goals = np.zeros((n, n), bool)
+    goals[c, c] = True                                  # the mouth, where the agent stands
+    blocked = np.zeros((n, n), bool)
+    blocked[[c - 1, c + 1], c:c + 5] = True             # the corridor's walls
+    brain.maps.known[:] = ~blocked
+    supply = np.zeros((n, n), bool)
+    supply[c, c - 8] = True
+    return brain, goals, open_sites, blocked, supply
+
+
+@pytest.mark.parametrize("far_end_seen_ago, mouth_seals", [(5, False), (FRESH_SITE + 50, True)])
+def test_an_open_site_not_seen_lately_is_no_way_through(far_end_seen_ago, mouth_seals):
+    # The corridor's far-end site was the other way in. Seen empty lately, it is, and the
+    # mouth may be filled. Not seen for a while, another agent (or the world before a
+    # restart) may have filled it: the mouth would seal the corridor, so it waits. Before,
+    # a stale belief let an agent fill a ring's last gap with a site inside still open
+    # (nested_squares, two agents cut off for ten seconds and back with new brains).
+    brain, goals, open_sites, blocked, supply = _corridor_with_a_far_way_out()
+    c = brain.centre
+    brain.maps.clear_age[open_sites] = 0.0
+    brain.maps.clear_age[c, c + 4] = far_end_seen_ago
+    assert brain.seals.judge(goals, open_sites, blocked, supply)[c, c] == mouth_seals
+
+
+def test_inside_a_corridor_whose_exit_was_not_seen_lately_the_deeper_sites_still_count():
+    # The agent stands inside a one-cell corridor of sites, its deep end shut, its exit (a
+    # site) out of sight behind it for a while: judged strictly, the inside reaches nothing.
+    # Judged on every cell not known blocked, the unseen ground beside the deep end let the
+    # deeper sites out, and the agent filled its site, sealing them (gen-pocket 031, nine
+    # agents: stalled at 11/15). With the open sites passable first, its site waits.
+    brain = Brain(_welcome(), AgentConfig(), np.random.default_rng(0))
+    n, c = brain.cfg.map_size, brain.centre
+    open_sites = np.zeros((n, n), bool)
+    open_sites[c, c - 4:c + 5] = True
+    brain.maps.clear_age[open_sites] = 0.0
+    brain.maps.clear_age[c, c + 4] = FRESH_SITE + 10     # the exit: behind the agent
+    goals = np.zeros((n, n), bool)
+    goals[c, c] = True
+    blocked = np.zeros((n, n), bool)
+    blocked[[c - 1, c + 1], c - 5:c + 5] = True
+    blocked[c, c - 5] = True                            # the deep end
+    brain.maps.known[:] = ~blocked
+    brain.maps.known[c - 3:c - 1, c - 6:c] = False       # beside the deep end: never seen
+    blocked[c - 1, c - 5:c] = False                     # ... nor the wall there
+    brain.maps.known[c - 1, c - 5:c] = False
+    supply = np.zeros((n, n), bool)
+    supply[c, c + 10] = True
+    assert brain.seals.judge(goals, open_sites, blocked, supply)[c, c]
+
+
+def test_a_brain_that_knows_nothing_beyond_the_sites_fills_none_near_it():
+    # A brain made on re-attaching (its world restored from a checkpoint) stands on a site
+    # with a brick in its gripper and has seen nothing but the cells round it: no supply, no
+    # ground beyond the checked square. It cannot tell a ring's last gap from any site, so
+    # none near is filled until it has seen more. Before, it dropped at once and walled
+    # itself inside a ring with a site still open (nested_squares under `conag chaos`).
+    brain, goals, open_sites, blocked, _ = _corridor_with_a_far_way_out()
+    c = brain.centre
+    brain.maps.clear_age[open_sites] = 0.0
+    nothing = np.zeros_like(goals)
+    brain.maps.known[:] = False
+    brain.maps.known[c - 2:c + 3, c - 2:c + 3] = ~blocked[c - 2:c + 3, c - 2:c + 3]
+    assert brain.seals.judge(goals, open_sites, blocked, nothing)[c, c]
+    brain.maps.known[:] = ~blocked                      # it has looked round: a way out at the far end
+    assert not brain.seals.judge(goals, open_sites, blocked, nothing).any()
 
 
 def test_a_site_walled_in_by_a_ghost_keeps_the_way_it_would_have():
@@ -121,6 +198,7 @@ def test_a_site_walled_in_by_a_ghost_keeps_the_way_it_would_have():
         m[BRICK, r, k] = float((r, k) not in ((c - 2, c - 1), (c, c)))
     m[OBSTACLE, c - 3, c - 2:c + 3] = m[OBSTACLE, c - 3:c + 2, c - 2] = 1.0   # the world's corner
     brain.maps.known[:] = True
+    brain.maps.clear_age[(m[CONFIG] > 0.5) & (m[BRICK] <= 0.5)] = 0.0   # the open sites, seen empty
     goals = np.zeros((n, n), bool)
     goals[c, c] = True
     supply = np.zeros((n, n), bool)
@@ -129,7 +207,7 @@ def test_a_site_walled_in_by_a_ghost_keeps_the_way_it_would_have():
     def unsafe():
         layers = m > 0.5
         blocked = layers[OBSTACLE] | (layers[BRICK] & layers[CONFIG])
-        return brain.sealing(goals, layers[CONFIG] & ~layers[BRICK], blocked, supply)[c, c]
+        return brain.seals.judge(goals, layers[CONFIG] & ~layers[BRICK], blocked, supply)[c, c]
 
     assert unsafe()
     m[BRICK, c - 2, c - 1] = 1.0        # seen filled after all: the gap may close
@@ -272,6 +350,22 @@ def test_bricks_that_leave_the_map_are_remembered_and_come_back():
     assert back[2, 4] and len(mem.bricks) == 0
 
 
+def test_a_brick_mapped_beyond_the_world_edge_is_remembered_on_the_edge():
+    # Seen from afar, a brick by the edge was mapped a cell beyond it: back on the map it lay
+    # in the edge's wall (no goal), off the map it was one, and the agent walked to and fro
+    # across one cell's edge for 50,000 ticks (gen-nested_rings 11230026).
+    mem = FarMemory(5, np.zeros((0, 2)), bounds=(-10, -10, 2, 10))   # the east edge: x < 2
+    free = np.zeros((5, 5), bool)
+    free[2, 4] = True                       # 2 cells east of the centre: x = 2, outside
+    none = np.zeros((5, 5), bool)
+    for _ in range(3):                      # 3 cells west: it leaves on the east side
+        free = mem.move(-1, 0, free)        # (what comes back is on the map's brick layer)
+    assert mem.bricks.tolist() == [[1, 0]]  # kept on the world's last column, x = 1
+    mem.move(1, 0, none)
+    back = mem.move(1, 0, none)             # x = 1 comes onto the map's east column
+    assert back[2, 4] and not mem.outside_world()[2, 4]   # back on a cell inside the world
+
+
 def test_blueprint_changes_keep_beliefs_of_sites_that_stay():
     mem = FarMemory(9, np.array([[1, 0], [2, 0]]))
     mem.site_open[:] = (False, True)
@@ -371,6 +465,68 @@ def _sized_welcome(x: float, y: float, w: float, h: float, sites=((), ())) -> We
                    site_ys=tuple(sites[1]), world_width=w, world_height=h)
 
 
+def _corridor_beyond_the_map(end_shut: bool) -> tuple[Brain, np.ndarray, np.ndarray, np.ndarray]:
+    """An agent (map 11 x 11) at the mouth of a one-cell corridor of 29 sites running 24
+    cells beyond its map's east border; the corridor's walls and the ground round it are
+    remembered, and its far end was seen shut by a wall, or open. Returns the brain and the
+    sealing check's map inputs (goals, open sites, blocked)."""
+    brain = Brain(_sized_welcome(2.5, 10.5, 40.0, 20.0, sites=([x + 2.5 for x in range(1, 30)], [10.5] * 29)),
+                  AgentConfig(map_size=11), np.random.default_rng(0))
+    far, c = brain.far, brain.centre
+    assert far.walls is not None and far.ground is not None
+    x0, y0 = -2, -10                                  # the world's first cell, from the attach cell
+    far.ground[:] = True
+    for y in (-1, 0, 1):
+        far.ground[1 - x0:31 - x0, y - y0] = False     # the corridor and its walls are no ground
+    far.walls[1 - x0:31 - x0, [-1 - y0, 1 - y0]] = True
+    far.walls[30 - x0, -y0] = end_shut                 # the far end: a wall, or open ground
+    far.ground[30 - x0, -y0] = not end_shut
+    open_sites = brain.maps.maps[CONFIG] > 0.5         # sites 1-5 are on the map
+    far.site_clear_age[:] = 10.0                       # all seen empty lately, walking along
+    brain.maps.clear_age[open_sites] = 0.0
+    blocked = far.on_map(far.walls)
+    brain.maps.known[:] = ~blocked & ~open_sites
+    goals = open_sites & (np.abs(np.arange(11) - c) <= 2)[None, :]
+    return brain, goals, open_sites, blocked
+
+
+@pytest.mark.parametrize("end_shut", [True, False])
+def test_a_corridor_longer_than_the_map_is_judged_on_what_lies_beyond_it(end_shut):
+    # Judged on the map alone, a corridor running past the border was cut off from
+    # everything (nothing checked: a site filled with open sites deeper in, gen-pocket 153),
+    # or, with the border counted open, open at a far end that was a wall (its mouth filled
+    # first, gen-pocket 117). The far memory knows the walls and the ground seen beyond.
+    brain, goals, open_sites, blocked = _corridor_beyond_the_map(end_shut)
+    c = brain.centre
+    unsafe = brain.seals.judge(goals, open_sites, blocked, np.zeros_like(goals))
+    assert goals[c, c + 1] and goals[c, c + 2]
+    assert unsafe[c, c + 1] == end_shut and unsafe[c, c + 2] == end_shut
+
+
+def test_ground_once_seen_free_is_remembered_beyond_what_the_map_sees_now():
+    # The maps forget what shifts off them and see little beside a wall: the mouth of a
+    # corridor by the world's edge, walked through on the way in, was unknown on coming back.
+    mem = FarMemory(5, np.zeros((0, 2)), bounds=(-10, -10, 10, 10))
+    seen = np.zeros((5, 5), bool)
+    seen[2, 2] = True                                  # the agent's own cell
+    mem.save_walls(np.zeros((5, 5), bool), np.zeros((5, 5), bool), seen)
+    mem.save_walls(np.zeros((5, 5), bool), np.zeros((5, 5), bool), np.zeros((5, 5), bool))
+    assert mem.ground is not None and mem.ground[10, 10]          # still known, at x = 0, y = 0
+
+
+def test_an_open_site_no_way_reaches_is_believed_filled():
+    # A brick deep in a one-cell slot hides behind the one in front: its site, seen empty
+    # long ago, stayed open, walled in, and loaded agents wandered for it (gen-pocket 153).
+    open_sites = np.zeros((9, 9), bool)
+    walls = np.zeros((9, 9), bool)
+    walls[3, 1:8] = walls[5, 1:8] = walls[4, 1] = True   # a slot, shut at its west end
+    walls[4, 4] = True                                   # a structure brick across it
+    open_sites[4, 2] = open_sites[4, 6] = True           # one behind the brick, one before it
+    enclosed = enclosed_sites(open_sites, walls, centre=(7, 7))
+    assert enclosed[4, 2] and not enclosed[4, 6]          # the east one opens onto the border
+    assert not enclosed_sites(open_sites, walls, centre=(4, 3))[4, 2]   # an agent inside reaches it
+
+
 def test_the_world_edge_is_a_wall_on_the_map_wherever_the_agent_is():
     brain = Brain(_sized_welcome(2.5, 3.5, 30.0, 20.0), AgentConfig(map_size=11), np.random.default_rng(0))
     brain.perceive(_frame(1))
@@ -430,6 +586,30 @@ def test_with_no_open_site_on_the_map_any_free_brick_is_a_brick_goal():
     plans = brain.plan()
     assert plans.brick_goals[c + 2, c - 2]
     assert plans.brick[c, c] == pytest.approx(2 * math.sqrt(2))
+
+
+def test_a_site_found_sealing_stays_no_goal_for_a_while_out_of_the_checks_reach():
+    # The sealing check runs only within SEAL_RADIUS cells. A site it refused became a goal
+    # again one cell farther off, and the agent turned back at that cell's edge, to and fro,
+    # in a one-cell slot of water (gen-pocket 11230010).
+    brain = Brain(_welcome(([52.5], [50.5])), AgentConfig(map_size=11), np.random.default_rng(0))
+    c = brain.centre
+    goals = np.zeros((11, 11), bool)
+    goals[c, c + 2] = True                         # the site, 2 cells east: within the check
+    assert brain.seals.remember(goals, goals.copy(), brain._tick)[c, c + 2]
+    brain.far.move(-2, 0, np.zeros((11, 11), bool))    # 2 cells west: out of the check's reach
+    goals = np.zeros((11, 11), bool)
+    goals[c, c + 4] = True
+    unsafe_now = np.zeros((11, 11), bool)          # the check no longer looks at it
+    assert brain.seals.remember(goals, unsafe_now, brain._tick)[c, c + 4]       # still no goal
+    brain._tick += SEAL_MEMORY + 1
+    assert not brain.seals.remember(goals, unsafe_now, brain._tick).any()        # forgotten in time
+    brain.far.move(2, 0, np.zeros((11, 11), bool))     # back within reach
+    goals = np.zeros((11, 11), bool)
+    goals[c, c + 2] = True
+    brain.seals.remember(goals, goals.copy(), brain._tick)       # found sealing again ...
+    brain._tick += 1
+    assert not brain.seals.remember(goals, np.zeros((11, 11), bool), brain._tick).any()   # ... then safe: goal at once
 
 
 def test_the_distance_beyond_the_map_goes_round_the_walls_remembered_there():

@@ -78,7 +78,8 @@ def test_an_agent_waits_for_its_world_and_attaches_to_the_resumed_one(bus, start
             wait_until(lambda: link.welcome.epoch == world.epoch, timeout=30,
                        what="the agent to attach to the resumed world")
             assert link.welcome.tick < last_tick
-            assert "re-attached to world w0" in caplog.text
+            # The welcome lands (the link sets it) a moment before the agent logs it.
+            wait_until(lambda: "re-attached to world w0" in caplog.text, what="the agent to say it re-attached")
             ticks = report.ticks
             wait_until(lambda: report.ticks >= ticks + 30, timeout=30, what="the agent to act in the resumed world")
             assert second.world.tick >= link.welcome.tick + 30

@@ -1,0 +1,142 @@
+"""The agent's guard against sealing: which goal sites near it must not be filled now.
+
+Each step with goal sequencing on, the brain asks which of its goal sites would cut
+another open site off if filled now (`judge`: the sealing module's pure judgements, on the
+whole world as the agent's far memory holds it, or on its map alone while the world's
+extent is unknown), and keeps each such verdict for SEAL_MEMORY ticks once the agent has
+walked out of the check's reach (`remember`). It reads the agent's maps and far memory and
+owns only those verdicts. Numpy, no bus.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from agent_runtime.esm import BRICK, CONFIG, EgocentricMaps
+from agent_runtime.far_memory import FarMemory
+from agent_runtime.sealing import (
+    FRESH_SITE,
+    MARGIN,
+    SEAL_MEMORY,
+    SEAL_RADIUS,
+    around,
+    connected,
+    cut_off,
+    walling_in,
+)
+
+
+class SealGuard:
+    """The sites an agent must not fill now, and the ones it found sealing lately."""
+
+    def __init__(self, maps: EgocentricMaps, far: FarMemory, centre: int):
+        self.maps, self.far, self.centre = maps, far, centre
+        self._found: dict[tuple[int, int], int] = {}   # far-memory cell -> tick found sealing
+
+    def unsafe(self, goals: np.ndarray, open_sites: np.ndarray, blocked: np.ndarray,
+               supply: np.ndarray, tick: int) -> np.ndarray:
+        """The goal sites that are no goals this step: found sealing now or lately."""
+        return self.remember(goals, self.judge(goals, open_sites, blocked, supply), tick)
+
+    def remember(self, goals: np.ndarray, unsafe: np.ndarray, tick: int) -> np.ndarray:
+        """`unsafe` (this step's verdicts, within SEAL_RADIUS cells) and the sites found
+        sealing in the last SEAL_MEMORY ticks that are out of that radius now.
+
+        Why: the check runs only near the agent. A site it found sealing became a goal
+        again one cell farther off, and the agent turned back at that cell's edge, to and
+        fro, for ever (a one-cell slot of water whose far end it had not seen)."""
+        judged = goals & around((self.centre, self.centre), SEAL_RADIUS, goals.shape)
+        for cell in map(tuple, self.far.from_map(*np.nonzero(judged)).tolist()):
+            self._found.pop(cell, None)
+        for cell in map(tuple, self.far.from_map(*np.nonzero(unsafe)).tolist()):
+            self._found[cell] = tick
+        self._found = {k: t for k, t in self._found.items() if tick - t <= SEAL_MEMORY}
+        if not self._found:
+            return unsafe
+        return unsafe | self.far.map_mask(np.array(list(self._found), np.int64))
+
+    def judge(self, goals: np.ndarray, open_sites: np.ndarray, blocked: np.ndarray,
+              supply: np.ndarray) -> np.ndarray:
+        """The goal sites near the agent (within SEAL_RADIUS cells) whose brick would cut an
+        open site off from the supply, on the ground the agent has seen open (see the
+        sealing module). Only cells seen free and open sites are passable; a site whose
+        filling disconnects another open site waits, and the agent goes deeper, seeing the
+        walls as it goes.
+
+        With the world's extent known, the check runs on the whole world as the agent
+        remembers it: a corridor longer than the map, judged on the map alone, was either
+        cut off from everything at the map's border (nothing checked: a site filled with
+        open sites deeper in, gen-pocket 153) or, with the border counted open, open at a
+        far end that was a wall (its mouth filled first, gen-pocket 117)."""
+        c = (self.centre, self.centre)
+        near = goals & around(c, SEAL_RADIUS, goals.shape)
+        if not near.any():
+            return np.zeros_like(goals)
+        # No food or water lies on an open site: such a mark is a disc mapped a cell off
+        # (a slot between water walls looked filled in its middle, gen-pocket 120).
+        blocked = blocked & ~open_sites
+        # Only open sites seen empty lately are ways through (a stale one may have been
+        # filled since); the sites judged are, as the agent is about to fill one of them.
+        fresh = (open_sites & (self.maps.clear_age <= FRESH_SITE)) | near
+        # The outside: the supply, and open ground seen a few cells beyond the sites that
+        # are checked (the supply itself is often beyond the map, where nothing is seen).
+        on_map = _Frame(open_sites, fresh, blocked, self.maps.known & ~blocked, supply,
+                        ~around(c, SEAL_RADIUS + MARGIN, goals.shape), _same, _same)
+        g = self._on_world(on_map) or on_map
+        believed = (g.ground | g.open) & ~g.blocked
+        passable = believed & ~(g.open & ~g.fresh)
+        reference = (g.supply | (g.outside & g.ground & ~g.open)) & passable
+        if not reference.any():
+            # Nothing known outside the sites yet (a brain just made, after a restart, on a
+            # site with a brick in its gripper): nothing near can be judged, so nothing is
+            # filled until the agent has seen more. It dropped at once and walled itself in
+            # (nested_squares, its world restored from a checkpoint).
+            return near
+        # Structure bricks are doubted only round sites that no way reaches even through
+        # stale sites: cut off by a stale mouth, the bricks beside a two-cell pocket were
+        # doubted and its inner column seemed to get out through them (gen-pocket 017).
+        structure = (self.maps.maps[BRICK] > 0.5) & (self.maps.maps[CONFIG] > 0.5)
+        local = around(c, SEAL_RADIUS + 1, goals.shape)
+        doubtful = g.from_map(walling_in(fresh & ~g.to_map(connected(reference, believed)), structure, local))
+        unsafe = cut_off(g.from_map(near), passable | doubtful, reference, g.open,
+                         fallbacks=(believed | doubtful, ~g.blocked))
+        return g.to_map(unsafe)
+
+    def _on_world(self, m: _Frame) -> _Frame | None:
+        """The map's grids `m` on the whole world as the far memory holds it, what the
+        agent sees now in the map's window; None while the world's extent is unknown."""
+        far = self.far
+        if far.ground is None or far.walls is None or far.discs is None:
+            return None
+        none = np.zeros_like(far.walls)
+        return _Frame(open=far.on_world(far.cells_grid(far.sites[far.site_open]), m.open),
+                      fresh=far.on_world(far.cells_grid(far.fresh_sites(FRESH_SITE)), m.fresh),
+                      blocked=far.on_world(far.walls | far.discs | far.cells_grid(far.sites[~far.site_open]),
+                                           m.blocked),
+                      ground=far.ground | far.on_world(none, m.ground),
+                      supply=far.on_world(far.cells_grid(far.bricks), m.supply),
+                      outside=far.on_world(~none, m.outside),
+                      to_map=far.on_map, from_map=lambda layer: far.on_world(none, layer))
+
+
+@dataclass(frozen=True)
+class _Frame:
+    """The grids one judgement runs on (the agent's map, or the world it remembers), and
+    the ways between them and the map: `to_map` a grid's map window, `from_map` a map mask
+    onto the grids (False beyond the map)."""
+
+    open: np.ndarray      # open sites
+    fresh: np.ndarray     # open sites seen empty lately, and the sites judged
+    blocked: np.ndarray   # walls, food, water and filled sites
+    ground: np.ndarray    # ground seen free
+    supply: np.ndarray    # the bricks and their source
+    outside: np.ndarray   # beyond the checked square and its margin
+    to_map: Callable[[np.ndarray], np.ndarray]
+    from_map: Callable[[np.ndarray], np.ndarray]
+
+
+def _same(grid: np.ndarray) -> np.ndarray:
+    return grid

@@ -1,0 +1,122 @@
+"""Sealing: which sites must wait because their brick would cut another open site off.
+
+Goal sequencing (paper §6) plans on the maps, where a cell never seen counts as empty.
+Inside a corridor whose walls no sensor has seen past the nearest disc, every deep site
+then seems to have a way out sideways; the mouth is filled and the rest sealed. The check
+here is stricter: only ground seen free and open sites are passable, and a site near the
+agent whose brick disconnects another open site from the outside (the brick supply and
+open ground seen away from the agent) is no goal until that site is filled.
+
+The grids are plain boolean arrays of any shape: the agent's map, or the whole world as
+its far memory holds it (a corridor longer than the map is judged on what the agent
+remembers beyond the map's border, not on the map alone). Also here: open sites that no
+way reaches at all (`enclosed_sites`) and the structure bricks that wall a site in
+(`walling_in`). Numpy and the spreading module's distance kernel, no bus.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from agent_runtime.spreading import _shift, distance_field
+
+SEAL_RADIUS = 2     # goal sites within this many cells (on each axis) of the agent are checked
+SEAL_MEMORY = 300   # ticks a site found sealing stays no goal once the agent is farther off
+MARGIN = 3          # open ground this many cells beyond the checked square counts as outside
+# An open site seen empty within this many steps is a way through; one not seen that long
+# may have been filled meanwhile by another agent (or before a restart), so it is not.
+FRESH_SITE = 30
+
+
+def around(centre: tuple[int, int], radius: int, shape: tuple[int, ...]) -> np.ndarray:
+    """Mask of the square of `radius` cells on each side of `centre` (clipped to the grid)."""
+    out = np.zeros(shape, bool)
+    i, j = centre
+    out[max(i - radius, 0):i + radius + 1, max(j - radius, 0):j + radius + 1] = True
+    return out
+
+
+def cut_off(candidates: np.ndarray, passable: np.ndarray, reference: np.ndarray,
+            open_sites: np.ndarray, fallbacks: Sequence[np.ndarray] = ()) -> np.ndarray:
+    """The `candidates` (sites) whose filling would disconnect another open site from
+    `reference` through `passable` cells; one distance field per candidate.
+
+    A candidate that `passable` does not connect to `reference` at all is judged again on
+    each of `fallbacks` in turn, each counting more cells passable (open sites not seen
+    lately; every cell not known to be blocked). Why: ground beside a wall or the world's
+    edge is seldom seen free (the wall's readings hide it), and the mouth of a corridor by
+    the edge never was; judged on nothing, a site was filled from inside with the rest of
+    the corridor open behind it, and two agents were shut in (gen-pocket 117). Likewise a
+    corridor's far end, out of sight behind the agent for a while, cut its inside off from
+    everything (gen-pocket 031). Counting more cells open there can only find more sites
+    unsafe, never fewer."""
+    unsafe = np.zeros_like(candidates)
+    rest = candidates
+    for tier in (passable, *fallbacks):
+        if not rest.any():
+            break
+        reachable = connected(reference, tier)
+        for i, j in zip(*np.nonzero(rest & reachable)):
+            unsafe[i, j] = _cuts(i, j, tier, reference, open_sites & _reached(reachable))
+        rest = rest & ~reachable
+    return unsafe
+
+
+def _cuts(i: int, j: int, passable: np.ndarray, reference: np.ndarray, reachable_sites: np.ndarray) -> bool:
+    """Does a brick on (i, j) disconnect one of `reachable_sites` (other than itself) from `reference`?"""
+    wall = ~passable
+    wall[i, j] = True
+    cut = reachable_sites & ~_reached(np.isfinite(distance_field(reference, wall)))
+    cut[i, j] = False
+    return bool(cut.any())
+
+
+def _reached(reachable: np.ndarray) -> np.ndarray:
+    """The cells a brick can be put on from `reachable` ones: those and their 4 neighbours.
+    A site that is not passable itself (believed open, not seen lately) is still reached
+    when an agent can stand beside it."""
+    out = reachable.copy()
+    for dr, dc in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+        out |= _shift(reachable, dr, dc, False)
+    return out
+
+
+def connected(reference: np.ndarray, passable: np.ndarray) -> np.ndarray:
+    """The cells that reach `reference` through `passable` cells."""
+    return np.isfinite(distance_field(reference & passable, ~passable))
+
+
+def walling_in(enclosed: np.ndarray, structure: np.ndarray, local: np.ndarray) -> np.ndarray:
+    """Structure bricks beside an `enclosed` open site, within the `local` mask.
+
+    An open site walled in by structure bricks near the agent is a contradiction: one of
+    them is likely a ghost (or the site a stale belief). Counted passable, the way the
+    site would have is not filled over before the agent has seen it."""
+    beside = np.zeros_like(enclosed)
+    beside[1:, :] |= enclosed[:-1, :]
+    beside[:-1, :] |= enclosed[1:, :]
+    beside[:, 1:] |= enclosed[:, :-1]
+    beside[:, :-1] |= enclosed[:, 1:]
+    return beside & structure & local
+
+
+def enclosed_sites(open_sites: np.ndarray, walls: np.ndarray, centre: tuple[int, int]) -> np.ndarray:
+    """Open sites that no way reaches, from `centre` (the agent's cell) or from the grid's
+    border (the world goes on beyond a map), round `walls`.
+
+    Why: a brick deep in a one-cell slot is hidden behind the brick in front of it, so its
+    site, last seen empty, stayed open on the map, walled in. The agent held its brick for
+    that site, found no way there, and wandered; three loaded agents did so in a corridor
+    for 6,000 ticks (gen-pocket 153). Nobody can fill a walled-in site, so believing it
+    filled loses nothing; the sensors open it again if they see it empty."""
+    if not open_sites.any():
+        return np.zeros_like(open_sites)
+    # No wall, food or water lies on a site: such a mark is a disc mapped a cell off.
+    walls = walls & ~open_sites
+    walls[centre] = False           # the agent's own cell: it may stand on a brick it dropped
+    ways_in = np.zeros_like(walls)
+    ways_in[[0, -1], :] = ways_in[:, [0, -1]] = True
+    ways_in[centre] = True
+    return open_sites & ~connected(ways_in, ~walls)
