@@ -36,7 +36,7 @@ from agent_runtime.matching import Matching, calculate_matching, select_goals
 from agent_runtime.motivations import Motivations
 from agent_runtime.network import NONE, STATE_NODES, ActionNetwork, engineered
 from agent_runtime.seal_guard import SealGuard
-from agent_runtime.sealing import enclosed_sites
+from agent_runtime.sealing import enclosed_sites, pocket_beside
 from agent_runtime.spreading import distance_field, gradient_step, seeded_distance_field
 from protocol.messages import BEHAVIOURS, CHANNELS, NO_READING, AgentState, Decision, SensorFrame, Welcome
 
@@ -118,6 +118,9 @@ class Brain:
         self.plans: Plans | None = None
         self._matching: tuple[bytes, Matching] | None = None  # (inputs, result) of the last matching
         self._taken_from: np.ndarray | None = None  # (dx, dy) cells to where the held brick was taken
+        self._dropped_at: np.ndarray | None = None  # odometry (cells) where it last dropped, until off it
+        # Centre to centre, in cells, at which the world lets a dropped brick hold this body again.
+        self._release = (welcome.agent_radius + welcome.disc_radius) / welcome.cell_size
 
     # sensing and planning --------------------------------------------------------------
     def perceive(self, frame: SensorFrame) -> np.ndarray:
@@ -367,11 +370,47 @@ class Brain:
         choice = self.network.choose(state)
         speed, turn, action, behaviour = self._select(frame, ranges, plans, choice.arm, choice.motor)
         speed, turn, action, behaviour = self._unstick(frame, speed, turn, action, behaviour)
+        speed, turn = self._off_own_brick(frame, speed, turn)
         self.behaviour = behaviour
         self.behaviour_ticks[behaviour] += 1
         decision = Decision(self.agent_id, frame.tick, tuple(state.tolist()), choice.outputs,
                             choice.arm, choice.motor)
         return Step(speed, turn, action, behaviour, decision)
+
+    def _off_own_brick(self, frame: SensorFrame, speed: float, turn: float) -> tuple[float, float]:
+        """Leave a brick just dropped on the side joined to the rest of the world.
+
+        The world lets the body pass through the brick it dropped until it is off it;
+        whatever the behaviour wanted (avoid_red moves away from the brick, whichever side
+        that is), a move into a pocket that brick closes (`sealing.pocket_beside`) would
+        shut the agent in for good. While it is still on its brick it heads for ground
+        outside the pocket, back through the brick if it had already stepped in."""
+        if frame.dropped:
+            # Where the body stood when it let go: before this tick's move.
+            self._dropped_at = self._odo - (frame.odom_dx / self.cell, frame.odom_dy / self.cell)
+        if self._dropped_at is None:
+            return speed, turn
+        dx, dy = self._dropped_at - self._odo
+        # Half a cell of slack: the brick settles on its site's centre, not where the body was.
+        if math.hypot(dx, dy) >= self._release + 0.5:
+            self._dropped_at = None
+            return speed, turn
+        cell = self.maps.cell_of(dx, dy)
+        if not self.maps.contains(*cell):
+            return speed, turn
+        m = self.maps.maps > 0.5
+        blocked = m[OBSTACLE] | m[FOOD] | m[WATER] | m[BRICK]
+        blocked[cell] = False
+        pocket = pocket_beside(blocked, cell)
+        if not pocket.any():
+            return speed, turn
+        blocked[self.centre, self.centre] = False
+        outside = ~blocked & ~pocket
+        outside[cell] = False
+        field = distance_field(outside, blocked)
+        if gradient_step(field) in (None, (0, 0)):
+            return speed, turn
+        return self._navigate(field, frame.heading)
 
     def _unstick(self, frame, speed, turn, action, behaviour):
         """Back off in a random direction for a random while after `stuck_ticks` without

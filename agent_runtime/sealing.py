@@ -11,7 +11,8 @@ The grids are plain boolean arrays of any shape: the agent's map, or the whole w
 its far memory holds it (a corridor longer than the map is judged on what the agent
 remembers beyond the map's border, not on the map alone). Also here: open sites that no
 way reaches at all (`enclosed_sites`) and the structure bricks that wall a site in
-(`walling_in`). Numpy and the spreading module's distance kernel, no bus.
+(`walling_in`), and the pocket a brick just dropped would shut an agent into
+(`pocket_beside`). Numpy and the spreading module's distance kernel, no bus.
 """
 
 from __future__ import annotations
@@ -120,3 +121,24 @@ def enclosed_sites(open_sites: np.ndarray, walls: np.ndarray, centre: tuple[int,
     ways_in[[0, -1], :] = ways_in[:, [0, -1]] = True
     ways_in[centre] = True
     return open_sites & ~connected(ways_in, ~walls)
+
+
+def pocket_beside(blocked: np.ndarray, cell: tuple[int, int]) -> np.ndarray:
+    """Unblocked cells beside `cell` that no way joins to the grid's border once `cell` is
+    blocked too, with every cell joined to them: the pocket a brick on `cell` closes.
+
+    Why: a dropped brick lets the agent that dropped it pass until the agent is off it, and
+    then holds like any other. An agent that moved off its brick into the cell a ring of
+    bricks encloses (the centre of nested_squares' inner ring) was shut in for good, 31 of
+    32 sites built, while its world was being killed and restored. Cells never seen count
+    as unblocked: only a pocket walled in on the map is one."""
+    walls = blocked.copy()
+    walls[cell] = True
+    border = np.zeros_like(walls)
+    border[[0, -1], :] = border[:, [0, -1]] = True
+    inside = ~walls & ~connected(border, ~walls)
+    if not inside.any():
+        return inside
+    beside = np.zeros_like(walls)
+    beside[cell] = True
+    return connected(_reached(beside) & inside, inside)

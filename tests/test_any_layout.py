@@ -17,7 +17,7 @@ from agent_runtime.brain import Brain, _mouth_side
 from agent_runtime.config import AgentConfig
 from agent_runtime.esm import BRICK, CONFIG, OBSTACLE, WATER
 from agent_runtime.far_memory import FarMemory, border_seed
-from agent_runtime.sealing import FRESH_SITE, SEAL_MEMORY, enclosed_sites
+from agent_runtime.sealing import FRESH_SITE, SEAL_MEMORY, enclosed_sites, pocket_beside
 from agent_runtime.spreading import distance_field, seeded_distance_field
 from protocol.messages import BEHAVIOURS, CHANNELS, NO_READING, SensorFrame, Welcome
 from world_server.scenario import load_scenario, parse_scenario
@@ -284,6 +284,56 @@ def test_an_agent_with_nothing_on_its_maps_explores():
     brain = Brain(_welcome(([80.5], [50.5])), AgentConfig(), np.random.default_rng(0))
     step = brain.step(_frame(1))
     assert step.behaviour == "explore" and step.speed > 0
+
+
+def _ring_pocket_south(brain: Brain, closed: bool = True) -> tuple[int, int]:
+    """Bricks on the brain's map round the cell south of it, open only through the agent's
+    own cell (the centre of a ring whose last gap the agent stands in); `closed=False`
+    leaves a second way in from the south. Returns the pocket cell."""
+    c = brain.centre
+    brick = brain.maps.maps[BRICK]
+    for r, col in ((c, c - 1), (c, c + 1), (c + 1, c - 1), (c + 1, c + 1), (c + 2, c - 1), (c + 2, c + 1)):
+        brick[r, col] = 1.0
+    if closed:
+        brick[c + 2, c] = 1.0
+    return c + 1, c
+
+
+def test_pocket_beside_is_what_a_brick_on_the_cell_would_close():
+    blocked = np.zeros((9, 9), bool)
+    blocked[5, 3] = blocked[5, 5] = blocked[6, 3] = blocked[6, 5] = blocked[7, 4] = True
+    blocked[4, 3] = blocked[4, 5] = True
+    pocket = pocket_beside(blocked, (4, 4))
+    assert pocket[5, 4] and pocket[6, 4] and pocket.sum() == 2
+    blocked[7, 4] = False                                 # a second way in: no pocket
+    assert not pocket_beside(blocked, (4, 4)).any()
+    blocked[7, 4] = True
+    assert not pocket_beside(blocked, (0, 0)).any()       # nothing walled in beside that cell
+
+
+def test_an_agent_leaves_a_brick_it_dropped_on_the_side_away_from_the_pocket_it_closes():
+    # It stands on the brick it just dropped in a ring's last gap, the ring's inside to the
+    # south. Whatever its behaviour asks (here: due south, into the ring), it heads north:
+    # once off the brick, the brick holds, and inside it would be shut in for good
+    # (nested_squares, its world killed and restored, stalled at 31/32 in CI).
+    brain = Brain(_welcome(([60.5], [50.5])), AgentConfig(), np.random.default_rng(0))
+    brain.step(_frame(1))
+    south = (1.0, -math.pi / 2)          # (speed, turn) as steering gives them: heading east, turn right
+    _ring_pocket_south(brain)
+    dropped = SensorFrame(**{**_frame(2).__dict__, "dropped": True})
+    speed, turn = brain._off_own_brick(dropped, *south)
+    assert turn > 0                        # turns left, to the north
+    # With a second way into the ring there is no pocket: the behaviour's move stands.
+    brain = Brain(_welcome(([60.5], [50.5])), AgentConfig(), np.random.default_rng(0))
+    brain.step(_frame(1))
+    _ring_pocket_south(brain, closed=False)
+    assert brain._off_own_brick(dropped, *south) == south
+    # Off the brick (more than a body and a brick's radius away), nothing is overridden.
+    brain = Brain(_welcome(([60.5], [50.5])), AgentConfig(), np.random.default_rng(0))
+    brain.step(_frame(1))
+    brain._dropped_at = np.array([0.0, 3.0]) + brain._odo
+    _ring_pocket_south(brain)
+    assert brain._off_own_brick(_frame(2), *south) == south and brain._dropped_at is None
 
 
 # ------------------------------------------------------------------ stuck agents back off
