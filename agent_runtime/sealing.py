@@ -117,8 +117,7 @@ def enclosed_sites(open_sites: np.ndarray, walls: np.ndarray, centre: tuple[int,
     # No wall, food or water lies on a site: such a mark is a disc mapped a cell off.
     walls = walls & ~open_sites
     walls[centre] = False           # the agent's own cell: it may stand on a brick it dropped
-    ways_in = np.zeros_like(walls)
-    ways_in[[0, -1], :] = ways_in[:, [0, -1]] = True
+    ways_in = _border(walls)
     ways_in[centre] = True
     return open_sites & ~connected(ways_in, ~walls)
 
@@ -134,11 +133,16 @@ def pocket_beside(blocked: np.ndarray, cell: tuple[int, int]) -> np.ndarray:
     as unblocked: only a pocket walled in on the map is one."""
     walls = blocked.copy()
     walls[cell] = True
-    border = np.zeros_like(walls)
-    border[[0, -1], :] = border[:, [0, -1]] = True
-    inside = ~walls & ~connected(border, ~walls)
+    inside = ~walls & ~connected(_border(walls), ~walls)
     if not inside.any():
         return inside
     beside = np.zeros_like(walls)
     beside[cell] = True
     return connected(_reached(beside) & inside, inside)
+
+
+def _border(like: np.ndarray) -> np.ndarray:
+    """The grid's outermost cells: the world goes on beyond a map's border."""
+    out = np.zeros_like(like)
+    out[[0, -1], :] = out[:, [0, -1]] = True
+    return out
