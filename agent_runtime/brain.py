@@ -72,6 +72,8 @@ class Plans:
 # source seen a cell off now and then flips the way to it, and an agent turned back and
 # forth beside a gap in a wall for 9,000 ticks (gen-letter 109).
 _STILL_IS_FINE = frozenset({"eat", "drink"})
+# Cells by which a brick must be nearer than touching to count as one the body stands on.
+_OVERLAP_MARGIN = 0.2
 
 
 class Brain:
@@ -119,6 +121,7 @@ class Brain:
         self._matching: tuple[bytes, Matching] | None = None  # (inputs, result) of the last matching
         self._taken_from: np.ndarray | None = None  # (dx, dy) cells to where the held brick was taken
         self._dropped_at: np.ndarray | None = None  # odometry (cells) where it last dropped, until off it
+        self._drop_unseen = False  # that drop was before this brain started (`_brick_underfoot`)
         # Centre to centre, in cells, at which the world lets a dropped brick hold this body again.
         self._release = (welcome.agent_radius + welcome.disc_radius) / welcome.cell_size
 
@@ -388,6 +391,10 @@ class Brain:
         if frame.dropped:
             # Where the body stood when it let go: before this tick's move.
             self._dropped_at = self._odo - (frame.odom_dx / self.cell, frame.odom_dy / self.cell)
+            self._drop_unseen = False
+        elif self._dropped_at is None:
+            self._dropped_at = self._brick_underfoot(frame)
+            self._drop_unseen = self._dropped_at is not None
         if self._dropped_at is None:
             return speed, turn
         dx, dy = self._dropped_at - self._odo
@@ -400,6 +407,10 @@ class Brain:
             return speed, turn
         m = self.maps.maps > 0.5
         blocked = m[OBSTACLE] | m[FOOD] | m[WATER] | m[BRICK]
+        if self._drop_unseen:
+            # A brain that did not see the drop has not seen the ring either (the brick
+            # underfoot hides what lies behind it): the blueprint's sites stand in for it.
+            blocked |= m[CONFIG]
         blocked[cell] = False
         pocket = pocket_beside(blocked, cell)
         if not pocket.any():
@@ -411,6 +422,21 @@ class Brain:
         if gradient_step(field) in (None, (0, 0)):
             return speed, turn
         return self._navigate(field, frame.heading)
+
+    def _brick_underfoot(self, frame: SensorFrame) -> np.ndarray | None:
+        """Odometry (cells) of a brick the body overlaps, if a reading shows one.
+
+        Only the brick an agent dropped itself lets its body pass, so this is one it dropped
+        before this brain knew: a process started again, or a world resumed from a
+        checkpoint, while the body was still on it. A lone agent restarted in that moment
+        stepped off into nested_squares' inner ring and was shut in (`conag chaos`, 30/32).
+        The margin keeps a brick merely touching (the physics lets bodies sink in a
+        little) from counting."""
+        raw = np.asarray(frame.ranges, np.float64).reshape(len(CHANNELS), frame.sectors)[_CH["brick"]]
+        bricks = np.where(raw != NO_READING, raw / self.cell, NO_READING)
+        if _nearest_reading(bricks) >= self._release - _OVERLAP_MARGIN:
+            return None
+        return self._odo + self._reading_offset(bricks)
 
     def _unstick(self, frame, speed, turn, action, behaviour):
         """Back off in a random direction for a random while after `stuck_ticks` without

@@ -123,8 +123,11 @@ def enclosed_sites(open_sites: np.ndarray, walls: np.ndarray, centre: tuple[int,
 
 
 def pocket_beside(blocked: np.ndarray, cell: tuple[int, int]) -> np.ndarray:
-    """Unblocked cells beside `cell` that no way joins to the grid's border once `cell` is
-    blocked too, with every cell joined to them: the pocket a brick on `cell` closes.
+    """Unblocked cells beside `cell` that no way joins to the rest of the world once `cell`
+    is blocked too, with every cell joined to them: the pocket a brick on `cell` closes.
+    The rest of the world is what reaches the grid's border; on a map that holds the whole
+    world (its border all outside the world's edge, so blocked) it is the largest region
+    beside `cell`.
 
     Why: a dropped brick lets the agent that dropped it pass until the agent is off it, and
     then holds like any other. An agent that moved off its brick into the cell a ring of
@@ -133,12 +136,31 @@ def pocket_beside(blocked: np.ndarray, cell: tuple[int, int]) -> np.ndarray:
     as unblocked: only a pocket walled in on the map is one."""
     walls = blocked.copy()
     walls[cell] = True
-    inside = ~walls & ~connected(_border(walls), ~walls)
-    if not inside.any():
-        return inside
+    free = ~walls
     beside = np.zeros_like(walls)
     beside[cell] = True
-    return connected(_reached(beside) & inside, inside)
+    beside = _reached(beside) & free
+    outside = connected(_border(walls), free)
+    if not outside.any():
+        outside = _largest_region(beside, free)
+    inside = free & ~outside
+    return connected(beside & inside, inside)
+
+
+def _largest_region(starts: np.ndarray, passable: np.ndarray) -> np.ndarray:
+    """The most cells any one of `starts` reaches through `passable` cells (none if no start)."""
+    regions = [connected(one, passable) for one in _each(starts)]
+    return max(regions, key=np.count_nonzero, default=np.zeros_like(passable))
+
+
+def _each(cells: np.ndarray) -> list[np.ndarray]:
+    """One mask per cell of `cells`."""
+    out = []
+    for i, j in zip(*np.nonzero(cells)):
+        one = np.zeros_like(cells)
+        one[i, j] = True
+        out.append(one)
+    return out
 
 
 def _border(like: np.ndarray) -> np.ndarray:

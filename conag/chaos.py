@@ -2,7 +2,12 @@
 a random agent process is SIGKILLed every few seconds (`conag kill` / `conag restart`, the
 RunControl query): some are started again at once, the others left dead, never fewer than
 `min_alive` alive. Kills start once the world ticks: an agent killed before it ever
-attached would leave a lockstep world waiting for `--wait-agents` agents for good. Each
+attached would leave a lockstep world waiting for `--wait-agents` agents for good. And an
+agent is killed only once the world has ticked `min_life` ticks since it was started (or
+started again): kills come at wall-clock times, and on a slow machine a process can be
+killed again before it has done anything, so the run would measure how fast the machine
+starts Python, not whether the build survives (a lone agent killed every 30-80 of its ticks
+never closes nested_squares' outer ring: each new process must see inside it again). Each
 run reports whether it completed, its exit code, ticks, sites and `bricks_total` (which
 must equal the scenario's: a kill neither loses nor makes a brick).
 
@@ -53,6 +58,7 @@ class ChaosOptions:
     scenario_path: str
     runs: int = 1
     kill_every: float = 3.0        # mean wall seconds between kills (each wait uniform in [0.5, 1.5] x this)
+    min_life: int = 200            # world ticks an agent lives, from its (re)start, before it may be killed
     restart_share: float = 0.5     # chance that a killed agent is started again at once
     min_alive: int = 1             # never leave fewer agents alive than this
     seed: int = 0                  # the kill schedule's seed (not the world's)
@@ -73,6 +79,8 @@ class ChaosOptions:
             raise ValueError("--kill-world-every must be >= 0 seconds (0: the world is not killed)")
         if self.kill_every == 0 and self.kill_world_every == 0:
             raise ValueError("nothing to kill: --kill-every and --kill-world-every are both 0")
+        if self.min_life < 0:
+            raise ValueError("--min-life must be >= 0 ticks")
         if not 0 <= self.restart_share <= 1:
             raise ValueError("--restart-share must be in [0, 1]")
         if self.min_alive < 1:
@@ -95,6 +103,7 @@ class ChaosRun:
     kills: int = 0
     restarts: int = 0
     left_dead: list[str] = field(default_factory=list)
+    lives: list[int] = field(default_factory=list)  # per agent kill: world ticks the victim had lived
     world_kills: int = 0
     world_restarts: int = 0        # as `conag run` reports them in its summary
     ticks_lost: list[int] = field(default_factory=list)  # per world kill (see the module)
@@ -108,7 +117,8 @@ class ChaosRun:
     def line(self) -> str:
         state = "complete" if self.completed else "STALLED" if self.stalled else f"NOT complete (exit {self.exit_code})"
         return (f"run {self.run}: {state}: {self.sites_filled}/{self.sites_total} sites in {self.ticks} ticks, "
-                f"{self.kills} kills ({self.restarts} restarted, left dead: {', '.join(self.left_dead) or 'none'}), "
+                f"{self.kills} kills ({self.restarts} restarted, left dead: {', '.join(self.left_dead) or 'none'}"
+                + (f"; shortest life {min(self.lives)} ticks" if self.lives else "") + "), "
                 f"bricks_total {self.bricks_total} (expected {self.bricks_expected}), {self.wall_seconds:.0f} s"
                 + (f", {self.world_kills} world kills ({self.world_restarts} restarts, ticks lost "
                    f"{', '.join(map(str, self.ticks_lost)) or '-'})" if self.world_kills else "")
@@ -192,7 +202,6 @@ def chaos_run(opts: ChaosOptions, index: int, stop: threading.Event, log=print) 
     rng = np.random.default_rng([opts.seed, index])
     world_rng = np.random.default_rng([opts.seed, index, 1])  # its own: the agents' schedule stays as it was
     endpoint = _free_endpoint()
-    alive = [f"a{i + 1}" for i in range(n_agents)]
     started = time.monotonic()
     with tempfile.TemporaryDirectory(prefix="conag-chaos-") as tmp:
         summary_path = Path(tmp) / "summary.json"
@@ -211,13 +220,16 @@ def chaos_run(opts: ChaosOptions, index: int, stop: threading.Event, log=print) 
         session = open_session(BusOptions(connect=(endpoint,)))
         ticking = threading.Event()
         frames = FrameWatch()
+        tick = [0]  # the newest tick the world's status showed
+        roster = Roster([f"a{i + 1}" for i in range(n_agents)])
 
         def on_status(sample) -> None:
             try:
-                if decode(sample.payload.to_bytes(), WorldStatus).tick > 0:
-                    ticking.set()
+                tick[0] = decode(sample.payload.to_bytes(), WorldStatus).tick
             except ProtocolError:
-                pass
+                return
+            if tick[0] > 0:
+                ticking.set()
 
         subs = [session.declare_subscriber(keys.status("w0"), on_status)]
         if opts.kill_world_every:
@@ -251,9 +263,11 @@ def chaos_run(opts: ChaosOptions, index: int, stop: threading.Event, log=print) 
                         os.kill(pid, signal.SIGKILL)
                         result.world_kills += 1
                         log(f"  run {index}: killed the world (pid {pid}) at tick {frames.newest}")
-                if now >= next_agent:
+                # An agent not yet min_life ticks old is spared; the kill waits until one is.
+                ready = roster.ready(tick[0], opts.min_life)
+                if now >= next_agent and ready:
                     next_agent = now + _draw(rng, opts.kill_every)
-                    _kill_agent(opts, session, rng, alive, result, index, log)
+                    _kill_agent(opts, session, rng, roster, (ready, tick[0]), result, index, log)
             result.exit_code = proc.wait(opts.run_timeout)
         finally:
             for sub in subs:
@@ -277,22 +291,38 @@ def chaos_run(opts: ChaosOptions, index: int, stop: threading.Event, log=print) 
     return result
 
 
-def _kill_agent(opts: ChaosOptions, session, rng: np.random.Generator, alive: list[str], result: ChaosRun,
-                index: int, log) -> None:
-    """SIGKILL a random agent through `conag kill` / `conag restart`, never leaving fewer than
-    `min_alive` alive."""
-    victim = alive[int(rng.integers(len(alive)))]
-    restart = len(alive) <= opts.min_alive or bool(rng.random() < opts.restart_share)
+class Roster:
+    """The agents still alive, and the world tick each was started (again) at."""
+
+    def __init__(self, ids: list[str]) -> None:
+        self.alive = list(ids)
+        self.born = dict.fromkeys(ids, 0)
+
+    def ready(self, tick: int, min_life: int) -> list[str]:
+        """The alive agents that have lived `min_life` ticks by `tick` (none, after a world
+        went back to a checkpoint older than their start, until it is past it again)."""
+        return [a for a in self.alive if tick - self.born[a] >= min_life]
+
+
+def _kill_agent(opts: ChaosOptions, session, rng: np.random.Generator, roster: Roster,
+                ready_at: tuple[list[str], int], result: ChaosRun, index: int, log) -> None:
+    """SIGKILL a random one of the ready agents (`ready_at`: them, and the world's tick now)
+    through `conag kill` / `conag restart`, never leaving fewer than `min_alive` alive."""
+    ready, tick = ready_at
+    victim = ready[int(rng.integers(len(ready)))]
+    restart = len(roster.alive) <= opts.min_alive or bool(rng.random() < opts.restart_share)
     answer = control(session, "w0", "restart" if restart else "kill", victim, timeout=5.0)
     if not answer.ok:
         return  # the run is ending, or not up yet
     result.kills += 1
+    result.lives.append(tick - roster.born[victim])
     if restart:
         result.restarts += 1
+        roster.born[victim] = tick
     else:
-        alive.remove(victim)
+        roster.alive.remove(victim)
         result.left_dead.append(victim)
-    log(f"  run {index}: {'restarted' if restart else 'killed'} {victim}")
+    log(f"  run {index}: {'restarted' if restart else 'killed'} {victim} at tick {tick}")
 
 
 def chaos(opts: ChaosOptions, stop: threading.Event, log=print) -> list[ChaosRun]:

@@ -470,7 +470,8 @@ def cmd_run(args) -> int:
 def cmd_chaos(args) -> int:
     from conag.chaos import ChaosOptions, chaos, report
 
-    opts = ChaosOptions(args.scenario, runs=args.runs, kill_every=args.kill_every, restart_share=args.restart_share,
+    opts = ChaosOptions(args.scenario, runs=args.runs, kill_every=args.kill_every, min_life=args.min_life,
+                        restart_share=args.restart_share,
                         min_alive=args.min_alive, seed=args.seed, agents=args.agents, max_ticks=args.max_ticks,
                         stall_ticks=args.stall_ticks, run_timeout=args.run_timeout, world_seed=args.world_seed,
                         kill_world_every=args.kill_world_every, checkpoint_every=args.checkpoint_every)
@@ -679,6 +680,9 @@ def _add_chaos(sub) -> None:
     c.add_argument("--runs", type=int, default=1, help="conag runs, one after the other (default 1)")
     c.add_argument("--kill-every", type=float, default=3.0, metavar="S",
                    help="mean wall seconds between agent kills (default 3; 0: no agent is killed)")
+    c.add_argument("--min-life", type=_non_negative, default=200, metavar="N",
+                   help="kill an agent only once the world has ticked N ticks since it was (re)started "
+                        "(default 200): on a slow machine a process killed sooner has done nothing yet")
     c.add_argument("--restart-share", type=float, default=0.5, metavar="P",
                    help="chance that a killed agent is started again at once (default 0.5)")
     c.add_argument("--kill-world-every", type=float, default=0.0, metavar="S",

@@ -5,6 +5,7 @@ Explore as the default and backing off when stuck."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +21,7 @@ from agent_runtime.far_memory import FarMemory, border_seed
 from agent_runtime.sealing import FRESH_SITE, SEAL_MEMORY, enclosed_sites, pocket_beside
 from agent_runtime.spreading import distance_field, seeded_distance_field
 from protocol.messages import BEHAVIOURS, CHANNELS, NO_READING, SensorFrame, Welcome
+from world_server.discs import BRICK_DISC
 from world_server.scenario import load_scenario, parse_scenario
 from world_server.world import World
 
@@ -309,6 +311,14 @@ def test_pocket_beside_is_what_a_brick_on_the_cell_would_close():
     assert not pocket_beside(blocked, (4, 4)).any()
     blocked[7, 4] = True
     assert not pocket_beside(blocked, (0, 0)).any()       # nothing walled in beside that cell
+    # A map that holds the whole world: its border lies beyond the world's edge, blocked, so
+    # no cell reaches it. The pocket is still only the ring's inside, not the world round it
+    # (nested_squares on a 41-cell map: the guard found everything a pocket and did nothing).
+    walled = np.pad(blocked, 2, constant_values=True)
+    pocket = pocket_beside(walled, (6, 6))
+    assert pocket[7, 6] and pocket[8, 6] and pocket.sum() == 2
+    walled[9, 6] = False                                  # a second way in: no pocket
+    assert not pocket_beside(walled, (6, 6)).any()
 
 
 def test_an_agent_leaves_a_brick_it_dropped_on_the_side_away_from_the_pocket_it_closes():
@@ -334,6 +344,75 @@ def test_an_agent_leaves_a_brick_it_dropped_on_the_side_away_from_the_pocket_it_
     brain._dropped_at = np.array([0.0, 3.0]) + brain._odo
     _ring_pocket_south(brain)
     assert brain._off_own_brick(_frame(2), *south) == south and brain._dropped_at is None
+
+
+def _brick_north(tick: int, distance: float) -> SensorFrame:
+    """A frame whose one brick reading is `distance` cells due north (sector 4 of 16)."""
+    ranges = [NO_READING] * (16 * len(CHANNELS))
+    ranges[CHANNELS.index("brick") * 16 + 4] = distance
+    return SensorFrame(**{**_frame(tick).__dict__, "ranges": tuple(ranges)})
+
+
+def test_a_brain_started_on_a_brick_its_body_dropped_leaves_it_away_from_the_pocket():
+    # A process started again (or a world resumed) while the body still stood on the brick
+    # it had dropped in a ring's last gap: the new brain never saw the drop. A brick nearer
+    # than touching can only be that one, so it heads north, out of the ring, all the same
+    # (a lone agent restarted in that moment under `conag chaos` was shut in at 30/32).
+    south = (1.0, -math.pi / 2)
+    welcome = replace(_welcome(([60.5], [50.5])), agent_radius=0.3, disc_radius=0.5)  # touching: 0.8 apart
+    brain = Brain(welcome, AgentConfig(), np.random.default_rng(0))
+    brain.step(_frame(1))
+    _ring_pocket_south(brain)
+    speed, turn = brain._off_own_brick(_brick_north(2, 0.3), *south)
+    assert turn > 0 and speed >= 0
+    # A brick that only touches the body (or further off) is not underfoot: nothing changes.
+    brain = Brain(welcome, AgentConfig(), np.random.default_rng(0))
+    brain.step(_frame(1))
+    _ring_pocket_south(brain)
+    assert brain._off_own_brick(_brick_north(2, 0.8), *south) == south and brain._dropped_at is None
+
+
+RING_GAP = """
+.............
+.b.b.....b.b.
+.............
+....BBB......
+....B.B......
+....B+B......
+.............
+.A...........
+.b.b.....b.b.
+.............
+"""
+
+
+@pytest.mark.parametrize("new_brain_after", [0, 1, 3])
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_an_agent_restarted_on_the_brick_that_closed_a_ring_ends_outside_it(seed, new_brain_after):
+    # The ring's last gap is site (5, 5), its inside cell (5, 4) to the north. The agent
+    # drops its brick there, 0.2 cells in from the site's centre, and its process is started
+    # again 0..3 ticks later, the body still on the brick (the world lets it pass until it is
+    # off). The new brain steps off on the outside: with the old code it walked into the
+    # ring in 3 of these 9 cases (all of seed 2) and was shut in for good.
+    run = sim.start(_scenario(RING_GAP), seed=seed)
+    w = run.world
+    rec, sc = w.agents["a1"], w.scenario
+    brick = int(np.flatnonzero(w.discs.kind == BRICK_DISC)[0])  # a free brick (top left)
+    w.discs.carry(brick)
+    w.physics.remove_disc(brick)
+    rec.holding = brick
+    w.physics.place_body(rec.index, sc.to_world([(5, 5)])[0] + (0.0, 0.2))
+    w.set_command("a1", 0.0, 0.0, "drop")
+    w.step()
+    assert w.sites_filled().all()
+    for _ in range(new_brain_after):
+        run.step()
+    w.detach("a1")
+    run.brains["a1"] = Brain(w.attach("a1"), None, np.random.default_rng([seed, 1]))
+    for _ in range(200):
+        run.step()
+    cell = sc.to_cell(w.physics.state()[0][rec.index][None])[0]
+    assert (int(cell[0]), int(cell[1])) != (5, 4), "the agent is shut inside the ring"
 
 
 # ------------------------------------------------------------------ stuck agents back off
