@@ -31,9 +31,8 @@ import os
 import re
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 from dataclasses import asdict, dataclass
-from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
@@ -41,6 +40,7 @@ import numpy as np
 import sim
 from agent_runtime.config import AgentConfig
 from experiments.report import write_section
+from experiments.workers import pool
 from world_server.scenario import Scenario, load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -157,8 +157,8 @@ def run_all(jobs: list[Job], workers: int, pictures: Path | None) -> list[Outcom
     """Every job on `workers` processes (spawned: nothing crosses a fork), with progress."""
     out: list[Outcome] = []
     began = time.monotonic()
-    with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
-        futures = {pool.submit(run_job, j, pictures): j for j in jobs}
+    with pool(workers) as executor:
+        futures = {executor.submit(run_job, j, pictures): j for j in jobs}
         for k, fut in enumerate(as_completed(futures), 1):
             o = fut.result()
             what = (f"complete in {o.ticks} ticks" if o.completed else

@@ -26,10 +26,9 @@ import json
 import os
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 from dataclasses import asdict, dataclass
 from functools import cache
-from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
@@ -38,6 +37,7 @@ import sim
 from agent_runtime.config import AgentConfig
 from experiments.replay import lower_bound, replay
 from experiments.report import write_section
+from experiments.workers import pool
 from world_server.scenario import Scenario, load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -144,8 +144,8 @@ def ideal(name: str) -> tuple[float, bool]:
 
 def run_all(jobs: list[Job], workers: int) -> list[JobResult]:
     results = []
-    with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
-        futures = [pool.submit(run_job, j) for j in jobs]
+    with pool(workers) as executor:
+        futures = [executor.submit(run_job, j) for j in jobs]
         for k, fut in enumerate(as_completed(futures), 1):
             r = fut.result()
             j = r.job
