@@ -373,27 +373,29 @@ class Brain:
         choice = self.network.choose(state)
         speed, turn, action, behaviour = self._select(frame, ranges, plans, choice.arm, choice.motor)
         speed, turn, action, behaviour = self._unstick(frame, speed, turn, action, behaviour)
-        speed, turn = self._off_own_brick(frame, speed, turn)
+        speed, turn = self._off_own_brick(frame, ranges[_CH["brick"]], speed, turn)
         self.behaviour = behaviour
         self.behaviour_ticks[behaviour] += 1
         decision = Decision(self.agent_id, frame.tick, tuple(state.tolist()), choice.outputs,
                             choice.arm, choice.motor)
         return Step(speed, turn, action, behaviour, decision)
 
-    def _off_own_brick(self, frame: SensorFrame, speed: float, turn: float) -> tuple[float, float]:
+    def _off_own_brick(self, frame: SensorFrame, bricks: np.ndarray, speed: float,
+                       turn: float) -> tuple[float, float]:
         """Leave a brick just dropped on the side joined to the rest of the world.
 
         The world lets the body pass through the brick it dropped until it is off it;
         whatever the behaviour wanted (avoid_red moves away from the brick, whichever side
         that is), a move into a pocket that brick closes (`sealing.pocket_beside`) would
         shut the agent in for good. While it is still on its brick it heads for ground
-        outside the pocket, back through the brick if it had already stepped in."""
+        outside the pocket, back through the brick if it had already stepped in. `bricks`:
+        the frame's brick readings, in cells (`perceive`)."""
         if frame.dropped:
             # Where the body stood when it let go: before this tick's move.
             self._dropped_at = self._odo - (frame.odom_dx / self.cell, frame.odom_dy / self.cell)
             self._drop_unseen = False
         elif self._dropped_at is None:
-            self._dropped_at = self._brick_underfoot(frame)
+            self._dropped_at = self._brick_underfoot(bricks)
             self._drop_unseen = self._dropped_at is not None
         if self._dropped_at is None:
             return speed, turn
@@ -423,8 +425,9 @@ class Brain:
             return speed, turn
         return self._navigate(field, frame.heading)
 
-    def _brick_underfoot(self, frame: SensorFrame) -> np.ndarray | None:
-        """Odometry (cells) of a brick the body overlaps, if a reading shows one.
+    def _brick_underfoot(self, bricks: np.ndarray) -> np.ndarray | None:
+        """Odometry (cells) of a brick the body overlaps, if one of the brick readings (cells,
+        one per sector) shows one.
 
         Only the brick an agent dropped itself lets its body pass, so this is one it dropped
         before this brain knew: a process started again, or a world resumed from a
@@ -432,8 +435,6 @@ class Brain:
         stepped off into nested_squares' inner ring and was shut in (`conag chaos`, 30/32).
         The margin keeps a brick merely touching (the physics lets bodies sink in a
         little) from counting."""
-        raw = np.asarray(frame.ranges, np.float64).reshape(len(CHANNELS), frame.sectors)[_CH["brick"]]
-        bricks = np.where(raw != NO_READING, raw / self.cell, NO_READING)
         if _nearest_reading(bricks) >= self._release - _OVERLAP_MARGIN:
             return None
         return self._odo + self._reading_offset(bricks)

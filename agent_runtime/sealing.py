@@ -148,19 +148,19 @@ def pocket_beside(blocked: np.ndarray, cell: tuple[int, int]) -> np.ndarray:
 
 
 def _largest_region(starts: np.ndarray, passable: np.ndarray) -> np.ndarray:
-    """The most cells any one of `starts` reaches through `passable` cells (none if no start)."""
-    regions = [connected(one, passable) for one in _each(starts)]
-    return max(regions, key=np.count_nonzero, default=np.zeros_like(passable))
-
-
-def _each(cells: np.ndarray) -> list[np.ndarray]:
-    """One mask per cell of `cells`."""
-    out = []
-    for i, j in zip(*np.nonzero(cells)):
-        one = np.zeros_like(cells)
+    """The most cells any one of `starts` reaches through `passable` cells (none if no start);
+    one distance field per region, not per start."""
+    best, seen = np.zeros_like(passable), np.zeros_like(passable)
+    for i, j in zip(*np.nonzero(starts)):
+        if seen[i, j]:
+            continue
+        one = np.zeros_like(starts)
         one[i, j] = True
-        out.append(one)
-    return out
+        region = connected(one, passable)
+        seen |= region
+        if np.count_nonzero(region) > np.count_nonzero(best):
+            best = region
+    return best
 
 
 def _border(like: np.ndarray) -> np.ndarray:

@@ -267,7 +267,7 @@ def chaos_run(opts: ChaosOptions, index: int, stop: threading.Event, log=print) 
                 ready = roster.ready(tick[0], opts.min_life)
                 if now >= next_agent and ready:
                     next_agent = now + _draw(rng, opts.kill_every)
-                    _kill_agent(opts, session, rng, roster, (ready, tick[0]), result, index, log)
+                    _kill_agent(opts, session, rng, roster, ready, tick[0], result, index, log)
             result.exit_code = proc.wait(opts.run_timeout)
         finally:
             for sub in subs:
@@ -304,11 +304,10 @@ class Roster:
         return [a for a in self.alive if tick - self.born[a] >= min_life]
 
 
-def _kill_agent(opts: ChaosOptions, session, rng: np.random.Generator, roster: Roster,
-                ready_at: tuple[list[str], int], result: ChaosRun, index: int, log) -> None:
-    """SIGKILL a random one of the ready agents (`ready_at`: them, and the world's tick now)
-    through `conag kill` / `conag restart`, never leaving fewer than `min_alive` alive."""
-    ready, tick = ready_at
+def _kill_agent(opts: ChaosOptions, session, rng: np.random.Generator, roster: Roster, ready: list[str],
+                tick: int, result: ChaosRun, index: int, log) -> None:
+    """SIGKILL a random one of the `ready` agents (the world at `tick`) through `conag kill` /
+    `conag restart`, never leaving fewer than `min_alive` alive."""
     victim = ready[int(rng.integers(len(ready)))]
     restart = len(roster.alive) <= opts.min_alive or bool(rng.random() < opts.restart_share)
     answer = control(session, "w0", "restart" if restart else "kill", victim, timeout=5.0)

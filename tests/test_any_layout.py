@@ -288,6 +288,11 @@ def test_an_agent_with_nothing_on_its_maps_explores():
     assert step.behaviour == "explore" and step.speed > 0
 
 
+def _bricks(frame: SensorFrame) -> np.ndarray:
+    """The frame's brick readings, one per sector, in cells (the test worlds' cells are 1.0)."""
+    return np.asarray(frame.ranges).reshape(len(CHANNELS), frame.sectors)[CHANNELS.index("brick")]
+
+
 def _ring_pocket_south(brain: Brain, closed: bool = True) -> tuple[int, int]:
     """Bricks on the brain's map round the cell south of it, open only through the agent's
     own cell (the centre of a ring whose last gap the agent stands in); `closed=False`
@@ -331,19 +336,19 @@ def test_an_agent_leaves_a_brick_it_dropped_on_the_side_away_from_the_pocket_it_
     south = (1.0, -math.pi / 2)          # (speed, turn) as steering gives them: heading east, turn right
     _ring_pocket_south(brain)
     dropped = SensorFrame(**{**_frame(2).__dict__, "dropped": True})
-    speed, turn = brain._off_own_brick(dropped, *south)
+    speed, turn = brain._off_own_brick(dropped, _bricks(dropped), *south)
     assert turn > 0 and speed >= 0         # turns left, to the north
     # With a second way into the ring there is no pocket: the behaviour's move stands.
     brain = Brain(_welcome(([60.5], [50.5])), AgentConfig(), np.random.default_rng(0))
     brain.step(_frame(1))
     _ring_pocket_south(brain, closed=False)
-    assert brain._off_own_brick(dropped, *south) == south
+    assert brain._off_own_brick(dropped, _bricks(dropped), *south) == south
     # Off the brick (more than a body and a brick's radius away), nothing is overridden.
     brain = Brain(_welcome(([60.5], [50.5])), AgentConfig(), np.random.default_rng(0))
     brain.step(_frame(1))
     brain._dropped_at = np.array([0.0, 3.0]) + brain._odo
     _ring_pocket_south(brain)
-    assert brain._off_own_brick(_frame(2), *south) == south and brain._dropped_at is None
+    assert brain._off_own_brick(_frame(2), _bricks(_frame(2)), *south) == south and brain._dropped_at is None
 
 
 def _brick_north(tick: int, distance: float) -> SensorFrame:
@@ -363,13 +368,15 @@ def test_a_brain_started_on_a_brick_its_body_dropped_leaves_it_away_from_the_poc
     brain = Brain(welcome, AgentConfig(), np.random.default_rng(0))
     brain.step(_frame(1))
     _ring_pocket_south(brain)
-    speed, turn = brain._off_own_brick(_brick_north(2, 0.3), *south)
+    on = _brick_north(2, 0.3)
+    speed, turn = brain._off_own_brick(on, _bricks(on), *south)
     assert turn > 0 and speed >= 0
     # A brick that only touches the body (or further off) is not underfoot: nothing changes.
     brain = Brain(welcome, AgentConfig(), np.random.default_rng(0))
     brain.step(_frame(1))
     _ring_pocket_south(brain)
-    assert brain._off_own_brick(_brick_north(2, 0.8), *south) == south and brain._dropped_at is None
+    touching = _brick_north(2, 0.8)
+    assert brain._off_own_brick(touching, _bricks(touching), *south) == south and brain._dropped_at is None
 
 
 RING_GAP = """
