@@ -90,6 +90,14 @@ def test_pockets_beside_structure_bricks_are_not_sealed_over_a_ghost():
     _assert_builds("twin_pockets", 8000)
 
 
+@pytest.mark.slow
+def test_one_cell_slots_between_water_walls_are_not_shut_by_far_wall_discs():
+    # Before: 32 of 36 sites at tick 20,000, 1,552 ticks in avoid_red (holding a brick, no
+    # open site reachable): far wall discs mapped a cell to the side closed slots for good.
+    run = _assert_builds("water_slots", 20000)
+    assert run.brains["a1"].behaviour_ticks["avoid_red"] < 300
+
+
 def test_a_mouth_site_waits_while_the_site_behind_it_is_open_on_seen_ground():
     # A corridor of food one cell wide, its far walls unseen: filling the mouth would cut
     # the deeper sites off on the ground the agent has seen, so it is no goal; the deepest is.
