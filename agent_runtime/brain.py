@@ -522,11 +522,9 @@ class Brain:
         return (*self._construct(frame, ranges, plans, motor, arm), arm, motor if motor != NONE else "explore")
 
     def _need_field(self, layer: int) -> np.ndarray:
-        # Any mark of the need's colour is a goal, also one seen only from afar (tentative):
-        # a thirsty agent heads for water it has seen, and places it as it comes near.
         m = self.maps.maps > 0.5
         others = (m[FOOD] | m[WATER] | m[BRICK] | m[OBSTACLE]) & ~m[layer]
-        return distance_field(self.maps.maps[layer] > 0.0, self._free_centre(others))
+        return distance_field(m[layer], self._free_centre(others))
 
     def _construct(self, frame, ranges, plans, motor, arm=NONE) -> tuple[float, float]:
         cruise = self.cfg.cruise_speed

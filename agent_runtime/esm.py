@@ -17,11 +17,10 @@ off the map is forgotten.
 
 Fixed obstacles (see `obstacle_trust`) are written only from readings near enough to put
 them in their own cell, so a one-cell gap in a wall is never sealed by a misplaced mark.
-Food and water seen from farther than that are written as TENTATIVE marks (a value under
-0.5): they tell an agent where to go to eat or drink, but every test of the form
-`maps > 0.5` (navigation, the seal checks, what is kept beyond the map) sees only marks
-from near readings. A far disc of a wall lands up to a cell to the side, into a one-cell
-slot between two walls, and would otherwise close it for good (gen-pocket 20261127).
+A farther food or water reading is never written on a blueprint site: sites are where
+bricks go, so the disc is the one beside it. Far discs of two water walls otherwise landed
+in the one-cell slot of sites between them, and (a marked cell explains the same reading
+ever after) shut it for good (gen-pocket 20261127).
 
 Sensing (see `sense`) clears what a sector proves empty (nothing of its colour nearer
 than its reading, or nothing at all within range) and writes each reading at the cell
@@ -54,13 +53,13 @@ _CHANNEL_LAYER = np.array([{"food": FOOD, "water": WATER, "brick": BRICK, "obsta
 _LAYER_BASE = _CHANNEL_LAYER[:, None].astype(np.float64)  # (channels, 1), broadcast over sectors
 _DISC_CHANNELS = 4             # the first four channels are fixed things, cleared by their sectors
 assert all(_CHANNEL_LAYER[:_DISC_CHANNELS] == np.arange(_DISC_CHANNELS))  # layer = channel for these
+_FOOD_OR_WATER = np.isin(_CHANNEL_LAYER, (FOOD, WATER))[:, None]   # (channels, 1)
 _BRICK_CH = CHANNELS.index("brick")
 _OBSTACLE_CH = CHANNELS.index("obstacle")
 CLEAR_MARGIN = 0.75            # clear only cells nearer than reading - this (a disc's cell centre
                                # can be up to 0.71 cell nearer than the disc, plus a little noise)
 RANGE_MARGIN = 0.5             # with no reading, clear only cells well inside the sensor range
 BAND = 0.75                    # cells this close to a reading's distance may hold what it saw
-TENTATIVE = 0.25               # a food or water mark from a reading too far to place it in its cell
 SITE_BRICK_OFFSET = 0.35       # a brick on a drop site lies this close to its cell's centre (agents
                                # drop within drop_centering = 0.3 of it; a little noise on top)
 
@@ -198,14 +197,7 @@ class EgocentricMaps:
         # still clear the cells in front of them, and the wall is mapped as it comes near.
         trust = obstacle_trust(sectors)
         unexplained[_OBSTACLE_CH][unexplained[_OBSTACLE_CH] > trust] = NO_READING
-        # Far food and water: the same doubt, but an agent that is thirsty needs to know
-        # where water is before it is near it. A tentative mark never blocks a path.
-        tentative = np.full_like(unexplained, NO_READING)
-        far = unexplained[[FOOD, WATER]] > trust
-        tentative[[FOOD, WATER]] = np.where(far, unexplained[[FOOD, WATER]], NO_READING)
-        unexplained[[FOOD, WATER]] = np.where(far, NO_READING, unexplained[[FOOD, WATER]])
-        self._write_readings(tentative, sectors, TENTATIVE)
-        self._write_readings(unexplained, sectors)
+        self._write_readings(unexplained, sectors, trust)
 
     def _associate(self, r, cells, dist, sector, vx, vy) -> np.ndarray:
         """Attribute each disc reading to one cell of its band; True where that was done.
@@ -224,16 +216,18 @@ class EgocentricMaps:
         return _associate_kernel(self._all, cells, dist, sector, vx, vy, np.ascontiguousarray(r[:_DISC_CHANNELS]),
                                  dirs[0], dirs[1], self.size * self.size * CONFIG, BRICK, BAND, r.shape[0])
 
-    def _write_readings(self, r: np.ndarray, sectors: int, value: float = 1.0) -> None:
-        """Mark each reading's cell in its channel's layer with `value`, never lowering a
-        mark already there (all channels and sectors at once)."""
+    def _write_readings(self, r: np.ndarray, sectors: int, trust: float) -> None:
+        """Mark each reading's cell in its channel's layer (all channels and sectors at once),
+        except food and water read from farther than `trust` whose cell is a blueprint site."""
         dirs = self._dirs(sectors)
         n = self.size
         col = np.floor(self.frac[0] + r * dirs[0] + 0.5) + self.centre
         row = self.centre - np.floor(self.frac[1] + r * dirs[1] + 0.5)
         hit = (r >= 0.0) & (row >= 0) & (row < n) & (col >= 0) & (col < n)
-        index = (_LAYER_BASE * (n * n) + row * n + col)[hit].astype(np.int64)
-        self._all[index] = np.maximum(self._all[index], value)
+        cell = np.where(hit, row * n + col, 0).astype(np.int64)
+        guessed = _FOOD_OR_WATER & (r > trust)
+        hit &= ~(guessed & (self._all[CONFIG * n * n + cell] > 0.5))
+        self._all[(_LAYER_BASE * (n * n) + cell)[hit].astype(np.int64)] = 1.0
 
     def _set_cells(self, layer: int, row: np.ndarray, col: np.ndarray) -> None:
         inside = (row >= 0) & (row < self.size) & (col >= 0) & (col < self.size)

@@ -16,7 +16,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent_runtime.esm import AGENT, BRICK, CONFIG, FOOD, OBSTACLE, TENTATIVE, WATER, EgocentricMaps, obstacle_trust
+from agent_runtime.esm import AGENT, BRICK, CONFIG, FOOD, OBSTACLE, WATER, EgocentricMaps, obstacle_trust
 from protocol.messages import CHANNELS, NO_READING, Perturbation
 from world_server.discs import IN_WORLD
 from world_server.scenario import parse_scenario
@@ -364,11 +364,11 @@ SLOTS = """
 ..................
 ..................
 ....WWWWWWWWWW....
-....W.............
+....W+++++++++....
 ....WWWWWWWWWW....
-....W.............
+....W+++++++++....
 ....WWWWWWWWWW....
-....W.............
+....W+++++++++....
 ....WWWWWWWWWW....
 ..................
 ..............A...
@@ -376,42 +376,54 @@ SLOTS = """
 """
 
 
-def test_far_water_never_closes_a_one_cell_slot_on_the_navigation_maps():
-    # gen-pocket 20261127: an agent at the mouths of one-cell slots between water walls saw
-    # the walls' discs 3-6 cells off, and a sector's centre angle put some of them a cell
-    # to the side, into a slot. The mark explained the same reading ever after, so the
+def test_far_water_is_never_mapped_on_a_site_between_water_walls():
+    # gen-pocket 20261127: an agent at the mouths of one-cell slots of sites between water
+    # walls saw the walls' discs 3-6 cells off, and a sector's centre angle put some of them
+    # a cell to the side, on a site. The mark explained the same reading ever after, so the
     # slot stayed shut and the agent held its brick at the mouths for the rest of the run.
-    w = world(SLOTS)
-    dr = Driven(w)
-    rows = SLOTS.strip().splitlines()
-    slots = [(c + 0.5, len(rows) - 1 - r + 0.5) for r, line in enumerate(rows)
-             for c, ch in enumerate(line) if ch == "." and 5 <= c <= 13 and r in (3, 5, 7)]
-    rng = np.random.default_rng(3)
-    tentative = 0
-    for t in range(400):
-        dr.step(speed=float(rng.uniform(0.3, 1.5)), turn=float(rng.uniform(-0.8, 0.8)))
-        cells = [dr.true_cell(xy) for xy in slots]
-        water = [float(dr.m.maps[WATER][cell]) for cell in cells if dr.m.contains(*cell)]
-        assert max(water) <= TENTATIVE, f"tick {t}: a slot holds a firm water mark"
-        tentative += sum(v == TENTATIVE for v in water)
-    assert tentative > 0   # far discs did land in the slots: only as tentative marks
+    for seed in range(3):
+        w = world(SLOTS)
+        dr = Driven(w)
+        walls_mapped = 0
+        for t in range(300):
+            # Up and down along the slots' mouths, 1-4 cells east of them.
+            x, y = dr.pose()
+            to_x, to_y = 15.5 + 1.5 * math.sin(t / 37 + seed), 6.5 + 4 * math.sin(t / 53 + 2 * seed)
+            heading = float(w.heading[w.agents["a1"].index])
+            turn = (math.atan2(to_y - y, to_x - x) - heading + math.pi) % (2 * math.pi) - math.pi
+            dr.step(speed=1.0, turn=float(np.clip(turn, -0.8, 0.8)))
+            sites = dr.m.maps[CONFIG] > 0.5
+            assert sites.sum() == 27
+            assert not (dr.m.maps[WATER][sites] > 0).any(), f"seed {seed}, tick {t}: water mapped on a site"
+            walls_mapped = max(walls_mapped, int((dr.m.maps[WATER] > 0.5).sum()))
+        assert walls_mapped > 10   # the walls themselves are mapped
+
+
+def test_near_water_is_mapped_on_a_site_all_the_same():
+    # The rule is a prior for readings too far to place, not a filter: water that really is
+    # on a site (a site added over it at run time) is mapped once the agent is near it.
+    dr = Driven(world("""
+    .....
+    ..+..
+    ..W..
+    ..A..
+    """))
+    dr.m.maps[CONFIG][C - 1, C] = 1.0          # the blueprint says the water's cell is a site
+    dr.sense()
+    assert dr.m.maps[WATER][C - 1, C] == 1.0
 
 
 def test_a_removed_disc_is_cleared_at_the_next_sense():
     w = world(LAYOUT)
     dr = Driven(w)
     assert dr.m.maps[BRICK, C + 1, C] == 1.0
-    # Food 5 cells off is seen too far away to be placed for sure in its cell: tentatively.
-    assert dr.m.maps[FOOD, C + 1, C - 5] == TENTATIVE
+    assert dr.m.maps[FOOD, C + 1, C - 5] == 1.0
     assert w.perturb(Perturbation("remove", 9.5, 6.5)).ok    # the brick south of the agent
     assert w.perturb(Perturbation("move", 4.5, 6.5, to_x=7.5, to_y=4.5)).ok  # food 5 west, 1 south
     dr.step()
     assert dr.m.maps[BRICK, C + 1, C] == 0.0
     assert dr.m.maps[FOOD, C + 1, C - 5] == 0.0
-    assert dr.m.maps[FOOD, C + 3, C - 2] == TENTATIVE   # where the food went: 2 west, 3 south (3.6 cells)
-    assert w.perturb(Perturbation("move", 7.5, 4.5, to_x=8.5, to_y=5.5)).ok   # 1 west, 2 south
-    dr.step()
-    assert dr.m.maps[FOOD, C + 2, C - 1] == 1.0   # 2.2 cells: near enough to place, a firm mark
+    assert dr.m.maps[FOOD, C + 3, C - 2] == 1.0   # where the food went: 2 west, 3 south
 
 
 def test_an_occluded_disc_behind_a_nearer_one_in_the_same_sector_is_kept():
@@ -536,9 +548,11 @@ def reference_sense(m: EgocentricMaps, ranges: np.ndarray, reach: float) -> np.n
             won = [c for score, c, marked, bp in scored if score <= best and (marked or bp)]
             winners += [(layer, c) for c in won]
             far = d > obstacle_trust(sectors)
-            if not won and not (layer == OBSTACLE and far):   # far walls are not written (see obstacle_trust)
-                # far food and water only tentatively: placed no better than a cell to the side
-                plain.append((layer, m.cell_of(px, py), TENTATIVE if far and layer in (FOOD, WATER) else 1.0))
+            cell = m.cell_of(px, py)
+            # far walls are not written (see obstacle_trust), nor far food and water on a site
+            on_site = m.contains(*cell) and cleared[CONFIG][cell] > 0.5
+            if not won and not (layer == OBSTACLE and far) and not (layer in (FOOD, WATER) and far and on_site):
+                plain.append((layer, cell))
             if layer == BRICK:  # ghosts of the one brick this sector saw, attributed or written plainly
                 ghosts += [(layer, c) for score, c, marked, bp in scored if marked and not bp and c not in won]
     for layer, c in ghosts:
@@ -546,12 +560,12 @@ def reference_sense(m: EgocentricMaps, ranges: np.ndarray, reach: float) -> np.n
     for layer, c in winners:
         out[layer][c] = 1.0
     out[AGENT] = 0.0
-    a_plain = [(m.cell_of(ranges[AG, s] * math.cos((s + 0.5) * 2 * math.pi / sectors),
+    a_plain = [(AGENT, m.cell_of(ranges[AG, s] * math.cos((s + 0.5) * 2 * math.pi / sectors),
                                  ranges[AG, s] * math.sin((s + 0.5) * 2 * math.pi / sectors)))
                for s in range(sectors) if ranges[AG, s] >= 0]
-    for layer, c, value in plain + [(AGENT, c, 1.0) for c in a_plain]:
+    for layer, c in plain + a_plain:
         if m.contains(*c):
-            out[layer][c] = max(out[layer][c], value)
+            out[layer][c] = 1.0
     return out
 
 
