@@ -445,6 +445,7 @@ def cmd_run(args) -> int:
                       checkpoint_every=args.checkpoint_every or CHECKPOINT_EVERY, profile=args.profile,
                       per_process=args.per_process, agent_mode=args.agent_mode)
     with _stop_on_signals() as stop:
+        _report_a_slow_stop(stop)
         try:
             summary = run(opts, stop)
         except RuntimeError as exc:  # a process of the run failed (the world died, the recorder did)
@@ -455,7 +456,7 @@ def cmd_run(args) -> int:
              else "INTERRUPTED" if interrupted else "NOT complete")
     print(f"{summary['scenario']}: {state}: {summary['sites_filled']}/{summary['sites_total']} sites in "
           f"{summary['ticks']} ticks, {len(summary['agents'])} agents, total distance "
-          f"{summary['total_distance']:.1f}")
+          f"{summary['total_distance']:.1f}", flush=True)
     if args.record:
         print(f"recording written to {args.record}")
     if args.summary == "-":
@@ -465,6 +466,27 @@ def cmd_run(args) -> int:
     if summary["completed"]:
         return 0
     return EXIT_STALLED if summary["stalled"] else EXIT_INTERRUPTED if interrupted else EXIT_INCOMPLETE
+
+
+SLOW_STOP = 60.0   # seconds after Ctrl-C / SIGTERM past which `conag run` shows where it waits
+
+
+def _report_a_slow_stop(stop: threading.Event, after: float = SLOW_STOP) -> None:
+    """Once `stop` is set, print every thread's stack to stderr if the process is still
+    alive `after` seconds later. Stopping a run is bounded (each process gets its grace,
+    then SIGKILL), yet CI once saw `conag run` still there 120 s after two Ctrl-Cs, with no
+    trace of where it waited; a daemon thread also fires while the interpreter waits for
+    other threads at exit."""
+    import faulthandler
+
+    def watch() -> None:
+        stop.wait()
+        time.sleep(after)
+        print(f"conag run: still stopping {after:g} s after the signal; where each thread waits:",
+              file=sys.stderr, flush=True)
+        faulthandler.dump_traceback(file=sys.stderr, all_threads=True)
+
+    threading.Thread(target=watch, name="slow-stop-report", daemon=True).start()
 
 
 def cmd_chaos(args) -> int:

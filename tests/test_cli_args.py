@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import logging
+import threading
+import time
 
 import pytest
 
-from conag.cli import build_parser, log_level
+from conag.cli import _report_a_slow_stop, build_parser, log_level
 
 
 @pytest.mark.parametrize("argv, level", [
@@ -64,3 +66,19 @@ def test_conag_world_needs_a_scenario_or_a_checkpoint(capsys):
     assert "needs a SCENARIO file (or --resume CHECKPOINT)" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         build_parser().parse_args(["world", "x.toml", "--checkpoint-every", "0"])
+
+
+def test_a_run_that_is_slow_to_stop_shows_where_each_thread_waits(capfd):
+    # CI once found `conag run` alive 120 s after two Ctrl-Cs and nothing said where it waited.
+    stop = threading.Event()
+    _report_a_slow_stop(stop, after=0.1)
+    time.sleep(0.3)
+    assert "still stopping" not in capfd.readouterr().err   # nothing before the signal
+    stop.set()
+    deadline = time.monotonic() + 5
+    err = ""
+    while "most recent call first" not in err and time.monotonic() < deadline:
+        time.sleep(0.05)
+        err += capfd.readouterr().err
+    assert "conag run: still stopping 0.1 s after the signal" in err
+    assert "test_a_run_that_is_slow_to_stop_shows_where_each_thread_waits" in err   # this thread's stack
