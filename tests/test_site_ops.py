@@ -74,6 +74,15 @@ def test_site_ops_are_refused_with_a_reason_and_change_nothing(op, x, y, why):
     assert counts(w) == (1, 0, 1, False) and w.blueprint_version == 0
 
 
+@pytest.mark.parametrize("x, y, held", [(0.5, 1.5, "food"), (1.5, 1.5, "water")])
+def test_no_site_is_added_where_food_or_water_lies(x, y, held):
+    w = make("FW+\nb..", agents=0)
+    res = w.perturb(site("add_site", x, y))
+    assert not res.ok and f"holds {held}" in res.message
+    assert counts(w) == (1, 0, 1, False) and w.blueprint_version == 0
+    assert w.perturb(site("add_site", 2.5, 0.5)).ok   # beside them, on open ground: fine
+
+
 def test_welcome_carries_the_blueprint_version_and_the_sites_now():
     w = make("+..\n.A.", agents=1)
     assert w.attach("a").blueprint_version == 0

@@ -565,6 +565,10 @@ class World:
         if p.op == "add_site":
             if self.scenario.layout[row][col] == "#":
                 return PerturbResult(False, f"{cell} is a fixed obstacle (#): no drop site there", self.tick)
+            held = self._food_or_water_in(col, row)
+            if held:
+                # A brick could never be dropped there (and agents take such marks for misplaced walls).
+                return PerturbResult(False, f"{cell} holds {held}: no drop site there", self.tick)
             if at.size:
                 return PerturbResult(False, f"{cell} is already a drop site", self.tick)
             self._set_sites(np.vstack([self.sites_xy, centre]))
@@ -576,6 +580,15 @@ class World:
             done = "removed the drop site of"
         return PerturbResult(True, f"{done} {cell}: {len(self.sites_xy)} sites, blueprint version "
                                    f"{self.blueprint_version}", self.tick)
+
+    def _food_or_water_in(self, col: int, row: int) -> str:
+        """"food" or "water" if such a disc lies in cell (col, row) now, else ""."""
+        _, xy, kind = self.discs.present_arrays()
+        for k, name in ((FOOD_DISC, "food"), (WATER_DISC, "water")):
+            mine = xy[kind == k]
+            if len(mine) and (self.scenario.to_cell(mine) == (col, row)).all(axis=1).any():
+                return name
+        return ""
 
     def _set_sites(self, sites_xy: np.ndarray) -> None:
         # The cell codes are what filling and completion are computed from: always together.
