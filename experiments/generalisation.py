@@ -18,6 +18,7 @@ stopped in (experiments/generalisation/failures/).
     python3 -m experiments.generalisation --quick      # a smoke run of a few small layouts
     python3 -m experiments.generalisation --generate   # rewrite the suite's layout files
     python3 -m experiments.generalisation --report-only   # the tables again from generalisation.json
+    python3 -m experiments.generalisation --resume     # go on with an interrupted run (same options)
 
 Writes experiments/generalisation.json (every run), experiments/generalisation.md and the
 generalisation section of EXPERIMENTS.md (not with --quick, which writes to --out).
@@ -39,6 +40,7 @@ import numpy as np
 
 import sim
 from agent_runtime.config import AgentConfig
+from experiments.journal import Journal
 from experiments.report import write_section
 from experiments.workers import pool
 from world_server.scenario import Scenario, load_scenario
@@ -51,6 +53,7 @@ SUITE_SIZE = 200
 MODES = (("goal sequencing", True), ("nearest-first", False))
 BANDS = ((15, 30), (31, 60), (61, 120))
 DEFAULT_STALL = 3000
+JOURNAL = "generalisation.partial.jsonl"   # the runs finished so far (see --resume)
 
 
 @dataclass(frozen=True)
@@ -153,20 +156,40 @@ def _picture(run: sim.SimRun, sc: Scenario, job: Job, folder: Path) -> Path:
                                               f"at tick {st.tick}", max_pixels=1200)
 
 
-def run_all(jobs: list[Job], workers: int, pictures: Path | None) -> list[Outcome]:
-    """Every job on `workers` processes (spawned: nothing crosses a fork), with progress."""
-    out: list[Outcome] = []
+def run_all(jobs: list[Job], workers: int, pictures: Path | None, journal: Journal | None = None,
+            earlier: list[Outcome] | None = None) -> list[Outcome]:
+    """Every job on `workers` processes (spawned: nothing crosses a fork), with progress;
+    each outcome goes to `journal` as it comes. `earlier` outcomes (a resumed run's) count
+    in the progress and the result."""
+    out: list[Outcome] = list(earlier or ())
+    total = len(out) + len(jobs)
     began = time.monotonic()
     with pool(workers) as executor:
         futures = {executor.submit(run_job, j, pictures): j for j in jobs}
-        for k, fut in enumerate(as_completed(futures), 1):
+        for fut in as_completed(futures):
             o = fut.result()
+            if journal is not None:
+                journal.append(_job_key(futures[fut]), asdict(o))
+            out.append(o)
             what = (f"complete in {o.ticks} ticks" if o.completed else
                     f"{'STALLED' if o.stalled else 'OUT OF TICKS'} at {o.sites_filled}/{o.sites_total}")
-            print(f"[{k}/{len(jobs)} {time.monotonic() - began:6.0f} s] {o.layout} ({o.family}, {o.cols}x{o.rows}, "
-                  f"{o.agents} agents) {o.mode}: {what} ({o.seconds:.0f} s)", file=sys.stderr, flush=True)
-            out.append(o)
+            print(f"[{len(out)}/{total} {time.monotonic() - began:6.0f} s] {o.layout} ({o.family}, "
+                  f"{o.cols}x{o.rows}, {o.agents} agents) {o.mode}: {what} ({o.seconds:.0f} s)",
+                  file=sys.stderr, flush=True)
     return sorted(out, key=lambda o: (o.layout, o.mode))
+
+
+def _job_key(job: Job) -> list:
+    return [job.layout, job.mode, job.stall]
+
+
+def resumed(journal: Journal, jobs: list[Job]) -> tuple[list[Outcome], list[Job]]:
+    """(outcomes the journal already holds for `jobs`, the jobs still to run). An entry
+    counts only for the same layout, agent and stall limit."""
+    wanted = {tuple(_job_key(j)) for j in jobs}
+    found = journal.results(lambda key: tuple(key) if tuple(key) in wanted else None)
+    earlier = [Outcome(**(r | {"report": tuple(r["report"])})) for r in found.values()]
+    return earlier, [j for j in jobs if tuple(_job_key(j)) not in found]
 
 
 # ------------------------------------------------------------------ tables
@@ -351,6 +374,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=None, help="folder for the json and md (default experiments/)")
     ap.add_argument("--report-only", action="store_true",
                     help="rewrite the tables from the committed generalisation.json, running nothing")
+    ap.add_argument("--resume", action="store_true",
+                    help=f"keep the runs an interrupted invocation with the same --out finished ({JOURNAL} there)")
     args = ap.parse_args(argv)
     if args.jobs < 1 or args.stall < 1:
         ap.error("--jobs and --stall must be >= 1")
@@ -367,12 +392,17 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("--quick needs --out (it must not overwrite the committed results)")
     out.mkdir(parents=True, exist_ok=True)
     pictures = out / "generalisation" / "failures" if args.out else SUITE / "failures"
-    for old in pictures.glob("*.png") if pictures.exists() and not (args.only or args.quick) else ():
+    fresh = not (args.only or args.quick or args.resume)
+    for old in pictures.glob("*.png") if pictures.exists() and fresh else ():
         old.unlink()
-    jobs = [Job(name, mode, args.stall) for name in names for mode, _ in MODES]
+    journal = Journal(out / JOURNAL, resume=args.resume)
+    earlier, jobs = resumed(journal, [Job(name, mode, args.stall) for name in names for mode, _ in MODES])
+    if args.resume:
+        print(f"resuming: {len(earlier)} of {len(earlier) + len(jobs)} runs already done "
+              f"({out / JOURNAL})", file=sys.stderr, flush=True)
     began = time.monotonic()
-    outcomes = run_all(jobs, args.jobs, pictures)
-    seconds = time.monotonic() - began
+    outcomes = run_all(jobs, args.jobs, pictures, journal, earlier)
+    seconds = journal.earlier_seconds() + time.monotonic() - began
     text = markdown(outcomes, args, seconds, out.resolve())
     rows = [asdict(o) | {"picture": os.path.relpath(o.picture, out.resolve()) if o.picture else ""} for o in outcomes]
     (out / "generalisation.json").write_text(json.dumps(rows, indent=1), encoding="utf-8")
@@ -381,6 +411,7 @@ def main(argv: list[str] | None = None) -> int:
     (out / "generalisation.md").write_text(text, encoding="utf-8")
     if not (args.quick or args.only or args.out):
         write_section(ROOT / "EXPERIMENTS.md", "generalisation", markdown(outcomes, args, seconds, ROOT))
+    journal.remove()
     print(text)
     return 0
 

@@ -56,3 +56,29 @@ def test_the_quick_run_refuses_to_overwrite_the_committed_results():
     r = subprocess.run([sys.executable, "experiments/generalisation.py", "--quick"], cwd=ROOT,
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "--out" in r.stderr
+
+
+@pytest.mark.slow
+def test_an_interrupted_run_resumes_without_running_again_what_it_finished(tmp_path):
+    layout = "000-gen-wall-20260000.toml"
+
+    def run(out, *extra):
+        return subprocess.run([sys.executable, "experiments/generalisation.py", "--only", layout, "--jobs", "1",
+                               "--out", str(out), *extra], cwd=ROOT, capture_output=True, text=True, timeout=600)
+
+    whole = run(tmp_path / "whole")
+    assert whole.returncode == 0, whole.stderr[-2000:]
+    assert not (tmp_path / "whole" / gen.JOURNAL).exists()    # a finished run leaves no journal
+    rows = json.loads((tmp_path / "whole" / "generalisation.json").read_text())
+    # As if the run had been killed after its goal-sequencing run: only that one is in the journal.
+    first = next(r for r in rows if r["mode"] == "goal sequencing")
+    (tmp_path / "cut").mkdir()
+    (tmp_path / "cut" / gen.JOURNAL).write_text(json.dumps(
+        {"run": 1.0, "at": 5.0, "key": [layout, "goal sequencing", gen.DEFAULT_STALL], "result": first}) + "\n")
+    resumed = run(tmp_path / "cut", "--resume")
+    assert resumed.returncode == 0, resumed.stderr[-2000:]
+    assert "resuming: 1 of 2 runs already done" in resumed.stderr
+    assert resumed.stderr.count("] 000-gen-wall") == 1 and "nearest-first" in resumed.stderr   # one run, the other
+    again = json.loads((tmp_path / "cut" / "generalisation.json").read_text())
+    same = ("layout", "mode", "completed", "ticks", "sites_filled", "distance")
+    assert [{k: r[k] for k in same} for r in again] == [{k: r[k] for k in same} for r in rows]

@@ -1,0 +1,73 @@
+"""A run journal: a long benchmark's finished runs, one JSON line each, so an interrupted
+run (a closed laptop, a killed session, the end of a CI slot) can be resumed without
+running again what it already finished (`experiments/generalisation.py --resume`).
+
+Each line is {"run": <when that invocation began>, "at": <its seconds so far>, "key": ...,
+"result": ...}; `key` says which job it was and under which settings (a line whose settings
+differ from the resumed run's is not used). Lines are appended and flushed one at a time:
+a kill loses at most the line being written, and a torn last line is dropped on resuming.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+
+class Journal:
+    """Append-only JSON lines at `path`; `entries` are the lines read when it was opened."""
+
+    def __init__(self, path: Path, *, resume: bool, clock=time.time):
+        self.path = Path(path)
+        self._clock = clock
+        self._began = clock()
+        self.entries: list[dict[str, Any]] = _read(self.path) if resume else []
+        if not resume:
+            self.path.unlink(missing_ok=True)   # a fresh run: nothing earlier counts
+        elif self.entries:
+            # Written again without a line a kill cut short: the next line must not join it.
+            self.path.write_text("".join(json.dumps(e) + "\n" for e in self.entries), encoding="utf-8")
+
+    def results(self, key_of) -> dict[Any, Any]:
+        """Results of the earlier entries by key, for the keys `key_of(entry_key)` accepts
+        (it returns the key to use, or None to leave the entry out)."""
+        out = {}
+        for e in self.entries:
+            key = key_of(e["key"])
+            if key is not None:
+                out[key] = e["result"]
+        return out
+
+    def earlier_seconds(self) -> float:
+        """Wall time of the earlier invocations: each one's last `at`, summed."""
+        last: dict[float, float] = {}
+        for e in self.entries:
+            last[e["run"]] = max(last.get(e["run"], 0.0), e["at"])
+        return sum(last.values())
+
+    def append(self, key: Any, result: Any) -> None:
+        """Record one finished job now."""
+        line = json.dumps({"run": self._began, "at": self._clock() - self._began, "key": key, "result": result})
+        with self.path.open("a", encoding="utf-8") as f:
+            f.write(line + "\n")
+            f.flush()
+
+    def remove(self) -> None:
+        """The run is complete: its results are written elsewhere."""
+        self.path.unlink(missing_ok=True)
+
+
+def _read(path: Path) -> list[dict[str, Any]]:
+    if not path.exists():
+        return []
+    entries = []
+    for line in path.read_text(encoding="utf-8").splitlines():
+        try:
+            e = json.loads(line)
+        except json.JSONDecodeError:
+            continue   # the line a kill cut short
+        if isinstance(e, dict) and {"run", "at", "key", "result"} <= e.keys():
+            entries.append(e)
+    return entries
