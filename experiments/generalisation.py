@@ -30,6 +30,7 @@ import argparse
 import json
 import os
 import re
+import subprocess
 import sys
 import time
 from concurrent.futures import as_completed
@@ -61,6 +62,7 @@ class Job:
     layout: str        # file name under LAYOUTS (or a path for --only)
     mode: str
     stall: int
+    code: str = ""     # the code version the run is for (see _code_version)
 
 
 @dataclass(frozen=True)
@@ -180,12 +182,31 @@ def run_all(jobs: list[Job], workers: int, pictures: Path | None, journal: Journ
 
 
 def _job_key(job: Job) -> list:
-    return [job.layout, job.mode, job.stall]
+    return [job.layout, job.mode, job.stall, job.code]
+
+
+_CODE_DIRS = ("agent_runtime", "world_server", "sim")   # what a run's outcome depends on
+
+
+def _code_version() -> str:
+    """The git trees of the code a run depends on, and whether it has uncommitted changes
+    ("" outside a git checkout): a journalled run counts on resuming only for the same code
+    (a commit elsewhere, the docs, changes nothing)."""
+    try:
+        trees = subprocess.run(["git", "rev-parse", *(f"HEAD:{d}" for d in _CODE_DIRS)], cwd=ROOT,
+                               capture_output=True, text=True, timeout=10, check=False)
+        dirty = subprocess.run(["git", "status", "--porcelain", "--", *_CODE_DIRS], cwd=ROOT,
+                               capture_output=True, text=True, timeout=10, check=False)
+    except (OSError, subprocess.SubprocessError):
+        return ""
+    if trees.returncode != 0:
+        return ""
+    return " ".join(h[:12] for h in trees.stdout.split()) + (" +changes" if dirty.stdout.strip() else "")
 
 
 def resumed(journal: Journal, jobs: list[Job]) -> tuple[list[Outcome], list[Job]]:
     """(outcomes the journal already holds for `jobs`, the jobs still to run). An entry
-    counts only for the same layout, agent and stall limit."""
+    counts only for the same layout, agent, stall limit and code (`Job.code`)."""
     wanted = {tuple(_job_key(j)) for j in jobs}
     found = journal.results(lambda key: tuple(key) if tuple(key) in wanted else None)
     earlier = [Outcome(**(r | {"report": tuple(r["report"])})) for r in found.values()]
@@ -396,7 +417,8 @@ def main(argv: list[str] | None = None) -> int:
     for old in pictures.glob("*.png") if pictures.exists() and fresh else ():
         old.unlink()
     journal = Journal(out / JOURNAL, resume=args.resume)
-    earlier, jobs = resumed(journal, [Job(name, mode, args.stall) for name in names for mode, _ in MODES])
+    code = _code_version()
+    earlier, jobs = resumed(journal, [Job(name, mode, args.stall, code) for name in names for mode, _ in MODES])
     if args.resume:
         print(f"resuming: {len(earlier)} of {len(earlier) + len(jobs)} runs already done "
               f"({out / JOURNAL})", file=sys.stderr, flush=True)

@@ -73,8 +73,8 @@ def test_an_interrupted_run_resumes_without_running_again_what_it_finished(tmp_p
     # As if the run had been killed after its goal-sequencing run: only that one is in the journal.
     first = next(r for r in rows if r["mode"] == "goal sequencing")
     (tmp_path / "cut").mkdir()
-    (tmp_path / "cut" / gen.JOURNAL).write_text(json.dumps(
-        {"run": 1.0, "at": 5.0, "key": [layout, "goal sequencing", gen.DEFAULT_STALL], "result": first}) + "\n")
+    key = [layout, "goal sequencing", gen.DEFAULT_STALL, gen._code_version()]
+    (tmp_path / "cut" / gen.JOURNAL).write_text(json.dumps({"run": 1.0, "at": 5.0, "key": key, "result": first}) + "\n")
     resumed = run(tmp_path / "cut", "--resume")
     assert resumed.returncode == 0, resumed.stderr[-2000:]
     assert "resuming: 1 of 2 runs already done" in resumed.stderr
