@@ -207,10 +207,10 @@ def _code_version() -> str:
 def resumed(journal: Journal, jobs: list[Job]) -> tuple[list[Outcome], list[Job]]:
     """(outcomes the journal already holds for `jobs`, the jobs still to run). An entry
     counts only for the same layout, agent, stall limit and code (`Job.code`)."""
-    wanted = {tuple(_job_key(j)) for j in jobs}
-    found = journal.results(lambda key: tuple(key) if tuple(key) in wanted else None)
-    earlier = [Outcome(**(r | {"report": tuple(r["report"])})) for r in found.values()]
-    return earlier, [j for j in jobs if tuple(_job_key(j)) not in found]
+    found = journal.results()
+    keys = [tuple(_job_key(j)) for j in jobs]
+    earlier = [Outcome(**(found[k] | {"report": tuple(found[k]["report"])})) for k in keys if k in found]
+    return earlier, [j for j, k in zip(jobs, keys) if k not in found]
 
 
 # ------------------------------------------------------------------ tables

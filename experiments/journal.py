@@ -30,15 +30,9 @@ class Journal:
             # Written again without a line a kill cut short: the next line must not join it.
             self.path.write_text("".join(json.dumps(e) + "\n" for e in self.entries), encoding="utf-8")
 
-    def results(self, key_of) -> dict[Any, Any]:
-        """Results of the earlier entries by key, for the keys `key_of(entry_key)` accepts
-        (it returns the key to use, or None to leave the entry out)."""
-        out = {}
-        for e in self.entries:
-            key = key_of(e["key"])
-            if key is not None:
-                out[key] = e["result"]
-        return out
+    def results(self) -> dict[tuple, Any]:
+        """Results of the earlier entries by key (as a tuple; the newest entry of a key wins)."""
+        return {tuple(e["key"]): e["result"] for e in self.entries}
 
     def earlier_seconds(self) -> float:
         """Wall time of the earlier invocations: each one's last `at`, summed."""

@@ -565,7 +565,7 @@ class World:
         if p.op == "add_site":
             if self.scenario.layout[row][col] == "#":
                 return PerturbResult(False, f"{cell} is a fixed obstacle (#): no drop site there", self.tick)
-            held = self._food_or_water_in(col, row)
+            held = self._food_or_water_in(code)
             if held:
                 # A brick could never be dropped there (and agents take such marks for misplaced walls).
                 return PerturbResult(False, f"{cell} holds {held}: no drop site there", self.tick)
@@ -581,12 +581,12 @@ class World:
         return PerturbResult(True, f"{done} {cell}: {len(self.sites_xy)} sites, blueprint version "
                                    f"{self.blueprint_version}", self.tick)
 
-    def _food_or_water_in(self, col: int, row: int) -> str:
-        """"food" or "water" if such a disc lies in cell (col, row) now, else ""."""
+    def _food_or_water_in(self, code: int) -> str:
+        """"food" or "water" if such a disc lies in the cell of `code` (`_cell_code`) now, else ""."""
         _, xy, kind = self.discs.present_arrays()
+        there = kind[self._cell_code(xy) == code] if len(xy) else kind[:0]
         for k, name in ((FOOD_DISC, "food"), (WATER_DISC, "water")):
-            mine = xy[kind == k]
-            if len(mine) and (self.scenario.to_cell(mine) == (col, row)).all(axis=1).any():
+            if np.any(there == k):
                 return name
         return ""
 
