@@ -3,11 +3,18 @@
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import threading
 from contextlib import contextmanager
 
 from bus import MODES, BusOptions
+
+# The recorder's nice value (conag record --nice, conag run --record-nice): on a machine the
+# run keeps busy a recorder would otherwise take its share of the CPU from the world and the
+# agents (BENCHMARKS.md, recording overhead). It only has to keep up on average: zenoh
+# queues what it has not written yet (nodes/recorder.py).
+RECORDER_NICE = 10
 
 
 def bus_args(p: argparse.ArgumentParser) -> None:
@@ -39,3 +46,19 @@ def stop_on_signals():
     finally:
         for s, h in previous.items():
             signal.signal(s, h)
+
+
+def lower_priority(by: int) -> None:
+    """Raise the nice value of every thread of this process by `by` (Linux keeps one per
+    thread; threads started later inherit their starter's). Call it before opening a zenoh
+    session, so zenoh's threads start niced too."""
+    try:
+        threads = [int(t) for t in os.listdir("/proc/self/task")]
+    except OSError:  # no /proc: the calling thread, which is all os.nice changes there
+        os.nice(by)
+        return
+    for tid in threads:
+        try:
+            os.setpriority(os.PRIO_PROCESS, tid, min(os.getpriority(os.PRIO_PROCESS, tid) + by, 19))
+        except ProcessLookupError:
+            continue  # the thread ended meanwhile

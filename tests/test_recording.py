@@ -12,10 +12,12 @@
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import threading
 from collections import Counter
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -324,3 +326,32 @@ def test_conag_record_finishes_its_file_on_sigterm(tmp_path, endpoint):
         assert not out.with_name(out.name + ".part").exists()
     finally:
         rec.kill()
+
+
+def _nice_values(pid: int) -> set[int]:
+    """The nice value of every thread of process `pid` (Linux keeps one per thread)."""
+    values = set()
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        try:
+            values.add(int(task.joinpath("stat").read_text().rsplit(")", 1)[1].split()[16]))
+        except (OSError, IndexError):
+            continue  # the thread ended meanwhile
+    return values
+
+
+def test_conag_record_runs_all_its_threads_niced_so_the_run_it_records_gets_the_cpu_first(tmp_path, endpoint):
+    base = os.getpriority(os.PRIO_PROCESS, 0)
+    rec = Process("record", str(tmp_path / "r.mcap"), "--connect", endpoint, "--nice", "7")
+    try:
+        rec.wait_for("recording world")
+        # zenoh's threads too: they start after the nice value is raised, and inherit it.
+        assert _nice_values(rec.proc.pid) == {min(base + 7, 19)}
+        assert len(list(Path(f"/proc/{rec.proc.pid}/task").iterdir())) > 1
+    finally:
+        rec.kill()
+
+
+def test_conag_record_refuses_a_negative_nice_value(tmp_path):
+    done = conag("record", tmp_path / "r.mcap", "--nice", "-3", timeout=60)
+    assert done.returncode == 2 and "--nice must be >= 0" in done.stderr
+    assert not (tmp_path / "r.mcap").exists()
