@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import pytest
@@ -170,3 +171,29 @@ def test_the_scale_benchmark_quick_run_prints_both_tables(tmp_path):
         assert row["proc"]["agent_pss_mb"] > 0 and row["proc"]["total_pss_mb"] > row["proc"]["agent_pss_mb"]
     assert [(r_["agents"], r_["target"]) for r_ in rows["realtime"]] == [(2, 20.0), (2, 20.0)]
     assert "| 2 | 2 | 300 |" in r.stdout and "| kept |" in r.stdout
+
+
+def test_the_cpu_split_names_each_process_by_its_role_and_counts_threads_born_midway():
+    from bench.bench_cpu_split import role, split
+
+    assert role("/usr/bin/python3 -m conag agent --id a1 --world-id w0") == "agent"
+    assert role("python3 -m conag agents --ids a1..a5") == "agents"
+    assert role("python3 -m conag world s.toml") == "world" and role("python3 -m pytest") == "other"
+    before = {(1, 1): ("world", "python3", 2.0), (2, 5): ("agent", "rx", 0.5)}
+    after = {(1, 1): ("world", "python3", 3.5), (2, 5): ("agent", "rx", 0.75), (2, 6): ("agent", "rx", 0.25)}
+    assert split(before, after) == {("world", "python3"): 1.5, ("agent", "rx"): 0.5}
+
+
+@pytest.mark.slow
+def test_the_cpu_split_benchmark_reports_the_steady_span_of_a_run():
+    import subprocess
+    import sys
+
+    from tests.conftest import ROOT, free_port
+
+    r = subprocess.run([sys.executable, "-m", "bench.bench_cpu_split", "--agents", "2", "--ticks", "300",
+                        "--port", str(free_port())], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert "| agent | python3 |" in r.stdout and "| world | python3 |" in r.stdout
+    busy = float(r.stdout.split("cores kept busy ")[1].split()[0])
+    assert 0.2 < busy <= (os.cpu_count() or 1) + 0.1
