@@ -3,7 +3,7 @@
     python3 -m bench.bench_record                      # nested_squares, 3 agents, 5 repetitions of each
     python3 -m bench.bench_record --scenario scenarios/fig6.toml --reps 3
     python3 -m bench.bench_record --main-job           # also: the size of a recording of the README's main job
-    python3 -m bench.bench_record --record-nice 0,10   # the recorder at nice 0 and at 10, side by side
+    python3 -m bench.bench_record --record-priority normal,low,idle   # the recorder's priorities side by side
 
 Each repetition runs `conag run SCENARIO --agents N --max-ticks T` as a subprocess,
 alternating without and with `--record` (so a slow spell of a shared machine hits both),
@@ -17,9 +17,9 @@ about 300 ticks, a second, too short to time. Two figures per run:
   over the same span: the steadier figure on a shared machine, since the run is
   CPU-bound (its processes outnumber the cores) and the wall rate follows the CPU it needs.
 
-With `--record-nice N,M,...` each repetition records once per nice value of the recorder
-(`conag run --record-nice`; default: only the default value, 10), so the recorder's
-priority can be compared in one run. Prints the medians and the slowdowns; the
+With `--record-priority P,Q,...` each repetition records once per CPU priority of the
+recorder (`conag run --record-priority`: normal, low, idle; default: only the default,
+idle), so the priorities can be compared in one run. Prints the medians and the slowdowns; the
 recordings' sizes too.
 """
 
@@ -36,7 +36,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from conag.common import RECORDER_NICE
+from conag.common import PRIORITIES, RECORDER_PRIORITY
 
 ROOT = Path(__file__).resolve().parent.parent
 LINE = re.compile(r"^tick\s+(\d+)\s")
@@ -106,14 +106,14 @@ class RunFigures:
 
 
 def one_run(scenario: str, agents: int | None, ticks: int, record: Path | None, port: int,
-            nice: int = RECORDER_NICE) -> RunFigures:
+            priority: str = RECORDER_PRIORITY) -> RunFigures:
     """Run one build and time it (see the module)."""
     cmd = [sys.executable, "-m", "conag", "run", scenario, "--headless", "--max-ticks", str(ticks),
            "--stall-ticks", "0", "--listen", f"tcp/127.0.0.1:{port}"]
     if agents is not None:
         cmd += ["--agents", str(agents)]
     if record is not None:
-        cmd += ["--record", str(record), "--record-nice", str(nice)]
+        cmd += ["--record", str(record), "--record-priority", priority]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, text=True)
     clock = BuildClock()
     cpu: list[tuple[float, float]] = []   # (all, recorder) at the first and the newest progress line
@@ -129,6 +129,14 @@ def one_run(scenario: str, agents: int | None, ticks: int, record: Path | None, 
                       record.stat().st_size if record is not None and record.exists() else 0)
 
 
+def _priorities(text: str) -> list[str]:
+    values = text.split(",")
+    bad = [v for v in values if v not in PRIORITIES]
+    if bad:
+        raise argparse.ArgumentTypeError(f"unknown priority {bad[0]!r}: expected some of {', '.join(PRIORITIES)}")
+    return values
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--scenario", default="scenarios/nested_squares.toml")
@@ -136,34 +144,37 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--ticks", type=int, default=3000, help="tick limit of each build (it stops when complete)")
     p.add_argument("--reps", type=int, default=5)
     p.add_argument("--port", type=int, default=17601)
-    p.add_argument("--record-nice", type=lambda t: [int(v) for v in t.split(",")], default=[RECORDER_NICE],
-                   metavar="N,N,...", help=f"the recorder's nice values to compare (default {RECORDER_NICE})")
+    p.add_argument("--record-priority", type=_priorities, default=[RECORDER_PRIORITY], metavar="P,P,...",
+                   help=f"the recorder's priorities to compare, of {', '.join(PRIORITIES)} "
+                        f"(default {RECORDER_PRIORITY})")
     p.add_argument("--main-job", action="store_true",
                    help="also record the README's main job (fig6 until complete) and print the file's size")
     args = p.parse_args(argv)
     agents = args.agents or None
     plain: list[RunFigures] = []
-    recorded: dict[int, list[RunFigures]] = {n: [] for n in args.record_nice}
+    recorded: dict[str, list[RunFigures]] = {n: [] for n in args.record_priority}
     with tempfile.TemporaryDirectory() as tmp:
         for rep in range(args.reps):
             plain.append(one_run(args.scenario, agents, args.ticks, None, args.port))
             a = plain[-1]
-            for nice, runs in recorded.items():
-                runs.append(one_run(args.scenario, agents, args.ticks, Path(tmp) / f"r{rep}-{nice}.mcap", args.port,
-                                    nice))
+            for priority, runs in recorded.items():
+                runs.append(one_run(args.scenario, agents, args.ticks, Path(tmp) / f"r{rep}-{priority}.mcap",
+                                    args.port, priority))
                 b = runs[-1]
-                print(f"rep {rep + 1}: {a.rate:.0f} ticks/s without, {b.rate:.0f} with recording at nice {nice} "
-                      f"({b.size / 1e6:.2f} MB); CPU s per 1000 ticks {a.cpu_per_kilotick:.2f} without, "
+                print(f"rep {rep + 1}: {a.rate:.0f} ticks/s without, {b.rate:.0f} with recording "
+                      f"at priority {priority} ({b.size / 1e6:.2f} MB); CPU s per 1000 ticks "
+                      f"{a.cpu_per_kilotick:.2f} without, "
                       f"{b.cpu_per_kilotick:.2f} with (recorder {b.recorder_per_kilotick:.2f})", flush=True)
 
         def median(runs: list[RunFigures], field: str) -> float:
             return statistics.median(getattr(r, field) for r in runs)
 
         a, ca = median(plain, "rate"), median(plain, "cpu_per_kilotick")
-        for nice, runs in recorded.items():
+        for priority, runs in recorded.items():
             b, cb = median(runs, "rate"), median(runs, "cpu_per_kilotick")
-            print(f"{args.scenario}, {agents or 'its'} agents, {args.reps} repetitions, recorder at nice {nice}: "
-                  f"median {a:.0f} ticks/s without, {b:.0f} with recording: slowdown {100 * (a - b) / a:.1f}% "
+            print(f"{args.scenario}, {agents or 'its'} agents, {args.reps} repetitions, recorder at "
+                  f"priority {priority}: median {a:.0f} ticks/s without, {b:.0f} with recording: "
+                  f"slowdown {100 * (a - b) / a:.1f}% "
                   f"(ranges {min(r.rate for r in plain):.0f}-{max(r.rate for r in plain):.0f} and "
                   f"{min(r.rate for r in runs):.0f}-{max(r.rate for r in runs):.0f}); CPU per 1000 ticks "
                   f"{ca:.2f} s without, {cb:.2f} s with (+{100 * (cb - ca) / ca:.1f}%), the recorder "

@@ -34,7 +34,7 @@ import time
 from dataclasses import asdict
 
 from bus import BusOptions, Declarations, is_client, open_session
-from conag.common import RECORDER_NICE
+from conag.common import PRIORITIES, RECORDER_PRIORITY
 from conag.common import bus_args as _bus_args
 from conag.common import bus_options as _bus
 from conag.common import stop_on_signals as _stop_on_signals
@@ -442,8 +442,8 @@ def cmd_run(args) -> int:
                       extra_agent_args=("--map-size", str(args.map_size), *learn_args,
                                         *(("--nearest-first",) if args.nearest_first else ())),
                       teacher=args.teacher, weights_dir=args.weights_dir, stall_ticks=args.stall_ticks,
-                      record=args.record, record_nice=args.record_nice, view=args.view, maps_every=args.maps_every,
-                      secure=args.secure,
+                      record=args.record, record_priority=args.record_priority, view=args.view,
+                      maps_every=args.maps_every, secure=args.secure,
                       checkpoint_every=args.checkpoint_every or CHECKPOINT_EVERY, profile=args.profile,
                       per_process=args.per_process, agent_mode=args.agent_mode)
     with _stop_on_signals() as stop:
@@ -666,9 +666,9 @@ def _add_run(sub) -> None:
                         "process its own credential (from DIR, written by `conag keys`; fresh ones without DIR)")
     u.add_argument("--record", metavar="OUT.mcap",
                    help="record every message of the run to an MCAP file (conag record; see conag replay)")
-    u.add_argument("--record-nice", type=_non_negative, default=RECORDER_NICE, metavar="N",
-                   help=f"the recorder's nice value, so the run gets the CPU first (default {RECORDER_NICE}; "
-                        "conag record --nice)")
+    u.add_argument("--record-priority", choices=PRIORITIES, default=RECORDER_PRIORITY,
+                   help=f"the recorder's CPU priority, so the run gets the CPU first (default {RECORDER_PRIORITY}; "
+                        "see conag record --priority)")
     u.add_argument("--view", nargs="?", type=int, const=8765, metavar="PORT",
                    help="watch the run in the browser: starts `conag view` on PORT (default 8765)")
     u.add_argument("--maps-every", type=_non_negative, default=0, metavar="N",

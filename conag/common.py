@@ -10,11 +10,13 @@ from contextlib import contextmanager
 
 from bus import MODES, BusOptions
 
-# The recorder's nice value (conag record --nice, conag run --record-nice): on a machine the
-# run keeps busy a recorder would otherwise take its share of the CPU from the world and the
-# agents (BENCHMARKS.md, recording overhead). It only has to keep up on average: zenoh
-# queues what it has not written yet (nodes/recorder.py).
-RECORDER_NICE = 10
+# The recorder's priority (conag record --priority, conag run --record-priority): on a
+# machine the run keeps busy a recorder would otherwise take its share of the CPU from the
+# world and the agents (BENCHMARKS.md, recording overhead). It only has to keep up on
+# average: zenoh queues what it has not written yet (nodes/recorder.py).
+PRIORITIES = ("idle", "low", "normal")
+RECORDER_PRIORITY = "idle"
+LOW_NICE = 10  # "low": this much above the starting nice value
 
 
 def bus_args(p: argparse.ArgumentParser) -> None:
@@ -48,17 +50,25 @@ def stop_on_signals():
             signal.signal(s, h)
 
 
-def lower_priority(by: int) -> None:
-    """Raise the nice value of every thread of this process by `by` (Linux keeps one per
-    thread; threads started later inherit their starter's). Call it before opening a zenoh
-    session, so zenoh's threads start niced too."""
+def lower_priority(level: str) -> None:
+    """Lower the CPU priority of every thread of this process (Linux keeps one per thread;
+    threads started later inherit their starter's). "idle": the SCHED_IDLE policy (a thread
+    runs when a core would otherwise idle); "low": nice raised by LOW_NICE; "normal": as it
+    was. Call it before opening a zenoh session, so zenoh's threads start with it too."""
+    if level not in PRIORITIES:
+        raise ValueError(f"priority must be one of {', '.join(PRIORITIES)}, got {level!r}")
+    if level == "normal":
+        return
     try:
         threads = [int(t) for t in os.listdir("/proc/self/task")]
-    except OSError:  # no /proc: the calling thread, which is all os.nice changes there
-        os.nice(by)
+    except OSError:  # no /proc (not Linux): the calling thread, which is all os.nice changes there
+        os.nice(LOW_NICE)
         return
     for tid in threads:
         try:
-            os.setpriority(os.PRIO_PROCESS, tid, min(os.getpriority(os.PRIO_PROCESS, tid) + by, 19))
+            if level == "idle":
+                os.sched_setscheduler(tid, os.SCHED_IDLE, os.sched_param(0))
+            else:
+                os.setpriority(os.PRIO_PROCESS, tid, min(os.getpriority(os.PRIO_PROCESS, tid) + LOW_NICE, 19))
         except ProcessLookupError:
             continue  # the thread ended meanwhile

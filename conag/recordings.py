@@ -19,7 +19,7 @@ from dataclasses import asdict, replace
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
-from conag.common import RECORDER_NICE, bus_args, bus_options, lower_priority, stop_on_signals
+from conag.common import PRIORITIES, RECORDER_PRIORITY, bus_args, bus_options, lower_priority, stop_on_signals
 
 EXIT_DIFFERENT = 1
 VERIFY_TIMEOUT = 3600.0  # seconds: the replayed world's lockstep timeout (off, in effect)
@@ -37,10 +37,10 @@ def add_commands(sub) -> None:
     r.add_argument("--maps-every", type=int, default=0, metavar="N",
                    help="ask the agents for their maps (ESMs, NMs, Matching grid) every N ticks, to record them "
                         "(default 0: off)")
-    r.add_argument("--nice", type=int, default=RECORDER_NICE, metavar="N",
-                   help="raise the recorder's nice value by N before it starts, so the run it records gets "
-                        f"the CPU first and the recorder writes in the run's idle moments (default {RECORDER_NICE}; "
-                        "0: as any process)")
+    r.add_argument("--priority", choices=PRIORITIES, default=RECORDER_PRIORITY,
+                   help="the recorder's CPU priority, so the run it records gets the CPU first: idle (the default) "
+                        "runs it only when a core would otherwise idle (Linux SCHED_IDLE), low raises its nice "
+                        "value by 10, normal leaves it as any process")
     bus_args(r)
     r.set_defaults(func=cmd_record)
 
@@ -118,10 +118,7 @@ def cmd_record(args) -> int:
             raise ValueError(f"--note expects KEY=VALUE, got {note!r}")
         notes[key] = value
     meta = recording_metadata(args.scenario, args.seed, notes, args.world_id)
-    if args.nice < 0:
-        raise ValueError(f"--nice must be >= 0 (a recorder never takes CPU before the run), got {args.nice}")
-    if args.nice:
-        lower_priority(args.nice)  # before the session opens, so zenoh's threads are niced too
+    lower_priority(args.priority)  # before the session opens, so zenoh's threads have it too
     report = RecordReport()
     with stop_on_signals() as stop:
         session = open_session(bus_options(args))

@@ -19,7 +19,8 @@ starting, before it got a checkpoint further, ends the run as an error.
 With `record`, a `conag record` process records the run (`nodes/recorder.py`): it starts
 after the world and before the agents, which start once it has heard the world, so the
 recording holds every tick; it stops last, after the agents' final state reports. It runs
-at nice `record_nice` (10 by default), so the world and the agents get the CPU first.
+at `record_priority` ("idle" by default: Linux SCHED_IDLE), so the world and the agents get
+the CPU first.
 
 With `secure` (`conag run --secure`, `conag/secure.py`), a zenoh router with access control
 listens on the run's endpoint, every process is a client of it with its own credential, and
@@ -42,7 +43,7 @@ from pathlib import Path
 
 from bus import Declarations, open_session
 from bus.acl import OBSERVER, TEACHER, WORLD, agent_user
-from conag.common import RECORDER_NICE
+from conag.common import RECORDER_PRIORITY
 from conag.secure import bus_flags, run_bus_options, secure_bus
 from protocol import keys
 from protocol.codec import ProtocolError, decode, encode
@@ -72,7 +73,7 @@ class RunOptions:
     weights_dir: str | None = None    # learning agents save their weights to weights_dir/<id>.json
     stall_ticks: int = DEFAULT_STALL_TICKS  # stop when no site is filled for this many ticks; 0: never
     record: str | None = None         # record the run to this MCAP file (`conag record`)
-    record_nice: int = RECORDER_NICE  # the recorder's nice value (`conag record --nice`)
+    record_priority: str = RECORDER_PRIORITY  # the recorder's CPU priority (`conag record --priority`)
     view: int | None = None           # serve the browser viewer on this port (`conag view`)
     maps_every: int = 0               # the recorder and viewer ask for the agents' maps every N ticks
     profile: str | None = None        # the world writes its loop's times here (conag world --profile)
@@ -441,7 +442,7 @@ def _start_recorder(opts: RunOptions) -> subprocess.Popen:
            *bus_flags(opts, OBSERVER), "--scenario", opts.scenario_path, "--seed", str(seed),
            "--note", f"agents={opts.agents if opts.agents is not None else opts.scenario.agents}",
            "--note", "agent_args=" + " ".join(opts.extra_agent_args), "--maps-every", str(opts.maps_every),
-           "--nice", str(opts.record_nice),
+           "--priority", opts.record_priority,
            "--note", f"checkpoint_every={opts.checkpoint_every}"]
     return subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
 

@@ -84,21 +84,21 @@ def test_a_run_that_is_slow_to_stop_shows_where_each_thread_waits(capfd):
     assert "test_a_run_that_is_slow_to_stop_shows_where_each_thread_waits" in err   # this thread's stack
 
 
-def test_conag_run_starts_its_recorder_at_the_nice_value_asked_for(monkeypatch):
+def test_conag_run_starts_its_recorder_at_the_priority_asked_for(monkeypatch):
     from conag import run as run_module
-    from conag.common import RECORDER_NICE
+    from conag.common import RECORDER_PRIORITY
     from tests.conftest import SCENARIOS
     from world_server.scenario import load_scenario
 
-    args = build_parser().parse_args(["run", "fig6.toml", "--record", "r.mcap", "--record-nice", "4"])
-    assert args.record_nice == 4
-    assert build_parser().parse_args(["run", "fig6.toml"]).record_nice == RECORDER_NICE
+    args = build_parser().parse_args(["run", "fig6.toml", "--record", "r.mcap", "--record-priority", "low"])
+    assert args.record_priority == "low"
+    assert build_parser().parse_args(["run", "fig6.toml"]).record_priority == RECORDER_PRIORITY == "idle"
     with pytest.raises(SystemExit):
-        build_parser().parse_args(["run", "fig6.toml", "--record-nice", "-1"])
+        build_parser().parse_args(["run", "fig6.toml", "--record-priority", "high"])
     started = []
     monkeypatch.setattr(run_module.subprocess, "Popen", lambda cmd, **kw: started.append(cmd))
     path = SCENARIOS / "fig6.toml"
     run_module._start_recorder(run_module.RunOptions(str(path), load_scenario(path), "tcp/127.0.0.1:1",
-                                                     record="r.mcap", record_nice=args.record_nice))
+                                                     record="r.mcap", record_priority=args.record_priority))
     cmd = started[0]
-    assert cmd[cmd.index("record") - 1:][:2] == ["conag", "record"] and cmd[cmd.index("--nice") + 1] == "4"
+    assert cmd[cmd.index("record") - 1:][:2] == ["conag", "record"] and cmd[cmd.index("--priority") + 1] == "low"

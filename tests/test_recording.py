@@ -328,30 +328,37 @@ def test_conag_record_finishes_its_file_on_sigterm(tmp_path, endpoint):
         rec.kill()
 
 
-def _nice_values(pid: int) -> set[int]:
-    """The nice value of every thread of process `pid` (Linux keeps one per thread)."""
-    values = set()
+def _scheduling(pid: int) -> set[tuple[int, int]]:
+    """(nice value, scheduling policy) of every thread of process `pid` (Linux keeps them per thread)."""
+    found = set()
     for task in Path(f"/proc/{pid}/task").iterdir():
         try:
-            values.add(int(task.joinpath("stat").read_text().rsplit(")", 1)[1].split()[16]))
-        except (OSError, IndexError):
+            fields = task.joinpath("stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
             continue  # the thread ended meanwhile
-    return values
+        found.add((int(fields[16]), int(fields[38])))
+    return found
 
 
-def test_conag_record_runs_all_its_threads_niced_so_the_run_it_records_gets_the_cpu_first(tmp_path, endpoint):
+@pytest.mark.parametrize("priority", ["idle", "low"])
+def test_conag_record_runs_all_its_threads_at_a_lower_priority_so_the_run_gets_the_cpu_first(tmp_path, endpoint,
+                                                                                            priority):
     base = os.getpriority(os.PRIO_PROCESS, 0)
-    rec = Process("record", str(tmp_path / "r.mcap"), "--connect", endpoint, "--nice", "7")
+    rec = Process("record", str(tmp_path / "r.mcap"), "--connect", endpoint, "--priority", priority)
     try:
         rec.wait_for("recording world")
-        # zenoh's threads too: they start after the nice value is raised, and inherit it.
-        assert _nice_values(rec.proc.pid) == {min(base + 7, 19)}
+        threads = _scheduling(rec.proc.pid)
+        # zenoh's threads too: they start after the priority is lowered, and inherit it.
+        if priority == "idle":
+            assert {policy for _, policy in threads} == {os.SCHED_IDLE}
+        else:
+            assert threads == {(min(base + 10, 19), os.SCHED_OTHER)}
         assert len(list(Path(f"/proc/{rec.proc.pid}/task").iterdir())) > 1
     finally:
         rec.kill()
 
 
-def test_conag_record_refuses_a_negative_nice_value(tmp_path):
-    done = conag("record", tmp_path / "r.mcap", "--nice", "-3", timeout=60)
-    assert done.returncode == 2 and "--nice must be >= 0" in done.stderr
+def test_conag_record_refuses_an_unknown_priority(tmp_path):
+    done = conag("record", tmp_path / "r.mcap", "--priority", "high", timeout=60)
+    assert done.returncode == 2 and "invalid choice: 'high'" in done.stderr
     assert not (tmp_path / "r.mcap").exists()
