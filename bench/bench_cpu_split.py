@@ -83,17 +83,18 @@ def measure(scenario: str, agents: int, ticks: int, from_tick: int, port: int, e
     cmd = [sys.executable, "-m", "conag", "run", scenario, "--agents", str(agents), "--max-ticks", str(ticks),
            "--stall-ticks", "0", "--headless", "--listen", f"tcp/127.0.0.1:{port}", *extra]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    samples: list[tuple[int, float, dict]] = []
+    first = last = None   # (tick, wall seconds, thread_cpu) at the first and the newest counted progress line
     assert proc.stdout is not None
     for line in proc.stdout:
         m = PROGRESS.match(line)
         if m and int(m.group(1)) >= from_tick:
-            samples.append((int(m.group(1)), os.times().elapsed, thread_cpu(proc.pid)))
+            last = (int(m.group(1)), os.times().elapsed, thread_cpu(proc.pid))
+            first = first or last
     proc.wait()
-    if len(samples) < 2 or samples[-1][0] <= samples[0][0]:
+    if first is None or last is None or last[0] <= first[0]:
         raise RuntimeError(f"too few progress lines past tick {from_tick} from {' '.join(cmd)} (exit "
                            f"{proc.returncode})")
-    (t0, w0, c0), (t1, w1, c1) = samples[0], samples[-1]
+    (t0, w0, c0), (t1, w1, c1) = first, last
     return {"ticks": t1 - t0, "seconds": w1 - w0, "split": split(c0, c1)}
 
 

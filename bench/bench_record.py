@@ -163,8 +163,8 @@ def main(argv: list[str] | None = None) -> int:
                 b = runs[-1]
                 print(f"rep {rep + 1}: {a.rate:.0f} ticks/s without, {b.rate:.0f} with recording "
                       f"at priority {priority} ({b.size / 1e6:.2f} MB); CPU s per 1000 ticks "
-                      f"{a.cpu_per_kilotick:.2f} without, "
-                      f"{b.cpu_per_kilotick:.2f} with (recorder {b.recorder_per_kilotick:.2f})", flush=True)
+                      f"{a.cpu_per_kilotick:.2f} without, {b.cpu_per_kilotick:.2f} with "
+                      f"(recorder {b.recorder_per_kilotick:.2f})", flush=True)
 
         def median(runs: list[RunFigures], field: str) -> float:
             return statistics.median(getattr(r, field) for r in runs)
