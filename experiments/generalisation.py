@@ -34,7 +34,7 @@ import subprocess
 import sys
 import time
 from concurrent.futures import as_completed
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -211,6 +211,18 @@ def resumed(journal: Journal, jobs: list[Job]) -> tuple[list[Outcome], list[Job]
     keys = [tuple(_job_key(j)) for j in jobs]
     earlier = [Outcome(**(found[k] | {"report": tuple(found[k]["report"])})) for k in keys if k in found]
     return earlier, [j for j, k in zip(jobs, keys) if k not in found]
+
+
+def in_folder(o: Outcome, pictures: Path) -> Outcome:
+    """A journalled outcome with its picture in `pictures` if a file of that name is there.
+
+    The journal holds each picture's absolute path: a journal carried on in another --out
+    folder (with its pictures copied along) linked 54 failures of the committed table to
+    the folder they were first drawn in, which no clone has."""
+    if not o.picture or Path(o.picture).parent.resolve() == pictures.resolve():
+        return o
+    here = pictures / Path(o.picture).name
+    return replace(o, picture=str(here.resolve())) if here.exists() else o
 
 
 # ------------------------------------------------------------------ tables
@@ -419,6 +431,7 @@ def main(argv: list[str] | None = None) -> int:
     journal = Journal(out / JOURNAL, resume=args.resume)
     code = _code_version()
     earlier, jobs = resumed(journal, [Job(name, mode, args.stall, code) for name in names for mode, _ in MODES])
+    earlier = [in_folder(o, pictures) for o in earlier]
     if args.resume:
         print(f"resuming: {len(earlier)} of {len(earlier) + len(jobs)} runs already done "
               f"({out / JOURNAL})", file=sys.stderr, flush=True)

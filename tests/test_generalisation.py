@@ -58,6 +58,23 @@ def test_the_quick_run_refuses_to_overwrite_the_committed_results():
     assert r.returncode == 2 and "--out" in r.stderr
 
 
+def test_a_resumed_run_links_the_pictures_in_its_own_folder(tmp_path):
+    # A journal carried on in another --out folder, its pictures copied along, linked 54
+    # failures of the committed table to the folder they were first drawn in.
+    first, now = tmp_path / "first" / "failures", tmp_path / "now" / "failures"
+    first.mkdir(parents=True)
+    now.mkdir(parents=True)
+    (now / "a-ts.png").write_bytes(b"png")
+    o = gen.Outcome(layout="a.toml", family="ring", cols=20, rows=20, agents=1, mode="goal sequencing",
+                    completed=False, stalled=True, ticks=3000, max_ticks=9000, sites_filled=1, sites_total=4,
+                    bricks_total_start=4, bricks_total_end=4, distance=1.0, bound=1.0, seconds=1.0,
+                    picture=str(first / "a-ts.png"))
+    assert gen.in_folder(o, now).picture == str((now / "a-ts.png").resolve())
+    gone = gen.in_folder(gen.Outcome(**{**o.__dict__, "picture": str(first / "b-ts.png")}), now)
+    assert gone.picture == str(first / "b-ts.png")                # none of that name here: as it was
+    assert gen.in_folder(gen.Outcome(**{**o.__dict__, "picture": ""}), now).picture == ""
+
+
 @pytest.mark.slow
 def test_an_interrupted_run_resumes_without_running_again_what_it_finished(tmp_path):
     layout = "000-gen-wall-20260000.toml"
