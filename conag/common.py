@@ -6,6 +6,7 @@ import argparse
 import os
 import signal
 import threading
+from collections.abc import Callable
 from contextlib import contextmanager
 
 from bus import MODES, BusOptions
@@ -35,11 +36,14 @@ def bus_options(args) -> BusOptions:
 
 
 @contextmanager
-def stop_on_signals():
-    """An Event set by SIGINT or SIGTERM, so loops finish their tick and close the session."""
+def stop_on_signals(on_stop: Callable[[], None] | None = None):
+    """An Event set by SIGINT or SIGTERM, so loops finish their tick and close the session;
+    `on_stop` is called first (in the handler, before anything else runs)."""
     stop = threading.Event()
 
     def handler(_signum, _frame):
+        if on_stop is not None and not stop.is_set():
+            on_stop()
         stop.set()
 
     previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
@@ -72,3 +76,22 @@ def lower_priority(level: str) -> None:
                 os.setpriority(os.PRIO_PROCESS, tid, min(os.getpriority(os.PRIO_PROCESS, tid) + LOW_NICE, 19))
         except ProcessLookupError:
             continue  # the thread ended meanwhile
+
+
+def restore_priority(level: str) -> None:
+    """Undo `lower_priority("idle")` on every thread, for a process that is stopping: on a
+    machine whose cores are all busy a SCHED_IDLE thread gets almost no CPU, and a recorder
+    stopped there took longer than 5 s to finish its file (the slow tier beside a 2-job
+    benchmark). "low" stays as it is: a raised nice value still gets a share, and only a
+    privileged process may lower it again."""
+    if level != "idle":
+        return
+    try:
+        threads = [int(t) for t in os.listdir("/proc/self/task")]
+    except OSError:
+        return
+    for tid in threads:
+        try:
+            os.sched_setscheduler(tid, os.SCHED_OTHER, os.sched_param(0))
+        except (ProcessLookupError, PermissionError):
+            continue  # the thread ended meanwhile, or the system does not allow it

@@ -19,7 +19,15 @@ from dataclasses import asdict, replace
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
-from conag.common import PRIORITIES, RECORDER_PRIORITY, bus_args, bus_options, lower_priority, stop_on_signals
+from conag.common import (
+    PRIORITIES,
+    RECORDER_PRIORITY,
+    bus_args,
+    bus_options,
+    lower_priority,
+    restore_priority,
+    stop_on_signals,
+)
 
 EXIT_DIFFERENT = 1
 VERIFY_TIMEOUT = 3600.0  # seconds: the replayed world's lockstep timeout (off, in effect)
@@ -120,7 +128,8 @@ def cmd_record(args) -> int:
     meta = recording_metadata(args.scenario, args.seed, notes, args.world_id)
     lower_priority(args.priority)  # before the session opens, so zenoh's threads have it too
     report = RecordReport()
-    with stop_on_signals() as stop:
+    # Stopped, it finishes its file at the normal priority: idle, it could starve on a busy machine.
+    with stop_on_signals(on_stop=lambda: restore_priority(args.priority)) as stop:
         session = open_session(bus_options(args))
         try:
             print(f"recording world {args.world_id} to {args.out}", flush=True)

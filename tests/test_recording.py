@@ -14,6 +14,8 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import subprocess
+import sys
 import threading
 from collections import Counter
 from dataclasses import replace
@@ -338,6 +340,23 @@ def _scheduling(pid: int) -> set[tuple[int, int]]:
             continue  # the thread ended meanwhile
         found.add((int(fields[16]), int(fields[38])))
     return found
+
+
+def test_a_stopping_recorder_finishes_at_the_normal_priority():
+    # Idle on a machine whose cores are all busy, a stopped recorder took longer than 5 s to
+    # finish its file. The signal handler restores the normal policy on every thread first.
+    code = ("import os, signal, threading; from conag.common import lower_priority, restore_priority, "
+            "stop_on_signals\n"
+            "lower_priority('idle'); t = threading.Thread(target=threading.Event().wait, args=(5,), daemon=True)\n"
+            "t.start()\n"
+            "with stop_on_signals(on_stop=lambda: restore_priority('idle')) as stop:\n"
+            "    before = {os.sched_getscheduler(int(x)) for x in os.listdir('/proc/self/task')}\n"
+            "    os.kill(os.getpid(), signal.SIGTERM); stop.wait(5)\n"
+            "    after = {os.sched_getscheduler(int(x)) for x in os.listdir('/proc/self/task')}\n"
+            "print(sorted(before), sorted(after), stop.is_set())")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == [f"[{os.SCHED_IDLE}]", f"[{os.SCHED_OTHER}]", "True"]
 
 
 @pytest.mark.parametrize("priority", ["idle", "low"])
