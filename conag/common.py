@@ -54,28 +54,39 @@ def stop_on_signals(on_stop: Callable[[], None] | None = None):
             signal.signal(s, h)
 
 
+def _each_thread(apply: Callable[[int], None]) -> bool:
+    """`apply(tid)` on every thread of this process (Linux keeps scheduling per thread);
+    False when there is no /proc to list them (not Linux)."""
+    try:
+        threads = [int(t) for t in os.listdir("/proc/self/task")]
+    except OSError:
+        return False
+    for tid in threads:
+        try:
+            apply(tid)
+        except ProcessLookupError:
+            continue  # the thread ended meanwhile
+    return True
+
+
 def lower_priority(level: str) -> None:
-    """Lower the CPU priority of every thread of this process (Linux keeps one per thread;
-    threads started later inherit their starter's). "idle": the SCHED_IDLE policy (a thread
-    runs when a core would otherwise idle); "low": nice raised by LOW_NICE; "normal": as it
-    was. Call it before opening a zenoh session, so zenoh's threads start with it too."""
+    """Lower the CPU priority of every thread of this process (threads started later inherit
+    their starter's). "idle": the SCHED_IDLE policy (a thread runs when a core would
+    otherwise idle); "low": nice raised by LOW_NICE; "normal": as it was. Call it before
+    opening a zenoh session, so zenoh's threads start with it too."""
     if level not in PRIORITIES:
         raise ValueError(f"priority must be one of {', '.join(PRIORITIES)}, got {level!r}")
     if level == "normal":
         return
-    try:
-        threads = [int(t) for t in os.listdir("/proc/self/task")]
-    except OSError:  # no /proc (not Linux): the calling thread, which is all os.nice changes there
-        os.nice(LOW_NICE)
-        return
-    for tid in threads:
-        try:
-            if level == "idle":
-                os.sched_setscheduler(tid, os.SCHED_IDLE, os.sched_param(0))
-            else:
-                os.setpriority(os.PRIO_PROCESS, tid, min(os.getpriority(os.PRIO_PROCESS, tid) + LOW_NICE, 19))
-        except ProcessLookupError:
-            continue  # the thread ended meanwhile
+
+    def lower(tid: int) -> None:
+        if level == "idle":
+            os.sched_setscheduler(tid, os.SCHED_IDLE, os.sched_param(0))
+        else:
+            os.setpriority(os.PRIO_PROCESS, tid, min(os.getpriority(os.PRIO_PROCESS, tid) + LOW_NICE, 19))
+
+    if not _each_thread(lower):
+        os.nice(LOW_NICE)  # the calling thread, which is all os.nice changes there
 
 
 def restore_priority(level: str) -> None:
@@ -86,12 +97,11 @@ def restore_priority(level: str) -> None:
     privileged process may lower it again."""
     if level != "idle":
         return
-    try:
-        threads = [int(t) for t in os.listdir("/proc/self/task")]
-    except OSError:
-        return
-    for tid in threads:
+
+    def restore(tid: int) -> None:
         try:
             os.sched_setscheduler(tid, os.SCHED_OTHER, os.sched_param(0))
-        except (ProcessLookupError, PermissionError):
-            continue  # the thread ended meanwhile, or the system does not allow it
+        except PermissionError:
+            pass  # the system does not allow it: the thread stays idle
+
+    _each_thread(restore)
