@@ -21,6 +21,13 @@ With `--record-priority P,Q,...` each repetition records once per CPU priority o
 recorder (`conag run --record-priority`: normal, low, idle; default: only the default,
 idle), so the priorities can be compared in one run. Prints the medians and the slowdowns; the
 recordings' sizes too.
+
+Two slowdowns are printed. The *paired* one is the median over repetitions of each recorded
+build's rate against the unrecorded build run just before it: a machine whose speed drifts
+during the run (seen here: 169 -> 228 ticks/s over 12 repetitions) moves both builds of a pair
+alike, while it moves the two medians of the unpaired figure apart. `--warmup` (default 1)
+first runs unrecorded builds that are not counted: on a fresh machine the first build loads
+and caches the compiled kernels (seen here: 97 ticks/s and twice the CPU of the next).
 """
 
 from __future__ import annotations
@@ -129,6 +136,14 @@ def one_run(scenario: str, agents: int | None, ticks: int, record: Path | None, 
                       record.stat().st_size if record is not None and record.exists() else 0)
 
 
+def paired_slowdown(plain: list[RunFigures], recorded: list[RunFigures]) -> float:
+    """The median over repetitions of 1 - (recorded rate / plain rate), each recorded build
+    against the plain build of its own repetition (see the module); a fraction."""
+    if not plain or len(plain) != len(recorded):
+        raise ValueError(f"need one plain build per recorded one, got {len(plain)} and {len(recorded)}")
+    return statistics.median(1 - b.rate / a.rate for a, b in zip(plain, recorded, strict=True))
+
+
 def _priorities(text: str) -> list[str]:
     values = text.split(",")
     bad = [v for v in values if v not in PRIORITIES]
@@ -143,6 +158,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--agents", type=int, default=3, help="agents (default 3; 0: the scenario's)")
     p.add_argument("--ticks", type=int, default=3000, help="tick limit of each build (it stops when complete)")
     p.add_argument("--reps", type=int, default=5)
+    p.add_argument("--warmup", type=int, default=1,
+                   help="unrecorded builds run first and not counted (kernel caches; default 1)")
     p.add_argument("--port", type=int, default=17601)
     p.add_argument("--record-priority", type=_priorities, default=[RECORDER_PRIORITY], metavar="P,P,...",
                    help=f"the recorder's priorities to compare, of {', '.join(PRIORITIES)} "
@@ -154,6 +171,9 @@ def main(argv: list[str] | None = None) -> int:
     plain: list[RunFigures] = []
     recorded: dict[str, list[RunFigures]] = {n: [] for n in args.record_priority}
     with tempfile.TemporaryDirectory() as tmp:
+        for n in range(args.warmup):
+            w = one_run(args.scenario, agents, args.ticks, None, args.port)
+            print(f"warm-up {n + 1}: {w.rate:.0f} ticks/s, not counted", flush=True)
         for rep in range(args.reps):
             plain.append(one_run(args.scenario, agents, args.ticks, None, args.port))
             a = plain[-1]
@@ -162,7 +182,8 @@ def main(argv: list[str] | None = None) -> int:
                                     args.port, priority))
                 b = runs[-1]
                 print(f"rep {rep + 1}: {a.rate:.0f} ticks/s without, {b.rate:.0f} with recording "
-                      f"at priority {priority} ({b.size / 1e6:.2f} MB); CPU s per 1000 ticks "
+                      f"at priority {priority} ({100 * (1 - b.rate / a.rate):+.1f}%, {b.size / 1e6:.2f} MB); "
+                      f"CPU s per 1000 ticks "
                       f"{a.cpu_per_kilotick:.2f} without, {b.cpu_per_kilotick:.2f} with "
                       f"(recorder {b.recorder_per_kilotick:.2f})", flush=True)
 
@@ -173,8 +194,9 @@ def main(argv: list[str] | None = None) -> int:
         for priority, runs in recorded.items():
             b, cb = median(runs, "rate"), median(runs, "cpu_per_kilotick")
             print(f"{args.scenario}, {agents or 'its'} agents, {args.reps} repetitions, recorder at "
-                  f"priority {priority}: median {a:.0f} ticks/s without, {b:.0f} with recording: "
-                  f"slowdown {100 * (a - b) / a:.1f}% "
+                  f"priority {priority}: paired slowdown {100 * paired_slowdown(plain, runs):.1f}%; "
+                  f"median {a:.0f} ticks/s without, {b:.0f} with recording: "
+                  f"unpaired slowdown {100 * (a - b) / a:.1f}% "
                   f"(ranges {min(r.rate for r in plain):.0f}-{max(r.rate for r in plain):.0f} and "
                   f"{min(r.rate for r in runs):.0f}-{max(r.rate for r in runs):.0f}); CPU per 1000 ticks "
                   f"{ca:.2f} s without, {cb:.2f} s with (+{100 * (cb - ca) / ca:.1f}%), the recorder "
