@@ -152,6 +152,22 @@ def test_agent_processes_are_peers_for_a_few_and_clients_of_the_world_for_many()
     assert agent_bus_mode("peer", 100) == "peer" and agent_bus_mode("client", 1) == "client"
 
 
+def test_a_realtime_row_is_kept_only_if_the_agents_answered_nearly_every_frame():
+    from bench.bench_scale import answered_share, realtime_kept, realtime_table
+
+    # measured 2026-11-24: 50 and 70 agents in hosts of 10 both gave about 8,300 commands over
+    # about 240 ticks, none late; the agents had skipped most frames ("latest wins")
+    row = {"agents": 50, "per_process": 10, "target": 20.0, "rate": 20.0, "commands": 8264,
+           "stale_share": 0.0, "max_lag": 1, "answered": answered_share(8264, 50, 240)}
+    assert row["answered"] == pytest.approx(0.689, abs=1e-3)
+    assert not realtime_kept(row)
+    assert realtime_kept(row | {"commands": 11900, "answered": answered_share(11900, 50, 240)})
+    assert not realtime_kept(row | {"answered": 1.0, "max_lag": 2})      # a late command
+    assert not realtime_kept(row | {"answered": 1.0, "rate": 18.0})      # the tick not kept
+    assert answered_share(0, 0, 0) == 0.0
+    assert "| 50 | 10 | 20 | 20.0 | 8264 | 69% | 0.0% | 1 | no |" in realtime_table([row])
+
+
 @pytest.mark.slow
 def test_the_scale_benchmark_quick_run_prints_both_tables(tmp_path):
     import subprocess
