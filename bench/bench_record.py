@@ -136,12 +136,17 @@ def one_run(scenario: str, agents: int | None, ticks: int, record: Path | None, 
                       record.stat().st_size if record is not None and record.exists() else 0)
 
 
-def paired_slowdown(plain: list[RunFigures], recorded: list[RunFigures]) -> float:
-    """The median over repetitions of 1 - (recorded rate / plain rate), each recorded build
-    against the plain build of its own repetition (see the module); a fraction."""
+def slowdown(without: float, with_: float) -> float:
+    """How much slower a rate `with_` something is than `without` it; a fraction."""
+    return 1 - with_ / without
+
+
+def paired_slowdown(plain: list[float], recorded: list[float]) -> float:
+    """The median over repetitions of the slowdown of each recorded build's rate against the
+    plain build of its own repetition (see the module)."""
     if not plain or len(plain) != len(recorded):
         raise ValueError(f"need one plain build per recorded one, got {len(plain)} and {len(recorded)}")
-    return statistics.median(1 - b.rate / a.rate for a, b in zip(plain, recorded, strict=True))
+    return statistics.median(slowdown(a, b) for a, b in zip(plain, recorded, strict=True))
 
 
 def _priorities(text: str) -> list[str]:
@@ -182,7 +187,7 @@ def main(argv: list[str] | None = None) -> int:
                                     args.port, priority))
                 b = runs[-1]
                 print(f"rep {rep + 1}: {a.rate:.0f} ticks/s without, {b.rate:.0f} with recording "
-                      f"at priority {priority} ({100 * (1 - b.rate / a.rate):+.1f}%, {b.size / 1e6:.2f} MB); "
+                      f"at priority {priority} ({100 * slowdown(a.rate, b.rate):+.1f}%, {b.size / 1e6:.2f} MB); "
                       f"CPU s per 1000 ticks "
                       f"{a.cpu_per_kilotick:.2f} without, {b.cpu_per_kilotick:.2f} with "
                       f"(recorder {b.recorder_per_kilotick:.2f})", flush=True)
@@ -194,9 +199,10 @@ def main(argv: list[str] | None = None) -> int:
         for priority, runs in recorded.items():
             b, cb = median(runs, "rate"), median(runs, "cpu_per_kilotick")
             print(f"{args.scenario}, {agents or 'its'} agents, {args.reps} repetitions, recorder at "
-                  f"priority {priority}: paired slowdown {100 * paired_slowdown(plain, runs):.1f}%; "
+                  f"priority {priority}: paired slowdown "
+                  f"{100 * paired_slowdown([r.rate for r in plain], [r.rate for r in runs]):.1f}%; "
                   f"median {a:.0f} ticks/s without, {b:.0f} with recording: "
-                  f"unpaired slowdown {100 * (a - b) / a:.1f}% "
+                  f"unpaired slowdown {100 * slowdown(a, b):.1f}% "
                   f"(ranges {min(r.rate for r in plain):.0f}-{max(r.rate for r in plain):.0f} and "
                   f"{min(r.rate for r in runs):.0f}-{max(r.rate for r in runs):.0f}); CPU per 1000 ticks "
                   f"{ca:.2f} s without, {cb:.2f} s with (+{100 * (cb - ca) / ca:.1f}%), the recorder "

@@ -265,7 +265,7 @@ def answered_share(commands: int, agents: int, ticks: int) -> float:
 def realtime_kept(row: dict) -> bool:
     """The tick kept: the target rate, no command answering a frame older than one tick, and
     (nearly) every frame answered."""
-    return row["rate"] >= 0.97 * row["target"] and row["max_lag"] <= 1 and row.get("answered", 1.0) >= 0.95
+    return row["rate"] >= 0.97 * row["target"] and row["max_lag"] <= 1 and row["answered"] >= 0.95
 
 
 def realtime_table(rows: list[dict]) -> str:
