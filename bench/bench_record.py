@@ -51,16 +51,17 @@ LINE = re.compile(r"^tick\s+(\d+)\s")
 
 class BuildClock:
     """The build's tick rate from `conag run`'s progress lines: from the first line of tick
-    >= 1 to the last one seen (process start-up and numba loading left out)."""
+    >= `start_tick` (1: process start-up and numba loading left out) to the last one seen."""
 
-    def __init__(self) -> None:
+    def __init__(self, start_tick: int = 1) -> None:
+        self.start_tick = max(start_tick, 1)
         self.first: tuple[int, float] | None = None
         self.last: tuple[int, float] | None = None
 
     def observe(self, line: str) -> bool:
-        """Take one output line; True if it was a progress line of tick >= 1."""
+        """Take one output line; True if it was a progress line of tick >= `start_tick`."""
         m = LINE.match(line)
-        if not m or int(m.group(1)) < 1:
+        if not m or int(m.group(1)) < self.start_tick:
             return False
         self.last = (int(m.group(1)), time.monotonic())
         self.first = self.first or self.last

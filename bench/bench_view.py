@@ -1,18 +1,24 @@
 """Viewer overhead: what watching a lockstep `conag run` costs it.
 
-    python3 -m bench.bench_view                          # fig6 with 10 agents, 800 ticks, 2 repetitions
-    python3 -m bench.bench_view --agents 10 --ticks 2000 --reps 3 --select a1
+    python3 -m bench.bench_view                          # scale.toml, 10 agents, 1500 ticks, 4 repetitions
+    python3 -m bench.bench_view --reps 6 --select a1     # the page also shows a1's details and maps
 
-As bench/bench_record.py, alternating runs without and with a viewer, timing the build's
-tick rate from its progress lines. With the viewer, `conag view` (started here, connected
-to the run) serves the page and a headless Chromium (`/usr/bin/chromium`) keeps it open
-for the whole run, receiving its pictures (Server-Sent Events, ten a second); with
-`--select ID` the page shows that agent (its decisions and maps every 10 ticks).
+As bench/bench_record.py, alternating builds without and with a viewer. With it, `conag
+view` (started here, connected to the run) serves the page and a headless Chromium
+(`/usr/bin/chromium`) opens it as the run starts and keeps it open for the whole build,
+receiving its pictures (Server-Sent Events, `--display-hz`, 5 a second); with `--select ID` the page
+shows that agent (its details, and its maps every 10 ticks, which that agent then sends).
 
-On a shared machine the tick rates swing with everyone else's load, so the CPU time the
-viewer and the page (Chromium and all its processes) used while the build went on (from the
-first progress line to the last, read from /proc) is printed too: that is what they take
-from the run on a machine whose cores the run fills.
+The build is timed from its progress line of tick `--from-tick` (default 300) to its last,
+in both builds of a repetition: what is measured is following a run, not starting a browser
+(Chromium's start-up, about a CPU second, lands in the first ticks). The default world,
+`scenarios/large/scale.toml`, keeps 10 agents building for all 1,500 ticks (fig6, the
+old default, is complete after about 230 ticks with 10 agents: builds of 3 s).
+
+The figure is the paired slowdown (the median over repetitions of each viewed build's
+rate against its own repetition's plain build; see bench/bench_record.py), beside the CPU
+the viewer and the page (Chromium and all its processes) used over the timed stretch, read
+from /proc: on a machine whose cores the run fills, that is what they take from it.
 """
 
 from __future__ import annotations
@@ -22,72 +28,91 @@ import shutil
 import statistics
 import subprocess
 import sys
+import tempfile
 
-from bench.bench_record import ROOT, BuildClock, tree_cpu
+from bench.bench_record import ROOT, BuildClock, paired_slowdown, slowdown, tree_cpu
 
 
-def one_run(scenario: str, agents: int, ticks: int, port: int, view_port: int | None,
-            select: str | None) -> tuple[float, float, float, float]:
-    """(ticks per second, wall seconds of the build, CPU seconds of the viewer, of the page)."""
+def one_run(scenario: str, agents: int, ticks: int, port: int, view_port: int | None, select: str | None,
+            from_tick: int, display_hz: float = 5.0, page: bool = True) -> tuple[float, float, float, float]:
+    """(ticks per second, wall seconds of the timed build, CPU seconds of the viewer, of the page)."""
     cmd = [sys.executable, "-m", "conag", "run", scenario, "--headless", "--agents", str(agents), "--max-ticks",
            str(ticks), "--stall-ticks", "0", "--listen", f"tcp/127.0.0.1:{port}"]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, text=True)
     viewer = browser = None
-    clock = BuildClock()
+    clock = BuildClock(from_tick)
     cpu_view = cpu_page = 0.0
     start_cpu = (0.0, 0.0)
+    profile = tempfile.TemporaryDirectory(prefix="conag-bench-view-")
     try:
         for line in proc.stdout:
             if view_port is not None and viewer is None:
                 viewer = subprocess.Popen([sys.executable, "-m", "conag", "view", "--connect", f"tcp/127.0.0.1:{port}",
-                                           "--port", str(view_port)], cwd=ROOT, stdout=subprocess.PIPE, text=True)
+                                           "--port", str(view_port), "--display-hz", str(display_hz)],
+                                          cwd=ROOT, stdout=subprocess.PIPE, text=True)
                 url = viewer.stdout.readline().split()[-1]
                 if select:
                     url += f"#select={select}"
-                browser = subprocess.Popen([shutil.which("chromium") or "/usr/bin/chromium", "--headless=new",
-                                            "--no-sandbox", "--disable-gpu", "--remote-debugging-port=0", url],
+                browser = None if not page else subprocess.Popen([
+                                            shutil.which("chromium") or "/usr/bin/chromium", "--headless=new",
+                                            "--no-sandbox", "--disable-gpu", "--no-first-run",
+                                            "--disable-background-networking", "--disable-component-update",
+                                            "--disable-sync", f"--user-data-dir={profile.name}",
+                                            "--remote-debugging-port=0", url],
                                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
             starting = clock.first is None
             if clock.observe(line):
                 if starting and viewer is not None:
-                    start_cpu = (tree_cpu(viewer.pid), tree_cpu(browser.pid))
-                if viewer is not None:  # the CPU they used while the build went on
-                    cpu_view, cpu_page = tree_cpu(viewer.pid) - start_cpu[0], tree_cpu(browser.pid) - start_cpu[1]
+                    start_cpu = (tree_cpu(viewer.pid), tree_cpu(browser.pid) if browser else 0.0)
+                if viewer is not None:  # the CPU they used over the timed stretch
+                    cpu_view = tree_cpu(viewer.pid) - start_cpu[0]
+                    cpu_page = tree_cpu(browser.pid) - start_cpu[1] if browser else 0.0
         proc.wait()
     finally:
         for p in (browser, viewer):
             if p is not None:
                 p.terminate()
                 p.wait(10)
+        profile.cleanup()
     rate, seconds = clock.rate(cmd)
     return rate, seconds, cpu_view, cpu_page
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--scenario", default="scenarios/fig6.toml")
+    p.add_argument("--scenario", default="scenarios/large/scale.toml")
     p.add_argument("--agents", type=int, default=10)
-    p.add_argument("--ticks", type=int, default=800)
-    p.add_argument("--reps", type=int, default=2)
+    p.add_argument("--ticks", type=int, default=1500)
+    p.add_argument("--from-tick", type=int, default=300, metavar="T",
+                   help="time each build from its progress line of tick T on (default 300)")
+    p.add_argument("--reps", type=int, default=4)
     p.add_argument("--port", type=int, default=17611)
     p.add_argument("--view-port", type=int, default=17612)
-    p.add_argument("--select", metavar="ID", help="the page shows this agent (its decisions and maps)")
+    p.add_argument("--select", metavar="ID", help="the page shows this agent (its details and maps)")
+    p.add_argument("--display-hz", type=float, default=5.0, metavar="HZ",
+                   help="conag view --display-hz: pictures a second sent to the page (default 5, the viewer's)")
+    p.add_argument("--no-page", action="store_true", help="the viewer alone, no browser (its own share)")
     args = p.parse_args(argv)
+    if args.from_tick >= args.ticks:
+        p.error(f"--from-tick {args.from_tick} leaves nothing to time in --ticks {args.ticks}")
     plain, viewed, share = [], [], []
     for rep in range(args.reps):
-        plain.append(one_run(args.scenario, args.agents, args.ticks, args.port, None, None)[0])
+        plain.append(one_run(args.scenario, args.agents, args.ticks, args.port, None, None, args.from_tick)[0])
         rate, wall, cpu_view, cpu_page = one_run(args.scenario, args.agents, args.ticks, args.port, args.view_port,
-                                                 args.select)
+                                                 args.select, args.from_tick, args.display_hz, not args.no_page)
         viewed.append(rate)
         share.append((cpu_view + cpu_page) / wall)
-        print(f"rep {rep + 1}: {plain[-1]:.0f} ticks/s without, {rate:.0f} with the viewer and a page; viewer "
-              f"{cpu_view:.1f} s CPU, page {cpu_page:.1f} s CPU over a {wall:.0f} s build "
-              f"({100 * share[-1]:.0f}% of one core)", flush=True)
+        print(f"rep {rep + 1}: {plain[-1]:.1f} ticks/s without, {rate:.1f} with the viewer and a page "
+              f"({100 * slowdown(plain[-1], rate):+.1f}%); viewer {cpu_view:.2f} s CPU "
+              f"({100 * cpu_view / wall:.1f}% of a core), page {cpu_page:.2f} s CPU ({100 * cpu_page / wall:.1f}%) "
+              f"over a {wall:.0f} s build", flush=True)
     a, b = statistics.median(plain), statistics.median(viewed)
-    print(f"{args.scenario}, {args.agents} agents, {args.ticks} ticks, {args.reps} repetitions"
-          f"{', page showing ' + args.select if args.select else ''}: median {a:.0f} ticks/s without, {b:.0f} "
-          f"with the viewer: slowdown {100 * (a - b) / a:.1f}% (ranges {min(plain):.0f}-{max(plain):.0f} and "
-          f"{min(viewed):.0f}-{max(viewed):.0f}); viewer and page used {100 * statistics.median(share):.0f}% of "
+    print(f"{args.scenario}, {args.agents} agents, ticks {args.from_tick}-{args.ticks}, {args.reps} repetitions"
+          f"{', page showing ' + args.select if args.select else ''}, {args.display_hz:g} pictures a second"
+          f"{', no page' if args.no_page else ''}: paired slowdown "
+          f"{100 * paired_slowdown(plain, viewed):.1f}% (median {a:.1f} ticks/s without, {b:.1f} with: "
+          f"{100 * slowdown(a, b):.1f}% unpaired; ranges {min(plain):.1f}-{max(plain):.1f} and "
+          f"{min(viewed):.1f}-{max(viewed):.1f}); viewer and page used {100 * statistics.median(share):.1f}% of "
           "one core")
     return 0
 

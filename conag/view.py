@@ -9,6 +9,7 @@ Registered by conag/cli.py; the shell is nodes/viewer.py, the pure part viewer/.
 
 from __future__ import annotations
 
+import argparse
 import sys
 
 from conag.common import bus_args, bus_options, stop_on_signals
@@ -25,8 +26,21 @@ def add_commands(sub) -> None:
     v.add_argument("--open", action="store_true", help="open the page in the default browser")
     v.add_argument("--maps-every", type=int, default=10, metavar="N",
                    help="live: ask the agent shown in the page's panel for its maps every N ticks (default 10; 0: off)")
+    v.add_argument("--display-hz", type=_display_hz, default=5.0, metavar="HZ",
+                   help="live: send the page at most HZ pictures a second (default 5; each costs the browser a "
+                        "frame, which a browser on the run's own cores takes from the run: BENCHMARKS.md)")
     bus_args(v)
     v.set_defaults(func=cmd_view)
+
+
+def _display_hz(text: str) -> float:
+    try:
+        hz = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of pictures a second, got {text!r}") from None
+    if not 0.2 <= hz <= 60:
+        raise argparse.ArgumentTypeError(f"{hz:g} pictures a second is out of range (0.2 to 60)")
+    return hz
 
 
 def cmd_view(args) -> int:
@@ -52,7 +66,7 @@ def cmd_view(args) -> int:
         session = open_session(bus_options(args))
         try:
             serve_live(session, args.world_id, stop, host=args.host, port=args.port, on_ready=ready,
-                       maps_every=max(args.maps_every, 0))
+                       maps_every=max(args.maps_every, 0), display_hz=args.display_hz)
         finally:
             session.close()
     return 0

@@ -7,8 +7,8 @@ JSON API; the picture itself is built by the pure `viewer.scene`:
 * live (`LiveFeed`): zenoh subscriptions to the world's WorldView, status and agent states
   fold into one `Scene` under a lock; the decisions and maps of the agent the page shows
   only (decisions, one per tick, kept undecoded until a picture is built); `GET /api/scene` is the picture now and
-  `GET /api/events` a Server-Sent Events stream sending it at `display_hz` (10 a second),
-  only when something changed: a run of any speed costs the page ten pictures a second,
+  `GET /api/events` a Server-Sent Events stream sending it at `display_hz` (5 a second),
+  only when something changed: a run of any speed costs the page five pictures a second,
   and the world nothing but a WorldView every `view_every` ticks;
 * recording (`Timeline`): `GET /api/timeline` (ticks, progress, metadata) and
   `GET /api/frame?tick=T`, the picture of the newest view at or before T;
@@ -42,7 +42,11 @@ from viewer.scene import LEAVES, Scene, Timeline, decode_maps, maps_picture, sta
 
 log = logging.getLogger("conag.view")
 
-DISPLAY_HZ = 10.0
+# Pictures a second sent to a live page. Each picture costs a browser a frame (style, layout,
+# raster, composite) whatever it redraws: with software rendering on the run's own two cores,
+# 10 a second slowed a 10-agent lockstep build by about 8%, 5 a second by about 1%
+# (bench/bench_view.py, BENCHMARKS.md). `conag view --display-hz` chooses.
+DISPLAY_HZ = 5.0
 
 
 class LiveFeed:
@@ -310,12 +314,14 @@ def _handler(server: ViewerServer) -> type[BaseHTTPRequestHandler]:
 
 
 def serve_live(session: zenoh.Session, world_id: str, stop: threading.Event, *, host: str = "127.0.0.1",
-               port: int = 0, on_ready: Callable[[str], None] | None = None, maps_every: int = 0) -> None:
-    """Serve the live page for world `world_id` until `stop` is set; with `maps_every` N, ask
-    the agent the page shows for its maps every N ticks."""
+               port: int = 0, on_ready: Callable[[str], None] | None = None, maps_every: int = 0,
+               display_hz: float = DISPLAY_HZ) -> None:
+    """Serve the live page for world `world_id` until `stop` is set, sending it at most
+    `display_hz` pictures a second; with `maps_every` N, ask the agent the page shows for
+    its maps every N ticks."""
     feed = LiveFeed(session, world_id, maps_every).start()
     try:
-        with ViewerServer(feed, host, port).serve_in_thread() as server:
+        with ViewerServer(feed, host, port, display_hz).serve_in_thread() as server:
             if on_ready:
                 on_ready(server.url)
             while not stop.wait(0.5):

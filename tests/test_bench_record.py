@@ -35,3 +35,16 @@ def test_unmatched_repetitions_are_refused():
         paired_slowdown([100, 100], [95])
     with pytest.raises(ValueError):
         paired_slowdown([], [])
+
+
+def test_the_build_clock_can_start_past_the_first_ticks():
+    from bench.bench_record import BuildClock
+
+    lines = ["tick       1  sites 0/4  agents alive 10/10      0.5 ticks/s     3.9 s",
+             "tick     120  sites 0/4  agents alive 10/10     50.0 ticks/s     5.0 s",
+             "tick     320  sites 2/4  agents alive 10/10     70.0 ticks/s     8.0 s",
+             "tick     700  sites 4/4  agents alive 10/10     70.0 ticks/s    13.0 s"]
+    clock = BuildClock(start_tick=300)
+    assert [clock.observe(line) for line in lines] == [False, False, True, True]
+    assert clock.first[0] == 320 and clock.last[0] == 700
+    assert BuildClock().observe(lines[0])  # by default, from tick 1

@@ -102,3 +102,12 @@ def test_conag_run_starts_its_recorder_at_the_priority_asked_for(monkeypatch):
                                                      record="r.mcap", record_priority=args.record_priority))
     cmd = started[0]
     assert cmd[cmd.index("record") - 1:][:2] == ["conag", "record"] and cmd[cmd.index("--priority") + 1] == "low"
+
+
+def test_the_viewers_display_rate_defaults_to_five_and_refuses_what_it_cannot_send(capsys):
+    assert build_parser().parse_args(["view"]).display_hz == 5.0
+    assert build_parser().parse_args(["view", "--display-hz", "12.5"]).display_hz == 12.5
+    for bad, why in (("0", "out of range"), ("100", "out of range"), ("fast", "expected a number")):
+        with pytest.raises(SystemExit) as exc:
+            build_parser().parse_args(["view", "--display-hz", bad])
+        assert exc.value.code == 2 and why in capsys.readouterr().err

@@ -4,7 +4,8 @@
 const COLOURS = { food: "#3a9d23", water: "#2a6fdb", brick: "#b5462f", wall: "#555555",
                   site: "#f2d27a", filled: "#e0a100", agent: "#6a3d9a", dead: "#aaaaaa", heading: "#111111" };
 const DISC_R = 0.5, AGENT_R = 0.3, MARGIN = 10;
-const canvas = document.getElementById("world"), ctx = canvas.getContext("2d");
+const canvas = document.getElementById("world");
+let ctx = canvas.getContext("2d");
 const viewer = window.viewer = { picture: null, mode: null, selectedAgent: null, selectedDisc: null,
                                  moving: false, frames: 0, scale: 1, ox: 0, oy: 0 };
 
@@ -29,21 +30,59 @@ function cell(x, y, fill, inset) {
   ctx.fillStyle = fill; ctx.fillRect(px + inset, py + inset, s - 2 * inset, s - 2 * inset);
 }
 
+// The world is drawn in two layers. The scenery (border, walls, sites, discs) changes only when
+// a brick is grabbed or dropped, so it is painted on an offscreen canvas when it changes and
+// copied; each picture repaints only the bodies over it. Software-rendered in a browser on the
+// run's own cores, every arc counts (BENCHMARKS.md, viewer overhead).
+const scenery = { canvas: document.createElement("canvas"), key: null };
+
+function sameRows(a, b) {  // two lists of [x, y, ...] rows, equal element for element
+  if (!a || !b || a.length !== b.length) return false;
+  for (let i = 0; i < a.length; i++) {
+    const u = a[i], v = b[i];
+    if (u.length !== v.length) return false;
+    for (let j = 0; j < u.length; j++) if (u[j] !== v[j]) return false;
+  }
+  return true;
+}
+
+function paintScenery(p) {
+  const k = scenery.key;
+  if (k && k.w === canvas.width && k.h === canvas.height && k.scale === viewer.scale && sameRows(k.walls, p.walls)
+      && sameRows(k.sites, p.sites) && sameRows(k.discs, p.discs)) return;
+  const c = scenery.canvas;
+  c.width = canvas.width; c.height = canvas.height;
+  const main = ctx;
+  ctx = c.getContext("2d");  // circle() and cell() draw on ctx
+  try {
+    const [x0, y0] = viewer.toCanvas(0, p.height);
+    ctx.strokeStyle = "#888"; ctx.lineWidth = 1; ctx.strokeRect(x0, y0, p.width * viewer.scale, p.height * viewer.scale);
+    for (const [x, y] of p.walls) cell(x, y, COLOURS.wall, 0);
+    for (const [x, y, filled] of p.sites) cell(x, y, filled ? COLOURS.filled : COLOURS.site, 1);
+    for (const [x, y, kind] of p.discs) circle(x, y, DISC_R * 0.92, COLOURS[kind]);
+  } finally { ctx = main; }
+  scenery.key = { w: canvas.width, h: canvas.height, scale: viewer.scale, walls: p.walls, sites: p.sites, discs: p.discs };
+  viewer.sceneryPaints = (viewer.sceneryPaints || 0) + 1;
+}
+
+function setText(id, text) {  // DOM writes only when the text changes: each one costs a layout
+  const e = document.getElementById(id);
+  if (e.textContent !== text) e.textContent = text;
+}
+
 function draw(p) {
   viewer.picture = p;
-  if (!p.width) { document.getElementById("status").textContent = "waiting for the world's first view..."; return; }
+  if (!p.width) { setText("status", "waiting for the world's first view..."); return; }
   fit(p);
+  paintScenery(p);
   ctx.clearRect(0, 0, canvas.width, canvas.height);
-  const [x0, y0] = viewer.toCanvas(0, p.height);
-  ctx.strokeStyle = "#888"; ctx.lineWidth = 1; ctx.strokeRect(x0, y0, p.width * viewer.scale, p.height * viewer.scale);
-  for (const [x, y] of p.walls) cell(x, y, COLOURS.wall, 0);
-  for (const [x, y, filled] of p.sites) cell(x, y, filled ? COLOURS.filled : COLOURS.site, 1);
-  for (const [x, y, kind] of p.discs) circle(x, y, DISC_R * 0.92, COLOURS[kind]);
+  ctx.drawImage(scenery.canvas, 0, 0);
   if (viewer.selectedDisc) {
     const [px, py] = viewer.toCanvas(viewer.selectedDisc[0], viewer.selectedDisc[1]);
     ctx.beginPath(); ctx.arc(px, py, DISC_R * viewer.scale, 0, 2 * Math.PI);
     ctx.strokeStyle = "#000"; ctx.lineWidth = 2; ctx.stroke();
   }
+  ctx.font = "11px sans-serif";
   for (const a of p.agents) {
     circle(a.x, a.y, AGENT_R, a.alive ? COLOURS.agent : COLOURS.dead);
     const [px, py] = viewer.toCanvas(a.x, a.y), r = AGENT_R * viewer.scale;
@@ -55,27 +94,32 @@ function draw(p) {
     if (a.id === viewer.selectedAgent) {
       ctx.beginPath(); ctx.arc(px, py, r * 1.6, 0, 2 * Math.PI); ctx.strokeStyle = "#c2185b"; ctx.lineWidth = 2; ctx.stroke();
     }
-    ctx.fillStyle = "#000"; ctx.font = "11px sans-serif"; ctx.fillText(a.id, px + r + 2, py - r - 2);
+    ctx.fillStyle = "#000"; ctx.fillText(a.id, px + r + 2, py - r - 2);
   }
   const total = p.sites_total ?? p.sites.length, filled = p.sites_filled ?? p.sites.filter(s => s[2]).length;
   const alive = p.agents_alive ?? p.agents.filter(a => a.alive).length;
-  document.getElementById("status").textContent =
-    `tick ${p.tick}   sites ${filled}/${total}   agents alive ${alive}/${p.agents.length}` +
-    (p.completed ? "   COMPLETE" : "") + (p.scenario ? `   (${p.scenario}, ${p.mode})` : "");
+  setText("status", `tick ${p.tick}   sites ${filled}/${total}   agents alive ${alive}/${p.agents.length}` +
+    (p.completed ? "   COMPLETE" : "") + (p.scenario ? `   (${p.scenario}, ${p.mode})` : ""));
   if (p.progress) viewer.progress = p.progress;
   drawChart(viewer.progress || [], total, p.tick);
   drawAgents(p);
   viewer.frames += 1;
-  document.body.dataset.tick = p.tick;
 }
 
 function drawChart(points, total, tick) {
   const c = document.getElementById("chart"), g = c.getContext("2d");
+  const tmax = points.length ? Math.max(points[points.length - 1][0], 1) : 1;
+  const X = t => 4 + (c.width - 8) * t / tmax;
+  // Redrawn when a pixel of it would change: a new point, the count, a 1% longer time axis or the marker
+  const key = [points.length, points.length && points[points.length - 1][1], total,
+               Math.round(100 * Math.log(tmax)), Math.round(X(tick))].join();
+  if (key === viewer.chartKey) return;
+  viewer.chartKey = key;
   g.clearRect(0, 0, c.width, c.height);
   g.strokeStyle = "#ccc"; g.strokeRect(0.5, 0.5, c.width - 1, c.height - 1);
   if (!points.length) return;
-  const tmax = Math.max(points[points.length - 1][0], 1), ymax = Math.max(total, 1, ...points.map(q => q[1]));
-  const X = t => 4 + (c.width - 8) * t / tmax, Y = n => c.height - 4 - (c.height - 8) * n / ymax;
+  const ymax = Math.max(total, 1, ...points.map(q => q[1]));
+  const Y = n => c.height - 4 - (c.height - 8) * n / ymax;
   g.beginPath(); g.strokeStyle = COLOURS.filled; g.lineWidth = 2;
   points.forEach(([t, n], i) => i ? g.lineTo(X(t), Y(n)) : g.moveTo(X(t), Y(n)));
   g.stroke();
@@ -103,8 +147,8 @@ function drawAgents(p) {
 }
 
 function drawDetails(p) {
-  const a = p.agents.find(q => q.id === viewer.selectedAgent), d = document.getElementById("details");
-  if (!a) { d.textContent = "none"; return; }
+  const a = p.agents.find(q => q.id === viewer.selectedAgent);
+  if (!a) { setText("details", "none"); return; }
   const lines = [`${a.id} at (${a.x.toFixed(2)}, ${a.y.toFixed(2)}), heading ${(a.heading * 180 / Math.PI).toFixed(0)} deg`,
                  `alive ${a.alive}, holding ${a.holding ? "a brick" : "nothing"}`];
   if (a.behaviour) {
@@ -116,36 +160,45 @@ function drawDetails(p) {
     lines.push(`state nodes (tick ${a.decision_tick}): ` + Object.entries(a.state_nodes).map(([k, v]) => `${k} ${v}`).join(", "));
     lines.push(`arm ${a.arm}, motor ${a.motor}`);
   } else lines.push("state nodes: published by learning students only (Decision)");
-  d.textContent = lines.join("\n");
+  setText("details", lines.join("\n"));
 }
 
 // the selected agent's maps: ESMs grey (dark = sure), NMs bright near a goal, dark far, black unreachable
 const MAP_ORDER = ["food", "water", "brick", "obstacle", "config", "agent", "config_nm", "brick_nm", "matching"];
 async function loadMaps() {
   const id = viewer.selectedAgent, note = document.getElementById("mapsnote"), box = document.getElementById("maps");
-  if (!id) { box.innerHTML = ""; note.textContent = ""; return; }
+  if (!id) { box.innerHTML = ""; note.textContent = ""; viewer.mapsShown = null; return; }
   const tick = viewer.picture ? viewer.picture.tick : 0;
   const m = await (await fetch(`/api/maps?agent=${encodeURIComponent(id)}&tick=${tick}`)).json();
   viewer.maps = m;
-  if (!m.size) { box.innerHTML = "";
+  if (!m.size) { box.innerHTML = ""; viewer.mapsShown = null;
     note.textContent = "no maps from this agent (a viewer or recorder asks for them with --maps-every N)"; return; }
+  const shown = `${id} ${m.tick} ${m.size}`;
+  if (shown === viewer.mapsShown) return;  // the same snapshot: nothing to paint
+  viewer.mapsShown = shown;
   note.textContent = `maps of ${id} at tick ${m.tick}, ${m.size} x ${m.size} cells, the agent in the centre`;
-  box.innerHTML = "";
   for (const name of MAP_ORDER) {
-    const cells = m.layers[name]; if (!cells) continue;
-    const fig = document.createElement("figure"), c = document.createElement("canvas");
-    c.width = c.height = m.size; c.style.width = c.style.height = `${m.size * 2}px`; c.dataset.layer = name;
-    const img = c.getContext("2d").createImageData(m.size, m.size), nm = name.endsWith("_nm");
+    const cells = m.layers[name];
+    let c = box.querySelector(`canvas[data-layer="${name}"]`);
+    if (!cells) { if (c) c.parentElement.remove(); continue; }
+    if (!c) {  // one figure per layer, made once and painted again for each snapshot
+      const fig = document.createElement("figure"), cap = document.createElement("figcaption");
+      c = document.createElement("canvas"); c.dataset.layer = name; cap.textContent = name;
+      fig.appendChild(c); fig.appendChild(cap);
+      const after = MAP_ORDER.slice(MAP_ORDER.indexOf(name) + 1)
+        .map(n => box.querySelector(`canvas[data-layer="${n}"]`)).find(Boolean);
+      box.insertBefore(fig, after ? after.parentElement : null);
+    }
+    if (c.width !== m.size) { c.width = c.height = m.size; c.style.width = c.style.height = `${m.size * 2}px`; }
+    const g = c.getContext("2d"), img = g.createImageData(m.size, m.size), nm = name.endsWith("_nm");
     cells.forEach((v, i) => {
-      let r, g, b;
-      if (nm) { if (v >= 127) { r = g = b = 0; } else { const k = Math.max(0, 1 - v / 40); r = 255 * k; g = 200 * k; b = 60 * k; } }
-      else { r = g = b = 255 - 2 * v; }
-      img.data.set([r, g, b, 255], 4 * i);
+      let r, gr, b;
+      if (nm) { if (v >= 127) { r = gr = b = 0; } else { const k = Math.max(0, 1 - v / 40); r = 255 * k; gr = 200 * k; b = 60 * k; } }
+      else { r = gr = b = 255 - 2 * v; }
+      const o = 4 * i; img.data[o] = r; img.data[o + 1] = gr; img.data[o + 2] = b; img.data[o + 3] = 255;
     });
     const mid = (m.size >> 1) * m.size + (m.size >> 1); img.data.set([200, 30, 90, 255], 4 * mid);
-    c.getContext("2d").putImageData(img, 0, 0);
-    fig.appendChild(c); const cap = document.createElement("figcaption"); cap.textContent = name; fig.appendChild(cap);
-    box.appendChild(fig);
+    g.putImageData(img, 0, 0);
   }
 }
 setInterval(() => { if (viewer.selectedAgent && viewer.mode === "live") loadMaps(); }, 1000);
@@ -192,7 +245,14 @@ document.getElementById("move").onclick = () => { viewer.moving = true;
 // live: pictures pushed at the display rate ---------------------------------------------------
 function live() {
   const es = new EventSource("/api/events");
-  es.onmessage = (ev) => { if (!viewer.frozen) draw(JSON.parse(ev.data)); };  // frozen: tests read one picture
+  // Pictures are drawn at the browser's next paint, the newest only: a page that falls behind
+  // (or a hidden tab, which gets no paints) skips pictures instead of queueing them.
+  let pending = null;
+  es.onmessage = (ev) => {
+    if (pending === null) requestAnimationFrame(() => { const p = pending; pending = null;
+                                                        if (!viewer.frozen) draw(JSON.parse(p)); });
+    pending = ev.data;  // parsed only if it is drawn
+  };  // frozen: tests read one picture
   fetch("/api/scene").then(r => r.json()).then(p => { if (!viewer.frames) draw(p); });
 }
 
