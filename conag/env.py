@@ -99,7 +99,9 @@ class ConAgParallelEnv(ParallelEnv):
         self.welcomes: dict[str, Welcome] = {}
         self.world: World | None = None
         endpoint = f"tcp/127.0.0.1:{_free_port()}"
-        self.world_id = f"env{endpoint.rsplit(':', 1)[1]}"
+        self._env_id = f"env{endpoint.rsplit(':', 1)[1]}"
+        self._resets = 0
+        self.world_id = self._env_id  # a new one per reset (`reset`)
         self._server_session = open_session(BusOptions(listen=(endpoint,)), serve=True)
         self._session = open_session(BusOptions(connect=(endpoint,)))
         self._links: dict[str, WorldLink] = {}
@@ -142,6 +144,11 @@ class ConAgParallelEnv(ParallelEnv):
     def reset(self, seed: int | None = None, options: dict | None = None):  # noqa: ARG002 -- PettingZoo's
         """Start the world afresh (`seed` seeds its noise; default the scenario's) and attach every agent."""
         self._stop_world()
+        # Each reset's world has an id of its own. The worlds share this env's sessions, and
+        # the old world's liveliness token going could reach a new link after it attached,
+        # which then took the new world for lost and waited for no frame (`WorldLink.world_lost`).
+        self._resets += 1
+        self.world_id = f"{self._env_id}r{self._resets}"
         self.world = World(self.scenario, np.random.default_rng(self.scenario.seed if seed is None else seed),
                            world_id=self.world_id)
         # BLOCK both ways: on a busy machine zenoh drops a DROP message that waits too long, and a
