@@ -4,8 +4,7 @@
 const COLOURS = { food: "#3a9d23", water: "#2a6fdb", brick: "#b5462f", wall: "#555555",
                   site: "#f2d27a", filled: "#e0a100", agent: "#6a3d9a", dead: "#aaaaaa", heading: "#111111" };
 const DISC_R = 0.5, AGENT_R = 0.3, MARGIN = 10;
-const canvas = document.getElementById("world");
-let ctx = canvas.getContext("2d");
+const canvas = document.getElementById("world"), ctx = canvas.getContext("2d");
 const viewer = window.viewer = { picture: null, mode: null, selectedAgent: null, selectedDisc: null,
                                  moving: false, frames: 0, scale: 1, ox: 0, oy: 0 };
 
@@ -20,14 +19,14 @@ function fit(p) {  // the canvas takes the world's shape, at most MAX_W x MAX_H 
   viewer.scale = s; viewer.ox = MARGIN; viewer.oy = MARGIN + p.height * s;
 }
 
-function circle(x, y, r, fill) {
+function circle(g, x, y, r, fill) {  // on the 2-D context g (the page's canvas or the scenery's)
   const [px, py] = viewer.toCanvas(x, y);
-  ctx.beginPath(); ctx.arc(px, py, r * viewer.scale, 0, 2 * Math.PI); ctx.fillStyle = fill; ctx.fill();
+  g.beginPath(); g.arc(px, py, r * viewer.scale, 0, 2 * Math.PI); g.fillStyle = fill; g.fill();
 }
 
-function cell(x, y, fill, inset) {
+function cell(g, x, y, fill, inset) {
   const s = viewer.scale, [px, py] = viewer.toCanvas(x - 0.5, y + 0.5);
-  ctx.fillStyle = fill; ctx.fillRect(px + inset, py + inset, s - 2 * inset, s - 2 * inset);
+  g.fillStyle = fill; g.fillRect(px + inset, py + inset, s - 2 * inset, s - 2 * inset);
 }
 
 // The world is drawn in two layers. The scenery (border, walls, sites, discs) changes only when
@@ -51,16 +50,12 @@ function paintScenery(p) {
   if (k && k.w === canvas.width && k.h === canvas.height && k.scale === viewer.scale && sameRows(k.walls, p.walls)
       && sameRows(k.sites, p.sites) && sameRows(k.discs, p.discs)) return;
   const c = scenery.canvas;
-  c.width = canvas.width; c.height = canvas.height;
-  const main = ctx;
-  ctx = c.getContext("2d");  // circle() and cell() draw on ctx
-  try {
-    const [x0, y0] = viewer.toCanvas(0, p.height);
-    ctx.strokeStyle = "#888"; ctx.lineWidth = 1; ctx.strokeRect(x0, y0, p.width * viewer.scale, p.height * viewer.scale);
-    for (const [x, y] of p.walls) cell(x, y, COLOURS.wall, 0);
-    for (const [x, y, filled] of p.sites) cell(x, y, filled ? COLOURS.filled : COLOURS.site, 1);
-    for (const [x, y, kind] of p.discs) circle(x, y, DISC_R * 0.92, COLOURS[kind]);
-  } finally { ctx = main; }
+  c.width = canvas.width; c.height = canvas.height;  // setting the size clears it, even the same size
+  const g = c.getContext("2d"), [x0, y0] = viewer.toCanvas(0, p.height);
+  g.strokeStyle = "#888"; g.lineWidth = 1; g.strokeRect(x0, y0, p.width * viewer.scale, p.height * viewer.scale);
+  for (const [x, y] of p.walls) cell(g, x, y, COLOURS.wall, 0);
+  for (const [x, y, filled] of p.sites) cell(g, x, y, filled ? COLOURS.filled : COLOURS.site, 1);
+  for (const [x, y, kind] of p.discs) circle(g, x, y, DISC_R * 0.92, COLOURS[kind]);
   scenery.key = { w: canvas.width, h: canvas.height, scale: viewer.scale, walls: p.walls, sites: p.sites, discs: p.discs };
   viewer.sceneryPaints = (viewer.sceneryPaints || 0) + 1;
 }
@@ -84,7 +79,7 @@ function draw(p) {
   }
   ctx.font = "11px sans-serif";
   for (const a of p.agents) {
-    circle(a.x, a.y, AGENT_R, a.alive ? COLOURS.agent : COLOURS.dead);
+    circle(ctx, a.x, a.y, AGENT_R, a.alive ? COLOURS.agent : COLOURS.dead);
     const [px, py] = viewer.toCanvas(a.x, a.y), r = AGENT_R * viewer.scale;
     const hx = Math.cos(a.heading), hy = -Math.sin(a.heading);
     ctx.beginPath(); ctx.moveTo(px, py); ctx.lineTo(px + hx * r * 1.9, py + hy * r * 1.9);
