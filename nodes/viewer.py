@@ -38,7 +38,7 @@ from bus import Declarations, undeclare
 from protocol import keys
 from protocol.codec import decode, encode
 from protocol.messages import Perturbation, PerturbResult
-from viewer.scene import LEAVES, Scene, Timeline, decode_maps, maps_picture, static_dir
+from viewer.scene import LEAVES, Scene, Timeline, decode_newest_maps, maps_picture, static_dir
 
 log = logging.getLogger("conag.view")
 
@@ -139,7 +139,7 @@ class LiveFeed:
         self.select(agent)
         with self._lock:
             raw = list(self._maps.get(agent, ()))
-        return maps_picture(decode_maps(raw))
+        return maps_picture(decode_newest_maps(raw))
 
     def perturb(self, p: Perturbation, timeout: float = 5.0) -> PerturbResult:
         """Ask the world for `p`; a PerturbResult either way (not ok when no world answers)."""

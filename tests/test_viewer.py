@@ -241,3 +241,18 @@ def test_the_timeline_gives_an_agents_maps_at_a_tick():
     assert timeline.maps_at("a1", 15)["tick"] == 10 and timeline.maps_at("a1", 99)["tick"] == 20
     assert timeline.maps_at("a1", 5)["layers"] == {} and timeline.maps_at("a2", 20)["size"] == 0
     assert len(timeline.maps_at("a1", 20)["layers"]["config_nm"]) == brain.maps.size ** 2
+
+
+def test_a_live_viewer_decodes_only_the_newest_snapshot_of_an_agents_maps():
+    from protocol.messages import AgentMap
+    from viewer.scene import decode_newest_maps, maps_picture
+
+    def layer(tick: int, name: str, value: int) -> bytes:
+        return encode(AgentMap("a1", tick, name, 3, (value,) * 9))
+
+    raw = [layer(10, "config", 1), layer(10, "brick", 2),     # an older snapshot
+           layer(20, "config", 3), b"not msgpack", layer(20, "brick", 4)]   # the newest, one bad message
+    newest = decode_newest_maps(raw)
+    assert [(m.tick, m.layer, m.cells[0]) for m in newest] == [(20, "config", 3), (20, "brick", 4)]
+    assert maps_picture(newest)["layers"] == {"config": [3] * 9, "brick": [4] * 9}
+    assert decode_newest_maps([]) == [] and decode_newest_maps([b"junk"]) == []

@@ -66,6 +66,21 @@ def decode_maps(raw: Iterable[bytes]) -> list[AgentMap]:
     return out
 
 
+def decode_newest_maps(raw: list[bytes]) -> list[AgentMap]:
+    """The AgentMaps of the newest snapshot among `raw` (in arrival order, a snapshot's layers
+    together), decoded from the end back to the first message of an older tick: a live viewer
+    keeps the last 16 messages, and each decode checks every one of a layer's cells."""
+    out: list[AgentMap] = []
+    for data in reversed(raw):
+        got = decode_maps([data])
+        if not got:
+            continue
+        if out and got[0].tick != out[0].tick:
+            break
+        out.append(got[0])
+    return out[::-1]
+
+
 def wanted(key: str) -> bool:
     """Whether a viewer needs the messages on `key` (a WorldView, status, agent state or decision)."""
     return key.rsplit("/", 1)[-1] in LEAVES
