@@ -43,9 +43,9 @@ from viewer.scene import LEAVES, Scene, Timeline, decode_newest_maps, maps_pictu
 log = logging.getLogger("conag.view")
 
 # Pictures a second sent to a live page. Each picture costs a browser a frame (style, layout,
-# raster, composite) whatever it redraws: with software rendering on the run's own two cores,
-# 10 a second slowed a 10-agent lockstep build by about 8%, 5 a second by about 1%
-# (bench/bench_view.py, BENCHMARKS.md). `conag view --display-hz` chooses.
+# raster, composite) whatever it redraws: a headless Chromium with software rendering took
+# 5.3-5.8% of a core at 10 a second and 3.7-4.2% at 5, following a 10-agent lockstep build
+# on the run's own two cores (bench/bench_view.py, BENCHMARKS.md). `conag view --display-hz`.
 DISPLAY_HZ = 5.0
 
 
