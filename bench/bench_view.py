@@ -31,10 +31,11 @@ import sys
 import tempfile
 
 from bench.bench_record import ROOT, BuildClock, paired_slowdown, slowdown, tree_cpu
+from viewer.scene import DISPLAY_HZ
 
 
 def one_run(scenario: str, agents: int, ticks: int, port: int, view_port: int | None, select: str | None,
-            from_tick: int, display_hz: float = 5.0, page: bool = True) -> tuple[float, float, float, float]:
+            from_tick: int, display_hz: float = DISPLAY_HZ, page: bool = True) -> tuple[float, float, float, float]:
     """(ticks per second, wall seconds of the timed build, CPU seconds of the viewer, of the page)."""
     cmd = [sys.executable, "-m", "conag", "run", scenario, "--headless", "--agents", str(agents), "--max-ticks",
            str(ticks), "--stall-ticks", "0", "--listen", f"tcp/127.0.0.1:{port}"]
@@ -89,8 +90,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--port", type=int, default=17611)
     p.add_argument("--view-port", type=int, default=17612)
     p.add_argument("--select", metavar="ID", help="the page shows this agent (its details and maps)")
-    p.add_argument("--display-hz", type=float, default=5.0, metavar="HZ",
-                   help="conag view --display-hz: pictures a second sent to the page (default 5, the viewer's)")
+    p.add_argument("--display-hz", type=float, default=DISPLAY_HZ, metavar="HZ",
+                   help=f"conag view --display-hz: pictures a second sent to the page "
+                        f"(default {DISPLAY_HZ:g}, the viewer's)")
     p.add_argument("--no-page", action="store_true", help="the viewer alone, no browser (its own share)")
     args = p.parse_args(argv)
     if args.from_tick >= args.ticks:

@@ -13,6 +13,7 @@ import argparse
 import sys
 
 from conag.common import bus_args, bus_options, stop_on_signals
+from viewer.scene import DISPLAY_HZ
 
 DEFAULT_PORT = 8765
 
@@ -26,9 +27,9 @@ def add_commands(sub) -> None:
     v.add_argument("--open", action="store_true", help="open the page in the default browser")
     v.add_argument("--maps-every", type=int, default=10, metavar="N",
                    help="live: ask the agent shown in the page's panel for its maps every N ticks (default 10; 0: off)")
-    v.add_argument("--display-hz", type=_display_hz, default=5.0, metavar="HZ",
-                   help="live: send the page at most HZ pictures a second (default 5; each costs the browser a "
-                        "frame, which a browser on the run's own cores takes from the run: BENCHMARKS.md)")
+    v.add_argument("--display-hz", type=_display_hz, default=DISPLAY_HZ, metavar="HZ",
+                   help=f"live: send the page at most HZ pictures a second (default {DISPLAY_HZ:g}; each costs the "
+                        "browser a frame, which a browser on the run's own cores takes from the run: BENCHMARKS.md)")
     bus_args(v)
     v.set_defaults(func=cmd_view)
 

@@ -7,7 +7,7 @@ JSON API; the picture itself is built by the pure `viewer.scene`:
 * live (`LiveFeed`): zenoh subscriptions to the world's WorldView, status and agent states
   fold into one `Scene` under a lock; the decisions and maps of the agent the page shows
   only (decisions, one per tick, kept undecoded until a picture is built); `GET /api/scene` is the picture now and
-  `GET /api/events` a Server-Sent Events stream sending it at `display_hz` (5 a second),
+  `GET /api/events` a Server-Sent Events stream sending it at `display_hz` (`DISPLAY_HZ`, 5 a second),
   only when something changed: a run of any speed costs the page five pictures a second,
   and the world nothing but a WorldView every `view_every` ticks;
 * recording (`Timeline`): `GET /api/timeline` (ticks, progress, metadata) and
@@ -38,15 +38,9 @@ from bus import Declarations, undeclare
 from protocol import keys
 from protocol.codec import decode, encode
 from protocol.messages import Perturbation, PerturbResult
-from viewer.scene import LEAVES, Scene, Timeline, decode_newest_maps, maps_picture, static_dir
+from viewer.scene import DISPLAY_HZ, LEAVES, Scene, Timeline, decode_newest_maps, maps_picture, static_dir
 
 log = logging.getLogger("conag.view")
-
-# Pictures a second sent to a live page. Each picture costs a browser a frame (style, layout,
-# raster, composite) whatever it redraws: a headless Chromium with software rendering took
-# 5.3-5.8% of a core at 10 a second and 3.7-4.2% at 5, following a 10-agent lockstep build
-# on the run's own two cores (bench/bench_view.py, BENCHMARKS.md). `conag view --display-hz`.
-DISPLAY_HZ = 5.0
 
 
 class LiveFeed:

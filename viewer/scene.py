@@ -33,6 +33,11 @@ from protocol.messages import BEHAVIOURS, AgentMap, AgentState, Decision, WorldS
 
 STATE_NODES = ("holding_brick", "at_drop_site", "at_brick", "near_brick", "brick_available",
                "drop_site_available")  # Decision.state, in order
+# Pictures a second sent to a live page. Each picture costs a browser a frame (style, layout,
+# raster, composite) whatever it redraws: a headless Chromium with software rendering took
+# 5.3-5.8% of a core at 10 a second and 3.7-4.2% at 5, following a 10-agent lockstep build
+# on the run's own two cores (bench/bench_view.py, BENCHMARKS.md). `conag view --display-hz`.
+DISPLAY_HZ = 5.0
 LEAVES = ("view", "status", "state", "decision", "maps")  # the keys a viewer listens to (their last part)
 _TYPES = (WorldView, WorldStatus, AgentState, Decision)
 
