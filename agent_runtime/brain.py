@@ -307,7 +307,7 @@ class Brain:
         far = (self.far.far_open_sites(), self.far.far_bricks())
         for k, (goals, obstacles) in enumerate(self.nav_masks()):
             field = self._field(goals, obstacles, far[k])
-            stuck = not (goals.any() or len(far[k])) if k == 0 else not np.isfinite(field[c, c])
+            stuck = not (goals.any() or len(far[k])) if k == 0 else self._no_brick_here(goals, field)
             if self.cfg.goal_sequencing and stuck:
                 goals, obstacles = self.nav_masks(sequenced=False)[k]
                 field = self._field(goals, obstacles, far[k])
@@ -317,6 +317,20 @@ class Brain:
         self.plans = Plans(config, brick, config_goals, brick_goals, self._nearest(brick_goals), matching,
                            config_obstacles, brick_obstacles)
         return self.plans
+
+    def _no_brick_here(self, goals: np.ndarray, field: np.ndarray) -> bool:
+        """Whether sequencing leaves the brick NM no brick to go to: none reachable, or
+        none on the map while free bricks lie on it.
+
+        The second case is a matching that only holds the map: with the way from these
+        bricks to the sites leading round beyond the border, it pairs none of them, and the
+        brick NM followed remembered bricks far away, until a step brought a site back onto
+        the map, the bricks here were matched again and it turned back, a cell's step either
+        side of the map's edge (gen-nested_rings 11260025). Any free brick blocks nothing."""
+        if not np.isfinite(field[self.centre, self.centre]):
+            return True
+        m = self.maps.maps > 0.5
+        return not goals.any() and bool((m[BRICK] & ~m[CONFIG]).any())
 
     def _field(self, goals: np.ndarray, obstacles: np.ndarray, beyond: np.ndarray) -> np.ndarray:
         """Distance field to `goals` and to the remembered cells `beyond` the map, which

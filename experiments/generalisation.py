@@ -405,6 +405,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="worker processes")
     ap.add_argument("--stall", type=int, default=DEFAULT_STALL, help="ticks with no site filled that stop a run")
     ap.add_argument("--out", type=Path, default=None, help="folder for the json and md (default experiments/)")
+    ap.add_argument("--mode", choices=[m for m, _ in MODES], default=None,
+                    help="run this mode only (default: both, side by side); an agent change that only "
+                         "goal sequencing reads leaves nearest-first's runs as they were")
     ap.add_argument("--report-only", action="store_true",
                     help="rewrite the tables from the committed generalisation.json, running nothing")
     ap.add_argument("--resume", action="store_true",
@@ -430,7 +433,8 @@ def main(argv: list[str] | None = None) -> int:
         old.unlink()
     journal = Journal(out / JOURNAL, resume=args.resume)
     code = _code_version()
-    earlier, jobs = resumed(journal, [Job(name, mode, args.stall, code) for name in names for mode, _ in MODES])
+    earlier, jobs = resumed(journal, [Job(name, mode, args.stall, code) for name in names for mode, _ in MODES
+                                      if args.mode in (None, mode)])
     earlier = [in_folder(o, pictures) for o in earlier]
     if args.resume:
         print(f"resuming: {len(earlier)} of {len(earlier) + len(jobs)} runs already done "
