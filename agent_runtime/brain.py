@@ -302,7 +302,6 @@ class Brain:
         out of reach for now (another agent in the corridor) is waited for, not replaced by
         one that would wall it off.
         """
-        c = self.centre
         fields = []
         far = (self.far.far_open_sites(), self.far.far_bricks())
         for k, (goals, obstacles) in enumerate(self.nav_masks()):

@@ -26,7 +26,9 @@ def add_commands(sub) -> None:
     v.add_argument("--host", default="127.0.0.1", help="address to serve on (default 127.0.0.1: this machine only)")
     v.add_argument("--open", action="store_true", help="open the page in the default browser")
     v.add_argument("--maps-every", type=int, default=10, metavar="N",
-                   help="live: ask the agent shown in the page's panel for its maps every N ticks (default 10; 0: off)")
+                   help="live: ask the agent shown in the page's panel for its maps at most every N ticks "
+                        "(default 10; 0: off); on a faster run, less often: about once a second, as the page "
+                        "shows them")
     v.add_argument("--display-hz", type=_display_hz, default=DISPLAY_HZ, metavar="HZ",
                    help=f"live: send the page at most HZ pictures a second (default {DISPLAY_HZ:g}; each costs the "
                         "browser a frame, which a browser on the run's own cores takes from the run: BENCHMARKS.md)")

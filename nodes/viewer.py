@@ -26,6 +26,7 @@ import logging
 import mimetypes
 import os
 import threading
+import time
 from collections.abc import Callable
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
@@ -38,7 +39,16 @@ from bus import Declarations, undeclare
 from protocol import keys
 from protocol.codec import decode, encode
 from protocol.messages import Perturbation, PerturbResult
-from viewer.scene import DISPLAY_HZ, LEAVES, Scene, Timeline, decode_newest_maps, maps_picture, static_dir
+from viewer.scene import (
+    DISPLAY_HZ,
+    LEAVES,
+    Scene,
+    Timeline,
+    decode_newest_maps,
+    maps_interval,
+    maps_picture,
+    static_dir,
+)
 
 log = logging.getLogger("conag.view")
 
@@ -47,18 +57,25 @@ class LiveFeed:
     """One world's messages folded into a Scene (thread-safe), and its perturb query.
 
     Everything costly to the run is asked for only for the agent the page shows (`select`):
-    its Decisions (one per tick) and, with `maps_every` N, its maps every N ticks (a maps
-    request token for that agent alone). With no agent selected the agents send the viewer
-    nothing but their AgentState reports (every 100 ticks).
+    its Decisions (one per tick) and, with `maps_every` N, its maps (a maps request token
+    for that agent alone) about once a page ask: every N ticks at first, then every
+    `maps_interval` ticks for the run's speed as measured between the page's asks, never
+    more often than every N. With no agent selected the agents send the viewer nothing but
+    their AgentState reports (every 100 ticks).
     """
 
-    def __init__(self, session: zenoh.Session, world_id: str, maps_every: int = 0, requester: str | None = None):
+    def __init__(self, session: zenoh.Session, world_id: str, maps_every: int = 0, requester: str | None = None,
+                 clock: Callable[[], float] = time.monotonic):
         self.session = session
         self.world_id = world_id
         self.maps_every = maps_every
         self.requester = requester or f"viewer-{os.getpid()}"
+        self.clock = clock
         self.selected: str | None = None
-        self._selection: list[Any] = []   # the selected agent's decision subscriber and maps token
+        self.asked_every = 0              # the interval of the maps request token up now (0: none)
+        self._selection: list[Any] = []   # the selected agent's decision subscriber
+        self._maps_token: Any = None
+        self._last_ask: tuple[float, int] | None = None  # (clock, tick) at the page's last maps ask
         self._select_lock = threading.Lock()
         self.scene = Scene()
         self._lock = threading.Lock()
@@ -85,14 +102,34 @@ class LiveFeed:
         with self._select_lock:
             if agent == self.selected:
                 return
-            undeclare(*self._selection)
+            undeclare(*self._selection, self._maps_token)
             self._selection = [self.session.declare_subscriber(keys.decision(self.world_id, agent), self._on_sample)]
-            if self.maps_every:
-                self._selection.append(self.session.liveliness().declare_token(
-                    keys.maps_request_token(self.world_id, self.requester, self.maps_every, agent)))
             self.selected = agent
+            self._maps_token, self.asked_every, self._last_ask = None, 0, None
+            self._ask_maps(self.maps_every)
             with self._lock:
                 self._decisions.clear()
+
+    def _ask_maps(self, every: int) -> None:
+        """Put the selected agent's maps request at `every` ticks (the old one goes after the
+        new one is up, so the agent is never left without one); 0 takes it back."""
+        if every == self.asked_every or self.selected is None:
+            return
+        old = self._maps_token
+        self._maps_token = self.session.liveliness().declare_token(
+            keys.maps_request_token(self.world_id, self.requester, every, self.selected)) if every else None
+        self.asked_every = every
+        undeclare(old)
+
+    def _retune_maps(self) -> None:
+        """At a page ask: the maps request's interval for the run's speed since the last ask."""
+        with self._lock:
+            tick = max((m.tick for m in (self.scene.view, self.scene.status) if m is not None), default=0)
+        now = self.clock()
+        with self._select_lock:
+            last, self._last_ask = self._last_ask, (now, tick)
+            if last is not None and now > last[0] and tick >= last[1]:
+                self._ask_maps(maps_interval((tick - last[1]) / (now - last[0]), self.maps_every))
 
     def refresh(self, timeout: float = 2.0) -> None:
         """Query the world's view and status now."""
@@ -131,6 +168,7 @@ class LiveFeed:
     def maps(self, agent: str) -> dict[str, Any]:
         """`agent`'s newest map snapshot (see `viewer.scene.maps_picture`); selects it."""
         self.select(agent)
+        self._retune_maps()
         with self._lock:
             raw = list(self._maps.get(agent, ()))
         return maps_picture(decode_newest_maps(raw))
@@ -146,8 +184,8 @@ class LiveFeed:
     def close(self) -> None:
         """Undeclare the subscriptions and the maps request (the session is the caller's)."""
         with self._select_lock:
-            undeclare(*self._selection)
-            self._selection = []
+            undeclare(*self._selection, self._maps_token)
+            self._selection, self._maps_token, self.asked_every = [], None, 0
         self._declared.close()
 
 

@@ -732,6 +732,23 @@ def test_with_no_open_site_on_the_map_any_free_brick_is_a_brick_goal():
     assert plans.brick[c, c] == pytest.approx(2 * math.sqrt(2))
 
 
+def test_free_bricks_the_matching_cannot_pair_on_the_map_are_goals_before_bricks_beyond_it():
+    # The way from the bricks here to the sites leads round a wall beyond the map, so the
+    # Matching grid (the map only) pairs none of them. Following the remembered bricks far
+    # off instead, the agent turned back each time a step brought one more site onto the
+    # map and the bricks here were paired again (gen-nested_rings 11260025).
+    brain = Brain(_welcome(([50.5], [47.5])), AgentConfig(map_size=11), np.random.default_rng(0))
+    c = brain.centre
+    assert brain.maps.maps[CONFIG, c + 3, c] == 1.0   # the site, three cells south
+    brain.maps.maps[OBSTACLE, c + 2, :] = 1.0         # a wall right across the map between
+    brain.maps.maps[BRICK, c - 2, c + 1] = 1.0        # a free brick in view, north
+    brain.far.bricks = np.array([[0, 20]])            # remembered 20 cells north, beyond the border
+    plans = brain.plan()
+    assert plans.matching is not None and not plans.matching.pairs
+    assert plans.brick_goals[c - 2, c + 1]
+    assert plans.brick[c, c] == pytest.approx(1 + math.sqrt(2))
+
+
 def test_a_site_found_sealing_stays_no_goal_for_a_while_out_of_the_checks_reach():
     # The sealing check runs only within SEAL_RADIUS cells. A site it refused became a goal
     # again one cell farther off, and the agent turned back at that cell's edge, to and fro,

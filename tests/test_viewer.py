@@ -16,7 +16,7 @@ from protocol.messages import BEHAVIOURS, AgentState, WorldStatus, WorldView
 from recording.mcap_log import McapRecorder, read_recording
 from tests.conftest import RunningWorld, make, wait_until
 from tests.scripted import ScriptedBody
-from viewer.scene import Scene, Timeline
+from viewer.scene import MAPS_STEPS, Scene, Timeline, maps_interval
 
 # A filled site (B: a brick on a site) at (2.5, 2.5), an empty one at (4.5, 2.5), a brick, a
 # food disc, a wall cell and an agent start.
@@ -141,6 +141,47 @@ def test_the_page_asks_for_the_maps_of_the_agent_it_shows_only(bus):
             wait_until(lambda: requests("a1") == [] and requests("a2"), what="the request to follow the page")
     finally:
         feed.close()
+
+
+def test_the_maps_interval_gives_about_one_snapshot_a_second_and_never_less_than_asked():
+    assert maps_interval(5.0, 10) == 10          # a slow run: every --maps-every ticks
+    assert maps_interval(35.0, 10) == 20         # 10 agents in lockstep: not 3.5 a second
+    assert maps_interval(300.0, 10) == 200
+    assert maps_interval(300.0, 250) == 250      # never more often than asked
+    assert maps_interval(1e9, 10) == MAPS_STEPS[-1]
+    assert maps_interval(300.0, 0) == 0          # maps off stays off
+
+
+def test_the_maps_request_follows_the_runs_speed_between_the_pages_asks(bus):
+    from protocol import keys
+
+    now = [100.0]
+    feed = LiveFeed(bus.server_session(), "w0", maps_every=10, requester="v1", clock=lambda: now[0]).start()
+    world = bus.client_session()
+
+    def requests():
+        return sorted(str(r.ok.key_expr) for key in keys.maps_requests_for("w0", "a1")
+                      for r in world.liveliness().get(key, timeout=1) if r.ok is not None)
+
+    def world_at(tick):
+        world.put(keys.view("w0"), encode(view(tick, 1.0)))
+        wait_until(lambda: feed.scene.view is not None and feed.scene.view.tick == tick, what=f"the view of {tick}")
+
+    try:
+        world_at(0)
+        feed.maps("a1")
+        wait_until(lambda: requests() == ["conag/v4/world/w0/alive/maps/v1/a1/10"], what="the first request")
+        now[0] += 2.0
+        world_at(120)                                # 60 ticks a second: one snapshot every 50
+        feed.maps("a1")
+        wait_until(lambda: requests() == ["conag/v4/world/w0/alive/maps/v1/a1/50"], what="the request at 50")
+        now[0] += 1.0
+        world_at(125)                                # it slowed down to 5 a second
+        feed.maps("a1")
+        wait_until(lambda: requests() == ["conag/v4/world/w0/alive/maps/v1/a1/10"], what="the request back at 10")
+    finally:
+        feed.close()
+    wait_until(lambda: requests() == [], what="the request to go with the viewer")
 
 
 def test_a_recording_cannot_be_perturbed_and_its_frames_are_served_by_tick():

@@ -38,8 +38,26 @@ STATE_NODES = ("holding_brick", "at_drop_site", "at_brick", "near_brick", "brick
 # 5.3-5.8% of a core at 10 a second and 3.7-4.2% at 5, following a 10-agent lockstep build
 # on the run's own two cores (bench/bench_view.py, BENCHMARKS.md). `conag view --display-hz`.
 DISPLAY_HZ = 5.0
+# The page asks for the shown agent's maps once a second (viewer.js), so a live viewer asks
+# that agent for about one snapshot a second, whatever the run's speed: at every 10 ticks, a
+# 10-agent lockstep run made 3-4 a second, each about 1.2 ms on the run's serial chain.
+MAPS_HZ = 1.0
+MAPS_STEPS = (10, 20, 50, 100, 200, 500, 1000, 2000, 5000)  # the intervals asked for (a token each)
 LEAVES = ("view", "status", "state", "decision", "maps")  # the keys a viewer listens to (their last part)
 _TYPES = (WorldView, WorldStatus, AgentState, Decision)
+
+
+def maps_interval(ticks_per_second: float, floor: int) -> int:
+    """Ticks between the shown agent's map snapshots for a run going at `ticks_per_second`:
+    the largest of `MAPS_STEPS` that still gives about `MAPS_HZ` a second, never fewer
+    ticks than `floor` (`conag view --maps-every`); 0 when `floor` is 0 (maps off).
+
+    The steps are coarse so that a run's speed wobbling does not make the viewer take its
+    request back and ask again at each page ask."""
+    if floor <= 0:
+        return 0
+    fit = [s for s in MAPS_STEPS if s <= ticks_per_second / MAPS_HZ]
+    return max(floor, fit[-1] if fit else floor)
 
 
 def static_dir() -> Path:
