@@ -209,7 +209,8 @@ def test_a_recorded_fig19_build_opens_and_plays(tmp_path, browser):
             browser.find_element(By.ID, "status").text
         browser.find_element(By.CSS_SELECTOR, "#agents tr.agent").click()  # a1: its details and maps
         wait_until(lambda: "behaviour" in browser.find_element(By.ID, "details").text, what="the details")
-        wait_until(lambda: len(browser.find_elements(By.CSS_SELECTOR, "#maps canvas")) == 9, what="a1's nine maps")
+        wait_until(lambda: len(browser.find_elements(By.CSS_SELECTOR, "#maps canvas")) == 9, timeout=30,
+                   what="a1's nine maps")  # seen to take over 10 s with both cores busy elsewhere
         maps = browser.execute_script("return window.viewer.maps")
         assert maps["tick"] <= timeline["last"] and maps["size"] == 41
         assert max(maps["layers"]["config"]) > 0  # the blueprint's sites on its configuration ESM
