@@ -116,6 +116,12 @@ class Brain:
         self.motivations = Motivations()
         self.centre = self.cfg.map_size // 2
         self.seals = SealGuard(self.maps, self.far, self.centre)
+        # Food and water remembered beyond the map that came back onto it and are not seen
+        # again yet (a sector sees only the nearest disc of a wall): in the way of paths,
+        # never a need's goal. Without them a water wall longer than the map was open ground
+        # again each time it came back, and the agents walked to it, along it and back
+        # (gen-multi 025).
+        self._recalled = np.zeros((self.cfg.map_size,) * 2, bool)
         self._attach_tick = welcome.tick
         self.plans: Plans | None = None
         self._matching: tuple[bytes, Matching] | None = None  # (inputs, result) of the last matching
@@ -140,16 +146,18 @@ class Brain:
             ground = self.maps.known & ~walls & ~discs      # before the maps shift
             kx, ky = self.maps.move(frame.odom_dx, frame.odom_dy, self.cell)
             if kx or ky:
-                self.far.save_walls(walls, discs, ground)
+                self.far.save_walls(walls, discs | self._recalled, ground)
                 back = self.far.move(kx, ky, free)
                 layers[BRICK][back] = 1.0
                 layers[OBSTACLE][self.far.load_walls()] = 1.0
                 self.far.config_layer(layers[CONFIG])
+                self._recalled = self.far.load_discs()
         self._track_source(frame)
         self.maps.sense(ranges, self.sensor_range)
         outside = self.far.outside_world()
         if outside is not None:
             self.maps.maps[OBSTACLE][outside] = 1.0
+        self._recalled &= ~self.maps.known     # seen free since: gone (eaten, moved)
         self.far.observe_sites(self.maps.maps[BRICK], self.maps.clear_age)
         self.far.age_sites(self.maps.clear_age)
         enclosed = self._enclosed_sites()
@@ -246,7 +254,7 @@ class Brain:
         """
         m = self.maps.maps > 0.5
         # Fixed obstacles (walls, the world's edge) are in the way exactly as food and water are.
-        food, water, brick, config = m[FOOD] | m[OBSTACLE], m[WATER], m[BRICK], m[CONFIG]
+        food, water, brick, config = m[FOOD] | m[OBSTACLE] | self._recalled, m[WATER], m[BRICK], m[CONFIG]
         # Other agents in sight are in the way too: two agents heading opposite ways down a
         # one-cell corridor would otherwise meet, back off and meet again for ever.
         agents = m[AGENT]

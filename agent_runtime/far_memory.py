@@ -216,6 +216,12 @@ class FarMemory:
             return np.zeros((self.size, self.size), bool)
         return self.on_map(self.walls)
 
+    def load_discs(self) -> np.ndarray:
+        """The remembered food and water that lie on the map now, as a map mask."""
+        if self.discs is None:
+            return np.zeros((self.size, self.size), bool)
+        return self.on_map(self.discs)
+
     def on_world(self, memory: np.ndarray, layer: np.ndarray) -> np.ndarray:
         """A world grid [x - x0, y - y0]: `memory` (a world grid) with the map's window
         replaced by the map mask `layer`, what the agent sees now."""

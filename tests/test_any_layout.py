@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 import sim
 from agent_runtime.brain import Brain, _mouth_side
 from agent_runtime.config import AgentConfig
-from agent_runtime.esm import BRICK, CONFIG, OBSTACLE, WATER
+from agent_runtime.esm import BRICK, CONFIG, FOOD, OBSTACLE, WATER
 from agent_runtime.far_memory import FarMemory, border_seed
 from agent_runtime.sealing import FRESH_SITE, SEAL_MEMORY, enclosed_sites, pocket_beside
 from agent_runtime.spreading import distance_field, seeded_distance_field
@@ -747,6 +747,27 @@ def test_free_bricks_the_matching_cannot_pair_on_the_map_are_goals_before_bricks
     assert plans.matching is not None and not plans.matching.pairs
     assert plans.brick_goals[c - 2, c + 1]
     assert plans.brick[c, c] == pytest.approx(1 + math.sqrt(2))
+
+
+def test_water_remembered_beyond_the_map_blocks_paths_when_it_comes_back_until_seen_free():
+    # Back on the map, remembered water was open ground: the agents planned through a
+    # water wall longer than the map, walked to it, along it and back (gen-multi 025).
+    brain = Brain(_sized_welcome(10.5, 20.5, 60.0, 40.0), AgentConfig(map_size=21), np.random.default_rng(0))
+    c = brain.centre
+    x0, y0 = brain.far.bounds[:2]
+    brain.far.discs[14 - x0, -y0] = True               # water 14 cells east, beyond the border (10)
+    for t in range(1, 31):                              # 6 cells east: it is 8 cells off, on the map
+        brain.perceive(_frame(t, dx=0.2))
+    assert brain._recalled[c, c + 8] and brain._recalled.sum() == 1
+    assert brain.maps.maps[WATER, c, c + 8] == 0.0 and brain.maps.maps[FOOD, c, c + 8] == 0.0  # no need's goal
+    (_, config_obstacles), (_, brick_obstacles) = brain.nav_masks()
+    assert config_obstacles[c, c + 8] and brick_obstacles[c, c + 8]
+    for t in range(31, 46):                             # 3 cells on: within sensor range, seen free
+        brain.perceive(_frame(t, dx=0.2))
+    assert not brain._recalled.any()
+    for t in range(46, 96):                             # and it is not remembered once gone
+        brain.perceive(_frame(t, dx=-0.2))
+    assert not brain.far.discs.any()
 
 
 def test_a_site_found_sealing_stays_no_goal_for_a_while_out_of_the_checks_reach():
