@@ -99,3 +99,12 @@ def test_an_interrupted_run_resumes_without_running_again_what_it_finished(tmp_p
     again = json.loads((tmp_path / "cut" / "generalisation.json").read_text())
     same = ("layout", "mode", "completed", "ticks", "sites_filled", "distance")
     assert [{k: r[k] for k in same} for r in again] == [{k: r[k] for k in same} for r in rows]
+
+
+def test_a_goal_with_no_layout_in_the_run_is_not_reported_as_measured_or_missed():
+    big = gen.Outcome("x.toml", "wall", 80, 80, 5, "goal sequencing", True, False, 900, 9000, 10, 10, 12, 12,
+                      50.0, 25.0, 1.0)
+    table = gen.goals([big])
+    assert "| goal sequencing completes buildable layouts | >= 98% | 100.0% of 1 | yes |" in table
+    assert "| ... with <= 3 agents in worlds up to 60 x 60 | 100% | no such layout in this run | — |" in table
+    assert "nan" not in table
