@@ -672,8 +672,8 @@ def _add_run(sub) -> None:
     u.add_argument("--view", nargs="?", type=int, const=8765, metavar="PORT",
                    help="watch the run in the browser: starts `conag view` on PORT (default 8765)")
     u.add_argument("--maps-every", type=_non_negative, default=0, metavar="N",
-                   help="the agents publish their maps every N ticks for --record (default 0: off) and --view "
-                        "(default: conag view's)")
+                   help="the agents publish their maps every N ticks for --record (default 0: off); for --view, "
+                        "the shown agent at most every N (default: conag view's), about once a second")
     u.add_argument("--checkpoint-every", type=_positive, metavar="N",
                    help=f"the world checkpoints every N ticks (default {CHECKPOINT_EVERY}); when its process dies "
                         "the run restarts it from the last checkpoint and the agents attach again")
