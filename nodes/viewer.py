@@ -350,7 +350,7 @@ def serve_live(session: zenoh.Session, world_id: str, stop: threading.Event, *, 
                display_hz: float = DISPLAY_HZ) -> None:
     """Serve the live page for world `world_id` until `stop` is set, sending it at most
     `display_hz` pictures a second; with `maps_every` N, ask the agent the page shows for
-    its maps every N ticks."""
+    its maps about once a second, never more often than every N ticks (`LiveFeed`)."""
     feed = LiveFeed(session, world_id, maps_every).start()
     try:
         with ViewerServer(feed, host, port, display_hz).serve_in_thread() as server:

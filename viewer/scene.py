@@ -40,7 +40,8 @@ STATE_NODES = ("holding_brick", "at_drop_site", "at_brick", "near_brick", "brick
 DISPLAY_HZ = 5.0
 # The page asks for the shown agent's maps once a second (viewer.js), so a live viewer asks
 # that agent for about one snapshot a second, whatever the run's speed: at every 10 ticks, a
-# 10-agent lockstep run made 3-4 a second, each about 1.2 ms on the run's serial chain.
+# 10-agent lockstep run at 70 ticks/s made 7 a second, each about 1.2 ms on the run's serial
+# chain (asking less often measured no gain in bench_view, within its noise: BENCHMARKS.md).
 MAPS_HZ = 1.0
 MAPS_STEPS = (10, 20, 50, 100, 200, 500, 1000, 2000, 5000)  # the intervals asked for (a token each)
 LEAVES = ("view", "status", "state", "decision", "maps")  # the keys a viewer listens to (their last part)
