@@ -34,7 +34,7 @@ import time
 from dataclasses import asdict
 
 from bus import BusOptions, Declarations, is_client, open_session
-from conag.common import PRIORITIES, RECORDER_PRIORITY
+from conag.common import PRIORITIES, RECORDER_PRIORITY, ignore_repeat
 from conag.common import bus_args as _bus_args
 from conag.common import bus_options as _bus
 from conag.common import stop_on_signals as _stop_on_signals
@@ -296,10 +296,6 @@ class _Stopped(Exception):
     """Raised by the agent's signal handler, so a blocking frame wait ends at once."""
 
 
-def _quiet(_signum, _frame) -> None:
-    """A signal handler that does nothing: the process is already stopping."""
-
-
 @contextlib.contextmanager
 def _stopped_by_signal():
     """The first SIGINT/SIGTERM raises `_Stopped` where the process waits (for a frame), and
@@ -307,7 +303,7 @@ def _stopped_by_signal():
     cleanup finishes without a traceback. The previous handlers come back afterwards."""
     def raise_stop(_signum, _frame):
         for s in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(s, _quiet)
+            signal.signal(s, ignore_repeat)
         raise _Stopped()
 
     previous = {s: signal.signal(s, raise_stop) for s in (signal.SIGINT, signal.SIGTERM)}

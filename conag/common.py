@@ -35,6 +35,10 @@ def bus_options(args) -> BusOptions:
     return BusOptions(args.zenoh_config, tuple(args.connect), tuple(args.listen), args.mode)
 
 
+def ignore_repeat(_signum, _frame) -> None:
+    """A signal handler for signals after the first: the process is already stopping."""
+
+
 @contextmanager
 def stop_on_signals(on_stop: Callable[[], None] | None = None):
     """An Event set by SIGINT or SIGTERM, so loops finish their tick and close the session;
@@ -42,6 +46,12 @@ def stop_on_signals(on_stop: Callable[[], None] | None = None):
     stop = threading.Event()
 
     def handler(_signum, _frame):
+        # Later signals (a second Ctrl-C) go to a handler that does nothing, and that comes
+        # first: Python runs a handler between any two bytecodes of the main thread, also
+        # inside this one's `stop.set()`, whose lock is not re-entrant. Setting the Event
+        # again there waited on that lock for ever (CI: `conag run` hung after two Ctrl-Cs).
+        for s in previous:
+            signal.signal(s, ignore_repeat)
         if on_stop is not None and not stop.is_set():
             on_stop()
         stop.set()
