@@ -31,13 +31,14 @@ The roles (a username each; `agent_user(id)` for agents):
   command and AgentState; answers attach, perturb, view, status and blueprint queries;
 * an agent `a1`: publishes only its own command, decision, state and maps, and declares only
   its own liveliness token; receives only its own frames, reinforcements and errors (and the
-  blueprint); may attach only as itself; watches the world's token, teachers and maps
-  requests for itself;
+  blueprint); may attach only as itself; answers queries for its own newest decision;
+  watches the world's token, teachers and maps requests for itself;
 * `teacher`: hears every decision, publishes the reinforcements, its own teacher token;
 * `operator`: the only one that may perturb the world or ask a `conag run` to kill or restart
   an agent (RunControl); a `conag run` serves its RunControl as the operator; reads everything;
 * `observer` (recorder, viewer, `conag status`, `conag echo`): reads everything, asks for
-  status, blueprint and view, may ask agents for their maps; writes nothing else.
+  status, blueprint, view and agents' newest decisions, may ask agents for their maps;
+  writes nothing else.
 
 With these rules a process holding `a2`'s credential cannot drive `a1`'s body, read its
 frames, declare its token or send its Hello (so it cannot take over the id `a1`); only the
@@ -105,6 +106,7 @@ def agent_role(world: str, agent: str) -> Role:
         ("subscribe", (keys.sensors(world, agent), keys.reinforcement(world, agent),
                        keys.command_error(world, agent), keys.blueprint(world))),
         ("ask", (keys.attach(world, agent), keys.blueprint(world), keys.status(world))),
+        ("serve", (keys.decision(world, agent),)),  # its newest Decision, to a viewer
         ("token", (keys.agent_token(world, agent),)),
         # The world's token too: an agent whose world dies waits for it and attaches again.
         ("watch", (keys.world_token(world), keys.all_teacher_tokens(world), *keys.maps_requests_for(world, agent))),
@@ -134,16 +136,17 @@ def operator_role(world: str) -> Role:
     """The operator: perturb and RunControl (asking and serving), and everything the observer reads."""
     return Role(OPERATOR, (
         ("ask", (keys.perturb(world), keys.run_control(world), keys.status(world), keys.blueprint(world),
-                 keys.view(world))),
+                 keys.view(world), keys.all_agents(world, "decision"))),
         ("serve", (keys.run_control(world),)),
         *_reader_grants(world),
     ))
 
 
 def observer_role(world: str) -> Role:
-    """A read-only observer (recorder, viewer, status, echo): reads everything, asks for maps."""
+    """A read-only observer (recorder, viewer, status, echo): reads everything, asks for maps
+    and for an agent's newest Decision."""
     return Role(OBSERVER, (
-        ("ask", (keys.status(world), keys.blueprint(world), keys.view(world))),
+        ("ask", (keys.status(world), keys.blueprint(world), keys.view(world), keys.all_agents(world, "decision"))),
         *_reader_grants(world),
     ))
 

@@ -12,10 +12,11 @@ from __future__ import annotations
 import argparse
 import sys
 
-from conag.common import bus_args, bus_options, stop_on_signals
+from conag.common import PRIORITIES, bus_args, bus_options, lower_priority, restore_priority, stop_on_signals
 from viewer.scene import DISPLAY_HZ
 
 DEFAULT_PORT = 8765
+VIEWER_PRIORITY = "low"  # not "idle", as the recorder: on a machine the run fills, the page would freeze
 
 
 def add_commands(sub) -> None:
@@ -32,6 +33,9 @@ def add_commands(sub) -> None:
     v.add_argument("--display-hz", type=_display_hz, default=DISPLAY_HZ, metavar="HZ",
                    help=f"live: send the page at most HZ pictures a second (default {DISPLAY_HZ:g}; each costs the "
                         "browser a frame, which a browser on the run's own cores takes from the run: BENCHMARKS.md)")
+    v.add_argument("--priority", choices=PRIORITIES, default=VIEWER_PRIORITY,
+                   help=f"live: the viewer's CPU priority, so a run on the same cores gets the CPU first "
+                        f"(default {VIEWER_PRIORITY}: nice +10; idle: only when a core would idle; normal)")
     bus_args(v)
     v.set_defaults(func=cmd_view)
 
@@ -54,7 +58,8 @@ def cmd_view(args) -> int:
 
             webbrowser.open(url)
 
-    with stop_on_signals() as stop:
+    # Stopped, it leaves at the normal priority: idle, it could wait long for a core (as the recorder).
+    with stop_on_signals(on_stop=lambda: restore_priority(args.priority)) as stop:
         if args.file:
             from nodes.viewer import serve_timeline
 
@@ -66,6 +71,7 @@ def cmd_view(args) -> int:
         from bus import open_session
         from nodes.viewer import serve_live
 
+        lower_priority(args.priority)  # before the session opens, so zenoh's threads have it too
         session = open_session(bus_options(args))
         try:
             serve_live(session, args.world_id, stop, host=args.host, port=args.port, on_ready=ready,

@@ -21,7 +21,8 @@ and on the way out. With no teacher on the bus it keeps acting on its current we
 
 Blueprint changes and state reports go through `nodes.agent_feeds.AgentFeeds`: the newest
 blueprint is applied before each step, an AgentState is published every 100 ticks and
-on exit.
+on exit. A query on the decision key is answered with the newest Decision: a viewer asks
+for it at its display rate, not the 50-100 a second of a lockstep run.
 """
 
 from __future__ import annotations
@@ -41,6 +42,7 @@ from nodes.student_link import StudentLink
 from nodes.world_link import AttachError, WorldLink
 from protocol import keys
 from protocol.codec import encode
+from protocol.messages import Decision
 
 log = logging.getLogger("conag.agent")
 WAIT_QUIET = 3.0    # seconds a world may be gone before the agent warns (a run ending stops its agents sooner)
@@ -128,6 +130,8 @@ class AgentProcess:
         self.reattaches = 0  # worlds lost and found again
         self.teacher = StudentLink(session, w, a) if self.learning else None
         self.decisions = None if self.learning else session.declare_publisher(keys.decision(w, a), express=True)
+        self.last_decision: Decision | None = None  # the newest, for queries (read by zenoh's thread)
+        self._decision_queries = session.declare_queryable(keys.decision(w, a), self._on_decision_query)
         report.student, report.link, report.world_link = self.student, self.teacher, self.link
 
     def attach(self) -> None:
@@ -191,6 +195,7 @@ class AgentProcess:
             teacher.publish(step.decision)
         else:
             self.decisions.put(encode(step.decision))
+        self.last_decision = step.decision
         self.tick = frame.tick
         self.report.ticks += 1
         self.feeds.after_step(self.brain, self.tick)
@@ -206,8 +211,14 @@ class AgentProcess:
             self.student.save(self.learning.weights_out)
         if self.teacher is not None:
             self.teacher.close()
-        undeclare(self.decisions)
+        undeclare(self.decisions, self._decision_queries)
         self.link.close()
+
+    def _on_decision_query(self, query) -> None:
+        """Answer with the newest Decision (none before the first step)."""
+        decision = self.last_decision
+        if decision is not None:
+            query.reply(keys.decision(self.opts.world_id, self.opts.agent_id), encode(decision))
 
 
 def _progress(teacher: StudentLink) -> str:

@@ -3,7 +3,9 @@
 `publish_recording` re-publishes recorded messages on their keys, paced as recorded (or
 faster, slower, at once: `recording.replay.paced`), like `ros2 bag play`: a viewer or
 `conag echo` sees the run again. It waits (up to `wait` seconds) for a subscriber to
-match one of its publishers before it starts.
+match one of its publishers before it starts. As the agents did, it answers a query on an
+agent's decision key with the newest Decision it has re-published there (a live viewer
+asks for the shown agent's that way).
 
 `drive_world` reproduces a recording with a live world in lockstep (a fresh world from
 the recorded scenario and seed): it declares each recorded agent's liveliness token and
@@ -42,6 +44,10 @@ def publish_recording(session: zenoh.Session, entries: list[Entry], stop: thread
         publishers = {key: declared.add(session.declare_publisher(
             key, reliability=zenoh.Reliability.RELIABLE, congestion_control=zenoh.CongestionControl.BLOCK))
             for key in dict.fromkeys(e.key for e in entries if e.tick >= from_tick)}
+        newest: dict[str, bytes] = {}  # the last Decision re-published on each decision key
+        for key in publishers:
+            if key.endswith("/decision"):
+                declared.add(session.declare_queryable(key, _answer_with_newest(key, newest)))
         deadline = clock() + wait
         while clock() < deadline and not stop.is_set() and not any(
                 p.matching_status.matching for p in publishers.values()):
@@ -54,10 +60,21 @@ def publish_recording(session: zenoh.Session, entries: list[Entry], stop: thread
             if stop.is_set():
                 break
             publishers[entry.key].put(entry.data)
+            if entry.key.endswith("/decision"):
+                newest[entry.key] = entry.data
             sent += 1
             if on_message is not None:
                 on_message(entry)
     return sent
+
+
+def _answer_with_newest(key: str, newest: dict[str, bytes]) -> Callable[[zenoh.Query], None]:
+    def answer(query: zenoh.Query) -> None:
+        data = newest.get(key)
+        if data is not None:
+            query.reply(key, data)
+
+    return answer
 
 
 DROP_GRACE = 2.0  # seconds to wait for the rest of a tick's frames once one has come

@@ -6,7 +6,8 @@ JSON API; the picture itself is built by the pure `viewer.scene`:
 * `GET /api/info`: `{"mode": "live" | "recording", ...}`;
 * live (`LiveFeed`): zenoh subscriptions to the world's WorldView, status and agent states
   fold into one `Scene` under a lock; the decisions and maps of the agent the page shows
-  only (decisions, one per tick, kept undecoded until a picture is built); `GET /api/scene` is the picture now and
+  only (its newest Decision asked for at most `display_hz` times a second, not every
+  tick's; its maps about once a second); `GET /api/scene` is the picture now and
   `GET /api/events` a Server-Sent Events stream sending it at `display_hz` (`DISPLAY_HZ`, 5 a second),
   only when something changed: a run of any speed costs the page five pictures a second,
   and the world nothing but a WorldView every `view_every` ticks;
@@ -57,30 +58,32 @@ class LiveFeed:
     """One world's messages folded into a Scene (thread-safe), and its perturb query.
 
     Everything costly to the run is asked for only for the agent the page shows (`select`):
-    its Decisions (one per tick) and, with `maps_every` N, its maps (a maps request token
-    for that agent alone) about once a page ask: every N ticks at first, then every
-    `maps_interval` ticks for the run's speed as measured between the page's asks, never
-    more often than every N. With no agent selected the agents send the viewer nothing but
-    their AgentState reports (every 100 ticks).
+    its newest Decision, by a query as a picture is built (at most once every
+    `decision_period` seconds; a subscription took every tick's, 50-100 a second), and, with
+    `maps_every` N, its maps (a maps request token for that agent alone) about once a page
+    ask: every N ticks at first, then every `maps_interval` ticks for the run's speed as
+    measured between the page's asks, never more often than every N. With no agent
+    selected the agents send the viewer nothing but their AgentState reports (every 100
+    ticks).
     """
 
     def __init__(self, session: zenoh.Session, world_id: str, maps_every: int = 0, requester: str | None = None,
-                 clock: Callable[[], float] = time.monotonic):
+                 clock: Callable[[], float] = time.monotonic, decision_period: float = 1.0 / DISPLAY_HZ):
         self.session = session
         self.world_id = world_id
         self.maps_every = maps_every
         self.requester = requester or f"viewer-{os.getpid()}"
         self.clock = clock
+        self.decision_period = decision_period
+        self._decision_asked = -float("inf")  # clock time of the last decision query
         self.selected: str | None = None
         self.asked_every = 0              # the interval of the maps request token up now (0: none)
-        self._selection: list[Any] = []   # the selected agent's decision subscriber
         self._maps_token: Any = None
         self._last_ask: tuple[float, int] | None = None  # (clock, tick) at the page's last maps ask
         self._select_lock = threading.Lock()
         self.scene = Scene()
         self._lock = threading.Lock()
         self._cache: tuple[int, str] = (-1, "")
-        self._decisions: dict[str, bytes] = {}  # the newest Decision of each agent, undecoded
         self._maps: dict[str, list[bytes]] = {}  # the newest AgentMaps of each agent, undecoded
         self._declared = Declarations()
 
@@ -90,7 +93,7 @@ class LiveFeed:
         root = keys.world_root(self.world_id)
         for leaf in LEAVES:
             if leaf == "decision":
-                continue  # only the selected agent's (`select`)
+                continue  # only the selected agent's, asked for (`picture`)
             key = f"{root}/{leaf}" if leaf in ("view", "status") else keys.all_agents(self.world_id, leaf)
             self._declared.add(self.session.declare_subscriber(key, self._on_sample))
         self.refresh()
@@ -102,13 +105,12 @@ class LiveFeed:
         with self._select_lock:
             if agent == self.selected:
                 return
-            undeclare(*self._selection, self._maps_token)
-            self._selection = [self.session.declare_subscriber(keys.decision(self.world_id, agent), self._on_sample)]
+            undeclare(self._maps_token)
             self.selected = agent
             self._maps_token, self.asked_every, self._last_ask = None, 0, None
             self._ask_maps(self.maps_every)
-            with self._lock:
-                self._decisions.clear()
+            self._decision_asked = -float("inf")
+        self._ask_decision()
 
     def _ask_maps(self, every: int) -> None:
         """Put the selected agent's maps request at `every` ticks (the old one goes after the
@@ -144,9 +146,6 @@ class LiveFeed:
             with self._lock:
                 self._maps.setdefault(keys.agent_of(key) or "", []).append(sample.payload.to_bytes())
                 del self._maps[keys.agent_of(key) or ""][:-16]  # a snapshot has at most 9 layers
-        elif key.endswith("/decision"):
-            # One per agent per tick: kept as bytes, decoded only when a picture is built.
-            self._decisions[key] = sample.payload.to_bytes()
         else:
             self._apply(sample.payload.to_bytes())
 
@@ -154,14 +153,26 @@ class LiveFeed:
         with self._lock:
             self.scene.apply_bytes(data)
 
+    def _ask_decision(self) -> None:
+        """Ask the selected agent for its newest Decision, unless asked within
+        `decision_period`; the answer comes to `_on_decision` (the query does not wait)."""
+        agent, now = self.selected, self.clock()
+        if agent is None or now - self._decision_asked < self.decision_period:
+            return
+        self._decision_asked = now
+        self.session.get(keys.decision(self.world_id, agent), self._on_decision, timeout=max(self.decision_period, 1.0))
+
+    def _on_decision(self, reply: zenoh.Reply) -> None:
+        if reply.ok is not None and keys.agent_of(str(reply.ok.key_expr)) == self.selected:
+            self._apply(reply.ok.payload.to_bytes())
+
     def picture(self) -> tuple[int, str]:
-        """(version, JSON text) of the picture now; built once per change."""
+        """(version, JSON text) of the picture now; built once per change. Asks for the
+        shown agent's newest Decision for the next one."""
+        self._ask_decision()
         with self._lock:
             version = self.scene.version
             if self._cache[0] != version:
-                for data in list(self._decisions.values()):
-                    self.scene.apply_bytes(data)
-                version = self.scene.version
                 self._cache = (version, json.dumps(self.scene.picture()))
             return self._cache
 
@@ -184,8 +195,8 @@ class LiveFeed:
     def close(self) -> None:
         """Undeclare the subscriptions and the maps request (the session is the caller's)."""
         with self._select_lock:
-            undeclare(*self._selection, self._maps_token)
-            self._selection, self._maps_token, self.asked_every = [], None, 0
+            undeclare(self._maps_token)
+            self._maps_token, self.asked_every, self.selected = None, 0, None
         self._declared.close()
 
 
@@ -351,7 +362,7 @@ def serve_live(session: zenoh.Session, world_id: str, stop: threading.Event, *, 
     """Serve the live page for world `world_id` until `stop` is set, sending it at most
     `display_hz` pictures a second; with `maps_every` N, ask the agent the page shows for
     its maps about once a second, never more often than every N ticks (`LiveFeed`)."""
-    feed = LiveFeed(session, world_id, maps_every).start()
+    feed = LiveFeed(session, world_id, maps_every, decision_period=1.0 / display_hz).start()
     try:
         with ViewerServer(feed, host, port, display_hz).serve_in_thread() as server:
             if on_ready:

@@ -125,7 +125,9 @@ def command_error(world: str, agent: str) -> str:
 
 
 def decision(world: str, agent: str) -> str:
-    """Decision publications (state nodes and chosen outputs) for the teacher."""
+    """Decision publications (state nodes and chosen outputs), one a tick, for the teacher
+    and a recorder; also the agent's queryable answering its newest one (a viewer asks at
+    its display rate instead of taking every tick's)."""
     return f"{world_root(world)}/agent/{check_id(agent, 'agent id')}/decision"
 
 

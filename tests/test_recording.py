@@ -17,6 +17,7 @@ import shutil
 import subprocess
 import sys
 import threading
+import time
 from collections import Counter
 from dataclasses import replace
 from pathlib import Path
@@ -34,6 +35,7 @@ from protocol import keys
 from protocol.codec import decode, encode
 from protocol.messages import (
     AgentCommand,
+    Decision,
     LockstepTimeout,
     Perturbation,
     PerturbResult,
@@ -289,6 +291,31 @@ def test_replay_publishes_a_recording_from_a_tick_and_echo_prints_it(bus, tmp_pa
     stop.set()
     echo.join(5)
     assert [line.split("tick=")[1].split(",")[0] for line in lines] == ["4", "5", "6", "7", "8", "9"]
+
+
+def test_a_replay_answers_a_decision_query_with_the_newest_decision_it_sent(bus, tmp_path):
+    # A live viewer asks the shown agent for its newest Decision; in a replay the replayer answers.
+    with McapRecorder(tmp_path / "r.mcap") as rec:
+        for t in range(10):
+            d = Decision("a1", t, (float(t),) + (0.0,) * 5, (0.0,) * 7, "none", "explore")
+            rec.add(keys.decision(W, "a1"), encode(d), 1_000_000 * t)
+    asker = bus.server_session()
+    answered: list[int] = []
+
+    def ask(entry) -> None:
+        if entry.tick not in (3, 8):
+            return
+        for _ in range(100):  # until the replayer's queryable is known on this side
+            for reply in asker.get(keys.decision(W, "a1"), timeout=5):
+                if reply.ok is not None:
+                    answered.append(decode(reply.ok.payload.to_bytes(), Decision).tick)
+                    return
+            time.sleep(0.05)
+
+    sent = publish_recording(bus.client_session(), read_recording(tmp_path / "r.mcap").entries, threading.Event(),
+                             rate=0, wait=0.5, on_message=ask)
+    assert sent == 10
+    assert answered == [3, 8]
 
 
 def test_echo_once_prints_one_message_as_json(bus):

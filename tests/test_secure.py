@@ -118,6 +118,10 @@ def test_an_agent_publishes_only_its_own_keys_and_reads_only_its_own_frames(acl,
     assert _who(acl, "egress", "put", keys.sensors(W, agent)) == {me, OPERATOR, OBSERVER}
     assert _who(acl, "ingress", "declare_subscriber", keys.sensors(W, agent)) == {me, OPERATOR, OBSERVER}
     assert _who(acl, "ingress", "put", keys.reinforcement(W, agent)) == {TEACHER}
+    # Its newest decision: only it answers, a viewer (observer, operator) asks.
+    assert _who(acl, "ingress", "declare_queryable", keys.decision(W, agent)) == {me}
+    assert _who(acl, "ingress", "reply", keys.decision(W, agent)) == {me}
+    assert _who(acl, "ingress", "query", keys.decision(W, agent)) == {OPERATOR, OBSERVER}
 
 
 def test_only_the_world_serves_the_world_and_only_the_operator_perturbs_kills_restarts(acl):

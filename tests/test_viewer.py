@@ -143,6 +143,78 @@ def test_the_page_asks_for_the_maps_of_the_agent_it_shows_only(bus):
         feed.close()
 
 
+def test_the_shown_agents_decision_is_asked_for_at_the_display_rate_not_taken_every_tick(bus):
+    # A stand-in agent: publishes a Decision every tick, as agents do, and answers queries
+    # with its newest. The viewer must take the queried ones only, at most one query per period.
+    from protocol import keys
+    from protocol.messages import Decision
+
+    agent = bus.client_session()
+    newest = {"tick": 7}
+    asked = []
+
+    def answer(query):
+        asked.append(newest["tick"])
+        d = Decision("a1", newest["tick"], (1.0, 0, 0, 0, 0, 0), (0.0,) * 7, "grab", "go-to-brick")
+        query.reply(keys.decision("w0", "a1"), encode(d))
+
+    queryable = agent.declare_queryable(keys.decision("w0", "a1"), answer)
+    publisher = agent.declare_publisher(keys.decision("w0", "a1"))
+    now = [100.0]
+    feed = LiveFeed(bus.server_session(), "w0", clock=lambda: now[0], decision_period=0.2).start()
+    try:
+        feed.scene.apply_bytes(encode(view(5, 0.5)))
+        feed.select("a1")  # asks at once (again each period, until the queryable is known here)
+
+        def answered(tick):
+            now[0] += 0.2
+            return json.loads(feed.picture()[1])["agents"][0].get("decision_tick") == tick
+
+        wait_until(lambda: answered(7), interval=0.2, what="the answer")
+        asked.clear()
+        for tick in range(8, 40):  # every tick's publication: not taken
+            publisher.put(encode(Decision("a1", tick, (0.0,) * 6, (0.0,) * 7, "none", "explore")))
+        for _ in range(20):
+            feed.picture()  # pictures within one period: no further query
+        assert len(asked) <= 1  # the last period's query, answered late at most
+        assert json.loads(feed.picture()[1])["agents"][0]["decision_tick"] == 7
+        newest["tick"] = 41
+        wait_until(lambda: answered(41), interval=0.2, what="the next period's answer")
+        assert len(asked) <= 4
+    finally:
+        feed.close()
+        queryable.undeclare()
+        publisher.undeclare()
+
+
+def test_an_agent_answers_a_query_with_its_newest_decision(bus, start_world):
+    import threading
+
+    from nodes.agent import AgentOptions, AgentReport, run_agent
+    from protocol import decode, keys
+    from protocol.messages import Decision
+
+    rw = start_world(_one_agent_scenario())
+    report, stop = AgentReport(), threading.Event()
+    agent = threading.Thread(target=run_agent, args=(bus.client_session(), AgentOptions("w0", "a1")),
+                             kwargs=dict(stop=stop, report=report), daemon=True)
+    agent.start()
+    asker = bus.client_session()
+    try:
+        wait_until(lambda: report.ticks > 5, what="the agent to be stepping")
+        replies = [r.ok for r in asker.get(keys.decision("w0", "a1"), timeout=5) if r.ok is not None]
+        assert len(replies) == 1
+        d = decode(replies[0].payload.to_bytes(), Decision)
+        assert d.agent_id == "a1" and 5 <= d.tick <= rw.world.tick and len(d.state) == 6
+    finally:
+        stop.set()
+        agent.join(10)
+
+
+def _one_agent_scenario() -> str:
+    return 'name = "one"\nseed = 3\nagents = 1\nlayout = """\n' + LAYOUT.strip("\n") + '\n"""\n'
+
+
 def test_the_maps_interval_gives_about_one_snapshot_a_second_and_never_less_than_asked():
     assert maps_interval(5.0, 10) == 10          # a slow run: every --maps-every ticks
     assert maps_interval(35.0, 10) == 20         # 10 agents in lockstep: not 3.5 a second
@@ -297,3 +369,22 @@ def test_a_live_viewer_decodes_only_the_newest_snapshot_of_an_agents_maps():
     assert [(m.tick, m.layer, m.cells[0]) for m in newest] == [(20, "config", 3), (20, "brick", 4)]
     assert maps_picture(newest)["layers"] == {"config": [3] * 9, "brick": [4] * 9}
     assert decode_newest_maps([]) == [] and decode_newest_maps([b"junk"]) == []
+
+
+def test_a_live_viewer_runs_at_a_lower_cpu_priority_than_the_run(endpoint):
+    # `conag view` (and so `conag run --view`) yields the CPU to the run: nice +10 on every
+    # thread, zenoh's too, by default; and it still stops at once on SIGTERM.
+    import os
+
+    from tests.conftest import Process
+
+    base = os.getpriority(os.PRIO_PROCESS, 0)
+    viewer = Process("view", "--port", "0", "--connect", endpoint)
+    try:
+        viewer.wait_for("viewer at http://127.0.0.1:")
+        tasks = os.listdir(f"/proc/{viewer.proc.pid}/task")
+        assert len(tasks) > 3  # the zenoh runtime's threads too
+        assert {os.getpriority(os.PRIO_PROCESS, int(t)) for t in tasks} == {min(base + 10, 19)}
+        assert viewer.stop() == 0
+    finally:
+        viewer.kill()

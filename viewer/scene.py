@@ -149,6 +149,8 @@ class Scene:
         elif isinstance(msg, AgentState):
             self.states[msg.agent_id] = msg
         elif isinstance(msg, Decision):
+            if self.decisions.get(msg.agent_id) == msg:
+                return False  # asked again with no new tick (a paused world): nothing to redraw
             self.decisions[msg.agent_id] = msg
         else:
             return False
