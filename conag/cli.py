@@ -472,13 +472,16 @@ SLOW_STOP = 60.0   # seconds after Ctrl-C / SIGTERM past which `conag run` shows
 def _report_a_slow_stop(stop: threading.Event, after: float = SLOW_STOP) -> None:
     """Once `stop` is set, print every thread's stack to stderr if the process is still
     alive `after` seconds later. Stopping a run is bounded (each process gets its grace,
-    then SIGKILL), yet CI once saw `conag run` still there 120 s after two Ctrl-Cs, with no
-    trace of where it waited; a daemon thread also fires while the interpreter waits for
-    other threads at exit."""
+    then SIGKILL), yet CI saw `conag run` still there 120 s after two Ctrl-Cs, with no
+    trace: the second signal's handler waited for ever on the Event's lock, which the first
+    held (fixed in `conag.common.stop_on_signals`), and this thread, waiting on the same
+    Event, never woke. So it polls the flag, which takes no lock. A daemon thread also
+    fires while the interpreter waits for other threads at exit."""
     import faulthandler
 
     def watch() -> None:
-        stop.wait()
+        while not stop.is_set():
+            time.sleep(0.5)
         time.sleep(after)
         print(f"conag run: still stopping {after:g} s after the signal; where each thread waits:",
               file=sys.stderr, flush=True)

@@ -111,3 +111,19 @@ def test_the_viewers_display_rate_defaults_to_five_and_refuses_what_it_cannot_se
         with pytest.raises(SystemExit) as exc:
             build_parser().parse_args(["view", "--display-hz", bad])
         assert exc.value.code == 2 and why in capsys.readouterr().err
+
+
+def test_the_slow_stop_report_fires_even_while_the_stop_events_lock_is_held(capfd):
+    # The state CI's hang left: the first signal's handler inside `stop.set()` (flag set, the
+    # Event's lock held, waiters not yet woken). A report waiting on the Event never woke.
+    stop = threading.Event()
+    _report_a_slow_stop(stop, after=0.1)
+    time.sleep(0.2)
+    with stop._cond:
+        stop._flag = True
+        deadline = time.monotonic() + 5
+        err = ""
+        while "still stopping" not in err and time.monotonic() < deadline:
+            time.sleep(0.05)
+            err += capfd.readouterr().err
+    assert "conag run: still stopping 0.1 s after the signal" in err
