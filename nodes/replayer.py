@@ -44,10 +44,10 @@ def publish_recording(session: zenoh.Session, entries: list[Entry], stop: thread
         publishers = {key: declared.add(session.declare_publisher(
             key, reliability=zenoh.Reliability.RELIABLE, congestion_control=zenoh.CongestionControl.BLOCK))
             for key in dict.fromkeys(e.key for e in entries if e.tick >= from_tick)}
-        newest: dict[str, bytes] = {}  # the last Decision re-published on each decision key
-        for key in publishers:
-            if key.endswith("/decision"):
-                declared.add(session.declare_queryable(key, _answer_with_newest(key, newest)))
+        # The last Decision re-published on each decision key (None: none yet), to answer queries.
+        newest: dict[str, bytes | None] = {key: None for key in publishers if key.endswith("/decision")}
+        for key in newest:
+            declared.add(session.declare_queryable(key, _answer_with_newest(key, newest)))
         deadline = clock() + wait
         while clock() < deadline and not stop.is_set() and not any(
                 p.matching_status.matching for p in publishers.values()):
@@ -60,7 +60,7 @@ def publish_recording(session: zenoh.Session, entries: list[Entry], stop: thread
             if stop.is_set():
                 break
             publishers[entry.key].put(entry.data)
-            if entry.key.endswith("/decision"):
+            if entry.key in newest:
                 newest[entry.key] = entry.data
             sent += 1
             if on_message is not None:
@@ -68,7 +68,7 @@ def publish_recording(session: zenoh.Session, entries: list[Entry], stop: thread
     return sent
 
 
-def _answer_with_newest(key: str, newest: dict[str, bytes]) -> Callable[[zenoh.Query], None]:
+def _answer_with_newest(key: str, newest: dict[str, bytes | None]) -> Callable[[zenoh.Query], None]:
     def answer(query: zenoh.Query) -> None:
         data = newest.get(key)
         if data is not None:

@@ -75,13 +75,18 @@ def test_a_run_that_is_slow_to_stop_shows_where_each_thread_waits(capfd):
     time.sleep(0.3)
     assert "still stopping" not in capfd.readouterr().err   # nothing before the signal
     stop.set()
-    deadline = time.monotonic() + 5
-    err = ""
-    while "most recent call first" not in err and time.monotonic() < deadline:
-        time.sleep(0.05)
-        err += capfd.readouterr().err
+    err = _stderr_until(capfd, "most recent call first")
     assert "conag run: still stopping 0.1 s after the signal" in err
     assert "test_a_run_that_is_slow_to_stop_shows_where_each_thread_waits" in err   # this thread's stack
+
+
+def _stderr_until(capfd, text: str, timeout: float = 5.0) -> str:
+    """What the process wrote to stderr until `text` appeared in it (or `timeout` passed)."""
+    deadline, err = time.monotonic() + timeout, ""
+    while text not in err and time.monotonic() < deadline:
+        time.sleep(0.05)
+        err += capfd.readouterr().err
+    return err
 
 
 def test_conag_run_starts_its_recorder_at_the_priority_asked_for(monkeypatch):
@@ -121,9 +126,5 @@ def test_the_slow_stop_report_fires_even_while_the_stop_events_lock_is_held(capf
     time.sleep(0.2)
     with stop._cond:
         stop._flag = True
-        deadline = time.monotonic() + 5
-        err = ""
-        while "still stopping" not in err and time.monotonic() < deadline:
-            time.sleep(0.05)
-            err += capfd.readouterr().err
+        err = _stderr_until(capfd, "still stopping")
     assert "conag run: still stopping 0.1 s after the signal" in err
