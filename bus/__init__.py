@@ -16,7 +16,15 @@ zenoh itself is imported only when a session is opened or a liveliness sample re
 
 from bus.declarations import Declarations, token_event, undeclare, watch_tokens
 from bus.inbox import Inbox, Presence
-from bus.session import DEFAULT_ENDPOINT, MODES, BusOptions, is_client, make_config, open_session
+from bus.session import (
+    DEFAULT_ENDPOINT,
+    MODES,
+    BusOptions,
+    is_client,
+    join_callback_threads,
+    make_config,
+    open_session,
+)
 
-__all__ = ["DEFAULT_ENDPOINT", "MODES", "BusOptions", "Declarations", "Inbox", "Presence", "is_client", "make_config",
-           "open_session", "token_event", "undeclare", "watch_tokens"]
+__all__ = ["DEFAULT_ENDPOINT", "MODES", "BusOptions", "Declarations", "Inbox", "Presence", "is_client",
+           "join_callback_threads", "make_config", "open_session", "token_event", "undeclare", "watch_tokens"]

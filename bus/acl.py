@@ -109,7 +109,9 @@ def agent_role(world: str, agent: str) -> Role:
         ("serve", (keys.decision(world, agent),)),  # its newest Decision, to a viewer
         ("token", (keys.agent_token(world, agent),)),
         # The world's token too: an agent whose world dies waits for it and attaches again.
-        ("watch", (keys.world_token(world), keys.all_teacher_tokens(world), *keys.maps_requests_for(world, agent))),
+        # A recorder's, so a recorded run's agent attaches once the recorder hears it.
+        ("watch", (keys.world_token(world), keys.all_teacher_tokens(world), keys.all_recorder_tokens(world),
+                   *keys.maps_requests_for(world, agent))),
     ))
 
 

@@ -19,8 +19,11 @@ from __future__ import annotations
 
 import json
 import os
+import threading
+import time
 from dataclasses import dataclass
 
+CALLBACK_THREAD = "(pyo3-closure)"   # how zenoh-python names the thread that runs a Python callback
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 MODES = ("peer", "client", "router")
 ROUTER_RUNTIME = "(rx: (worker_threads: 16))"
@@ -99,3 +102,23 @@ def open_session(opts: BusOptions, *, serve: bool = False):
         os.environ.setdefault("ZENOH_RUNTIME", ROUTER_RUNTIME)
     zenoh.init_log_from_env_or("error")
     return zenoh.open(make_config(opts, serve=serve))
+
+
+def join_callback_threads(timeout: float = 2.0) -> bool:
+    """Wait (up to `timeout` seconds in all) for zenoh's callback threads to end, once their
+    sessions are closed; False if some did not. Call it before a process whose callbacks
+    were declared from a daemon thread exits.
+
+    zenoh-python runs each Python callback (a subscriber's, a queryable's) in a Python thread
+    of its own, started when the callback is declared, and a Python thread is a daemon if its
+    starter is: a WorldServer running in a daemon thread (`conag replay --verify`, the Gym
+    env) makes daemon callback threads, which Python's exit does not wait for. One woken by
+    its closed session while the interpreter was finalising could not take the GIL and was
+    unwound through zenoh's Rust frames: the process aborted ("FATAL: exception not
+    rethrown", exit 134) after its work was done.
+    """
+    deadline = time.monotonic() + timeout
+    for thread in threading.enumerate():
+        if thread is not threading.current_thread() and thread.name.endswith(CALLBACK_THREAD):
+            thread.join(max(deadline - time.monotonic(), 0.0))
+    return not any(t.is_alive() and t.name.endswith(CALLBACK_THREAD) for t in threading.enumerate())

@@ -332,7 +332,7 @@ def _agent_options(args):
         network = Student.load(args.weights_in)  # a trained student, acting without learning
     cfg = AgentConfig(map_size=args.map_size, goal_sequencing=not args.nearest_first)
     return AgentOptions(args.world_id, args.id, cfg, args.seed, attach_timeout=args.attach_timeout,
-                        learning=learning, network=network)
+                        recorded=args.recorded, learning=learning, network=network)
 
 
 def cmd_agent(args) -> int:
@@ -369,7 +369,7 @@ def cmd_agents(args) -> int:
     ids = parse_ids(args.ids)
     base = AgentOptions(args.world_id, ids[0], AgentConfig(map_size=args.map_size,
                                                            goal_sequencing=not args.nearest_first),
-                        args.seed, attach_timeout=args.attach_timeout)
+                        args.seed, attach_timeout=args.attach_timeout, recorded=args.recorded)
 
     with _stopped_by_signal():
         session = open_session(_bus(args))
@@ -603,6 +603,9 @@ def _add_agent(sub) -> None:
     a.add_argument("--id", required=True, help="agent id; a restarted process with the same id gets its body back")
     a.add_argument("--seed", type=int, default=0, help="seed of the agent's own randomness (exploring)")
     a.add_argument("--attach-timeout", type=float, default=30.0, help="seconds to wait for the world")
+    a.add_argument("--recorded", action="store_true",
+                   help="the run is recorded: attach once a recorder of the world is heard (at most --attach-timeout "
+                        "seconds), so the recording holds this agent's messages from its first tick")
     a.add_argument("--map-size", type=int, default=AGENT_MAP_SIZE, metavar="N",
                    help=f"cells per side of the agent's maps, odd (default {AGENT_MAP_SIZE})")
     a.add_argument("--nearest-first", action="store_true",
@@ -628,6 +631,9 @@ def _add_agents(sub) -> None:
     a.add_argument("--ids", required=True, metavar="IDS", help="agent ids: ranges and commas, e.g. a1..a20 or a1,a3")
     a.add_argument("--seed", type=int, default=0, help="seed of every agent's own randomness (as conag agent)")
     a.add_argument("--attach-timeout", type=float, default=30.0, help="seconds to wait for the world")
+    a.add_argument("--recorded", action="store_true",
+                   help="the run is recorded: attach once a recorder of the world is heard (at most --attach-timeout "
+                        "seconds), so the recording holds this agent's messages from its first tick")
     a.add_argument("--map-size", type=int, default=AGENT_MAP_SIZE, metavar="N",
                    help=f"cells per side of the agents' maps, odd (default {AGENT_MAP_SIZE})")
     a.add_argument("--nearest-first", action="store_true", help="no goal sequencing (as conag agent)")

@@ -241,12 +241,15 @@ class ConAgParallelEnv(ParallelEnv):
 
     def close(self) -> None:
         """Stop the world and close both sessions."""
+        from bus import join_callback_threads
+
         self._stop_world()
         for s in (self._session, self._server_session):
             try:
                 s.close()
             except Exception:  # noqa: BLE001 -- closing twice, or after zenoh shut down: nothing left to do
                 pass
+        join_callback_threads()  # the world's, declared in a daemon thread (bus.session says why)
 
 
 class ConAgGymEnv(gymnasium.Env):

@@ -179,7 +179,7 @@ def _verify(args, rec, entries, world_id: str) -> int:
 
     import numpy as np
 
-    from bus import BusOptions, open_session
+    from bus import BusOptions, join_callback_threads, open_session
     from nodes.replayer import drive_world
     from nodes.world_server import WorldServer
     from recording.replay import LockstepScript
@@ -192,6 +192,8 @@ def _verify(args, rec, entries, world_id: str) -> int:
     script = LockstepScript.from_entries(entries)
     for limit in script.limits:
         print(f"warning: {limit}: the replay may differ from then on", file=sys.stderr)
+    if script.cut_short:
+        print(f"note: {script.cut_short}: the replay ends at tick {script.last_tick + 1}", file=sys.stderr)
     scenario = parse_scenario(rec.info["scenario"], rec.info.get("scenario_path", "<recording>"))
     # The script stands in for every command the recorded world stepped without: this one
     # never times out itself (a busy machine makes the replay slower, not different).
@@ -225,6 +227,7 @@ def _verify(args, rec, entries, world_id: str) -> int:
         finally:
             client.close()
             serve.close()
+            join_callback_threads()  # the world's, declared in a daemon thread (bus.session says why)
     if result.identical:
         lost = f" ({result.dropped} dropped on the bus, not compared)" if result.dropped else ""
         print(f"identical: {result.matched} frames of {len(script.agents())} agents over ticks 0-"

@@ -107,6 +107,8 @@ class Fleet:
                 "--attach-timeout", str(max(30, 2 * processes))]
         if o.secure is None:  # a secure run's mode is its credential file's (a client of the router)
             args += ["--mode", agent_bus_mode(o.agent_mode, processes)]
+        if o.record:  # attach once the recorder is heard: its link to the agent may come later than the world's
+            args.append("--recorded")
         return args
 
     def start_host(self, first: int, last: int) -> subprocess.Popen:

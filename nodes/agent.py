@@ -94,6 +94,7 @@ class AgentOptions:
     cfg: AgentConfig | None = None    # None: AgentConfig()
     seed: int = 0                     # the agent's own randomness (exploring; a student's random weights)
     attach_timeout: float = 30.0      # seconds to wait for the world
+    recorded: bool = False            # wait (up to attach_timeout) for the run's recorder before attaching
     learning: Learning | None = None  # a learning student (paper §5.1)
     network: object | None = None     # replaces the engineered construction network (e.g. a trained Student)
 
@@ -136,6 +137,10 @@ class AgentProcess:
 
     def attach(self) -> None:
         """Attach to the world and make the brain from the Welcome."""
+        if self.opts.recorded and not self.link.wait_for_recorder(self.opts.attach_timeout):
+            log.warning("agent %s: no recorder of world %s heard within %g s; attaching anyway (the recording "
+                        "may miss this agent's first messages)", self.opts.agent_id, self.opts.world_id,
+                        self.opts.attach_timeout)
         welcome = self.link.attach(timeout=self.opts.attach_timeout)
         log.info("agent %s attached to body %d at (%.2f, %.2f)%s", self.opts.agent_id, welcome.body, welcome.x,
                  welcome.y, f", restart {welcome.restarts}" if welcome.restarts else "")

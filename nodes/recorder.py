@@ -4,8 +4,9 @@ It subscribes to everything published under one world's root (`<root>/world/<id>
 frames, commands, decisions, reinforcements, statuses, blueprints, agent states, the
 world's welcomes and perturbations). zenoh queues them in a FIFO channel; the loop
 thread takes each, stamps it with the clock and writes it, ends a chunk every `flush_every`
-seconds (what a SIGKILL can lose) and, once stopped, writes what is still queued, the
-summary and the footer, and renames the file into place.
+seconds (what a SIGKILL can lose) and, once stopped, writes on until the bus has been
+quiet for `QUIET` seconds (what was still on its way), then the summary and the footer,
+and renames the file into place.
 
 Once the world's first status arrives (the world then routes its publications here too)
 the recorder declares its liveliness token: `conag run --record` starts the agents only
@@ -36,6 +37,8 @@ log = logging.getLogger("conag.record")
 
 QUEUE_DEPTH = 65_536   # samples zenoh may hold for the writer; when full, zenoh's receiving thread waits
 IDLE_SLEEP = 0.002     # seconds the writer sleeps when nothing is waiting
+QUIET = 0.5            # once stopped, the recorder writes on until nothing has come for this long ...
+QUIET_LIMIT = 10.0     # ... or for at most this long
 
 
 @dataclass
@@ -78,6 +81,10 @@ def run_recorder(session: zenoh.Session, world_id: str, out: str | Path, stop: t
                 if time.monotonic() - last_flush >= flush_every:
                     recorder.flush()
                     last_flush = time.monotonic()
+            # Stopped: the last messages may still be on their way (an idle recorder on a busy
+            # machine reads its sockets late; the world's last frames came, an agent's last
+            # commands had not): write on until the bus has been quiet for a while.
+            drain_until_quiet(lambda: _drain(inbox, recorder, status_key, report, clock))
         # Undeclared: nothing more arrives; write what is still in the channel.
         _drain(inbox, recorder, status_key, report, clock)
     finally:
@@ -87,6 +94,18 @@ def run_recorder(session: zenoh.Session, world_id: str, out: str | Path, stop: t
         report.path = recorder.close(end)
         report.messages, report.last_tick = recorder.messages, recorder.tick
     return report
+
+
+def drain_until_quiet(drain: Callable[[], int], quiet: float = QUIET, limit: float = QUIET_LIMIT, *,
+                      clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep) -> None:
+    """Call `drain` (it writes what is waiting, returns how many) until it has found nothing
+    for `quiet` seconds, or for `limit` seconds in all."""
+    start = last = clock()
+    while clock() - last < quiet and clock() - start < limit:
+        if drain():
+            last = clock()
+        else:
+            sleep(IDLE_SLEEP)
 
 
 def _drain(inbox, recorder: McapRecorder, status_key: str, report: RecordReport,

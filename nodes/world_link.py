@@ -133,6 +133,23 @@ class WorldLink:
                 return f"tick {frame.tick} is too far ahead of the last frame's ({self._last_tick})"
         return None
 
+    def wait_for_recorder(self, timeout: float, poll: float = 0.05) -> bool:
+        """Wait until a recorder's liveliness token reaches this session; False if none came
+        within `timeout`. On the default one-host bus (peers that do not forward for each
+        other) a token comes only over a direct link, and only then does the recorder get
+        what this agent publishes: before it, an agent attached at once lost its first
+        commands from the recording (its link to an idle-priority recorder on a busy machine
+        took seconds), and a replay of it could not go past them."""
+        key = keys.all_recorder_tokens(self.world_id)
+        deadline = time.monotonic() + timeout
+        while True:
+            left = deadline - time.monotonic()
+            if any(r.ok is not None for r in self.session.liveliness().get(key, timeout=min(max(left, 0.05), 0.5))):
+                return True
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(poll)
+
     def attach(self, timeout: float = 10.0, retry: float = 0.05) -> Welcome:
         """Ask the world for this agent's body; retry until it answers or `timeout` passes."""
         hello = encode(Hello(self.agent_id, os.getpid()))

@@ -176,8 +176,14 @@ def teacher_token(world: str, teacher: str) -> str:
 
 def recorder_token(world: str, recorder: str) -> str:
     """A recorder's liveliness token, declared once it hears the world (`conag run --record`
-    starts the agents only then, so the recording holds the run from its first tick)."""
+    starts the agents only then, and they attach once they hear it: so the recording holds
+    the run from its first tick)."""
     return f"{world_root(world)}/alive/recorder/{check_id(recorder, 'recorder id')}"
+
+
+def all_recorder_tokens(world: str) -> str:
+    """Every recorder's liveliness token: a recorded run's agents wait for one before they attach."""
+    return f"{world_root(world)}/alive/recorder/*"
 
 
 def all_teacher_tokens(world: str) -> str:

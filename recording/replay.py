@@ -76,6 +76,7 @@ class LockstepScript:
     last_tick: int = 0
     missed: set[tuple[int, str]] = field(default_factory=set)  # (tick, agent): stepped without its command
     limits: list[str] = field(default_factory=list)  # why this recording may not replay exactly
+    cut_short: str = ""   # why the script ends before the recorded frames do (see `_end_at_the_last_full_tick`)
 
     @classmethod
     def from_entries(cls, entries: Iterable[Entry]) -> LockstepScript:
@@ -120,6 +121,7 @@ class LockstepScript:
         for welcomes in script.attaches.values():
             _order_welcomes(welcomes)
         script._add_stand_ins()
+        script._end_at_the_last_full_tick()
         return script
 
     def _add_stand_ins(self) -> None:
@@ -136,6 +138,28 @@ class LockstepScript:
                     speed[c.agent_id] = c.speed
             for a in missed.get(tick, ()):
                 self.commands[tick].append(AgentCommand(a, tick, speed.get(a, 0.0), 0.0, "none"))
+
+    def _end_at_the_last_full_tick(self) -> None:
+        """End the script at the last tick that holds the command of every agent the world
+        still sent frames to at the end. A recorder stopped while some agent's last commands
+        were still on their way (an idle-priority recorder on a busy machine reads its
+        socket late) holds that agent's frames but not its commands: a world fed the script
+        past that tick would wait for ever for a command the recording does not hold."""
+        last_frame: dict[str, int] = {}
+        for t, a in self.frames:
+            last_frame[a] = max(last_frame.get(a, -1), t)
+        last_command: dict[str, int] = dict.fromkeys(last_frame, -1)
+        for t, cmds in self.commands.items():
+            for c in cmds:
+                if c.agent_id in last_command:
+                    last_command[c.agent_id] = max(last_command[c.agent_id], t)
+        end = max(last_frame.values(), default=0)
+        short = [(last_command[a], a) for a in last_frame if last_frame[a] == end and last_command[a] < self.last_tick]
+        if short:
+            tick, agent = min(short)
+            self.cut_short = (f"the recording holds no command of {agent} after tick {tick}, though it holds its "
+                              f"frames to tick {end} (the recorder stopped before they reached it)")
+            self.last_tick = max(tick, 0)
 
     def agents(self) -> list[str]:
         """Every agent that attached, in the order it first did."""

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import threading
 import time
 
 import pytest
 
-from bus import Declarations, Inbox, Presence, undeclare
+from bus import Declarations, Inbox, Presence, join_callback_threads, undeclare
+from bus.session import CALLBACK_THREAD
 
 
 class Entity:
@@ -91,3 +93,22 @@ def test_an_inbox_keeps_every_sample_in_order_until_it_is_closed(bus):
                 got.append(sample.payload.to_bytes().decode())
         assert got == [str(i) for i in range(10)]
         assert inbox.get(0) is None
+
+
+def test_callback_threads_declared_from_a_daemon_thread_are_joined_once_the_session_is_closed(bus):
+    # zenoh-python runs a Python callback in a thread that is a daemon if its starter was: exit
+    # does not wait for those, and one woken during finalisation aborted `conag replay --verify`.
+    session = bus.server_session()
+
+    def callbacks():
+        return [t for t in threading.enumerate() if t.name.endswith(CALLBACK_THREAD)]
+
+    before = set(callbacks())
+    declared = threading.Thread(target=lambda: session.declare_queryable("test/q", lambda q: None), daemon=True)
+    declared.start()
+    declared.join(5)
+    started = [t for t in callbacks() if t not in before]
+    assert started and all(t.daemon for t in started)
+    session.close()
+    assert join_callback_threads(timeout=5.0)
+    assert not any(t.is_alive() for t in started)

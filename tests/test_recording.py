@@ -5,6 +5,9 @@
   readable up to its last chunk when the recorder was killed;
 * a world in lockstep fed a recording's commands sends the recorded frames, byte for byte
   (three agents, a perturbation mid-run);
+* a recorded agent attaches once it hears the recorder, and a recorder stopped writes on
+  until the bus is quiet: the recording holds every agent's commands from first to last;
+  one that lost an agent's last commands is replayed up to its last full tick;
 * `conag replay` publishes a recording again, paced by --rate, from --from;
 * `conag echo` prints decoded messages (text, JSON) and rates.
 """
@@ -29,7 +32,7 @@ from mcap.reader import make_reader
 from agent_runtime.config import AgentConfig
 from nodes.agent import AgentOptions, run_agent
 from nodes.echo import run_echo
-from nodes.recorder import RecordReport, run_recorder
+from nodes.recorder import RecordReport, drain_until_quiet, run_recorder
 from nodes.replayer import drive_world, publish_recording
 from protocol import keys
 from protocol.codec import decode, encode
@@ -184,6 +187,56 @@ def test_a_late_command_is_sent_at_the_tick_the_world_got_it(tmp_path):
     assert script.agents() == ["a1"] and script.last_tick == 4
 
 
+def test_a_recording_that_lost_an_agents_last_commands_is_replayed_up_to_its_last_full_tick(tmp_path):
+    # A recorder stopped on a busy machine held the world's frames to tick 5 but a2's commands
+    # only to tick 2: past that, a replayed world would wait for ever for a2.
+    with McapRecorder(tmp_path / "r.mcap") as rec:
+        for body, a in enumerate(("a1", "a2")):
+            rec.add(keys.welcome(W, a), encode(Welcome(W, a, 0, body, 1.0, 1.0, 0.0, False, 0, 1, 6.0, 1.0, (), ())), 1)
+        for t in range(6):
+            for a in ("a1", "a2"):
+                rec.add(keys.sensors(W, a), _frame(t, a), 10 + t)
+            rec.add(keys.command(W, "a1"), _cmd(t), 10 + t)
+            if t <= 2:
+                rec.add(keys.command(W, "a2"), _cmd(t, "a2"), 10 + t)
+    script = LockstepScript.from_entries(read_recording(tmp_path / "r.mcap").entries)
+    assert script.last_tick == 2
+    assert "no command of a2 after tick 2" in script.cut_short
+
+
+def test_an_agent_that_went_away_does_not_cut_the_replay_short(tmp_path):
+    with McapRecorder(tmp_path / "r.mcap") as rec:
+        for body, a in enumerate(("a1", "a2")):
+            rec.add(keys.welcome(W, a), encode(Welcome(W, a, 0, body, 1.0, 1.0, 0.0, False, 0, 1, 6.0, 1.0, (), ())), 1)
+        for t in range(6):
+            rec.add(keys.sensors(W, "a1"), _frame(t), 10 + t)
+            rec.add(keys.command(W, "a1"), _cmd(t), 10 + t)
+            if t <= 2:   # a2's frames and commands end together: it went away
+                rec.add(keys.sensors(W, "a2"), _frame(t, "a2"), 10 + t)
+                rec.add(keys.command(W, "a2"), _cmd(t, "a2"), 10 + t)
+    script = LockstepScript.from_entries(read_recording(tmp_path / "r.mcap").entries)
+    assert script.last_tick == 5 and script.cut_short == ""
+
+
+def test_a_stopped_recorder_writes_on_until_the_bus_is_quiet():
+    now = [0.0]
+    arrivals = {0.3: 5, 0.7: 2, 1.1: 1, 3.0: 9}   # when messages still on their way come in, and how many
+
+    def drain():
+        due = [t for t in arrivals if t <= now[0]]
+        return sum(arrivals.pop(t) for t in due)
+
+    def sleep(dt):
+        now[0] += dt
+
+    drain_until_quiet(drain, quiet=0.5, limit=10.0, clock=lambda: now[0], sleep=sleep)
+    assert list(arrivals) == [3.0]          # took the three bursts, each within 0.5 s of the one before
+    assert 1.6 <= now[0] < 1.7              # and stopped 0.5 s after the last
+    arrivals.update({t / 10: 1 for t in range(30, 200)})   # a bus that never goes quiet
+    drain_until_quiet(drain, quiet=0.5, limit=2.0, clock=lambda: now[0], sleep=sleep)
+    assert now[0] < 1.7 + 2.1
+
+
 def test_describe_prints_a_message_as_text_or_json_and_never_raises():
     line = describe(keys.command(W, "a1"), _cmd(3, speed=1.5))
     assert line == f"{keys.command(W, 'a1')}: AgentCommand(agent_id='a1', tick=3, speed=1.5, turn=0, action='none')"
@@ -271,6 +324,28 @@ def test_a_recorded_run_of_three_agents_is_reproduced_frame_for_frame_by_a_fresh
     assert replayed.world.tick == ticks
     assert replayed.world.status().sites_filled == rw.world.status().sites_filled
     assert np.array_equal(replayed.world.agent_poses(), rw.world.agent_poses())
+
+
+def test_a_recorded_agent_attaches_only_once_it_hears_the_recorder(bus, start_world):
+    # On the one-host bus peers do not forward for each other: an agent's commands reach the
+    # recorder only over their own link, which may come up after the world's (seconds, for an
+    # idle-priority recorder on a busy machine). A recorded agent waits for it.
+    rw = start_world(SCENARIOS / "quick_wall.toml", wait_agents=1)
+    stop = threading.Event()
+    agent = threading.Thread(target=run_agent, daemon=True, kwargs=dict(
+        session=bus.client_session(), opts=AgentOptions(W, "a1", AgentConfig(), recorded=True, attach_timeout=30),
+        stop=stop))
+    agent.start()
+    try:
+        time.sleep(1.5)
+        assert rw.world.live_agents() == [] and rw.world.tick == 0
+        token = bus.client_session().liveliness().declare_token(keys.recorder_token(W, "recorder"))
+        wait_until(lambda: rw.world.live_agents() == ["a1"], 20, what="a1 to attach once the recorder is up")
+        wait_until(lambda: rw.world.tick > 0, 20, what="the world to step")
+        token.undeclare()
+    finally:
+        stop.set()
+        agent.join(10)
 
 
 def test_replay_publishes_a_recording_from_a_tick_and_echo_prints_it(bus, tmp_path):
