@@ -10,11 +10,13 @@ JSON API; the picture itself is built by the pure `viewer.scene`:
   tick's; its maps about once a second); `GET /api/scene` is the picture now and
   `GET /api/events` a Server-Sent Events stream sending it at `display_hz` (`DISPLAY_HZ`, 5 a second),
   only when something changed: a run of any speed costs the page five pictures a second,
-  and the world nothing but a WorldView every `view_every` ticks;
+  and the world nothing but a WorldView every `view_every` ticks; the same stream pushes
+  the shown agent's maps (event `maps`, as `/api/maps` gives them, with `agent`) once a
+  second when they changed;
 * recording (`Timeline`): `GET /api/timeline` (ticks, progress, metadata) and
   `GET /api/frame?tick=T`, the picture of the newest view at or before T;
 * `GET /api/maps?agent=ID[&tick=T]`: that agent's newest map snapshot (at or before T in a
-  recording), `{"tick", "size", "layers": {name: cells}}` (agents publish them while a
+  recording), `{"tick", "size", "layers": {name: base64 cells}}` (agents publish them while a
   viewer or recorder asks, `--maps-every`);
 * `POST /api/perturb` with `{"op", "x", "y", "to_x", "to_y", "kind"}`: the world's perturb
   query (remove or move a disc from the page), answered with the PerturbResult as JSON.
@@ -85,6 +87,7 @@ class LiveFeed:
         self._lock = threading.Lock()
         self._cache: tuple[int, str] = (-1, "")
         self._maps: dict[str, list[bytes]] = {}  # the newest AgentMaps of each agent, undecoded
+        self._maps_cache: tuple[str, list[bytes], dict[str, Any]] = ("", [], {})  # agent, its raw maps, their picture
         self._declared = Declarations()
 
     def start(self) -> LiveFeed:
@@ -182,7 +185,12 @@ class LiveFeed:
         self._retune_maps()
         with self._lock:
             raw = list(self._maps.get(agent, ()))
-        return maps_picture(decode_newest_maps(raw))
+        cached = self._maps_cache
+        if cached[0] == agent and cached[1] == raw:
+            return cached[2]  # nothing new since the page's last ask (it asks about once a second)
+        picture = maps_picture(decode_newest_maps(raw))
+        self._maps_cache = (agent, raw, picture)
+        return picture
 
     def perturb(self, p: Perturbation, timeout: float = 5.0) -> PerturbResult:
         """Ask the world for `p`; a PerturbResult either way (not ok when no world answers)."""
@@ -310,26 +318,38 @@ def _handler(server: ViewerServer) -> type[BaseHTTPRequestHandler]:
                 self._json({"error": f"no {path}"}, HTTPStatus.NOT_FOUND)
 
         def _events(self, feed: LiveFeed) -> None:
-            """Server-Sent Events: the picture at the display rate, when it changed."""
+            """Server-Sent Events: the picture at the display rate, when it changed, and the
+            shown agent's maps (event `maps`) once a second, when they changed: pushed on the
+            open stream, not asked for by the page (a request a second cost the page and the
+            viewer more than the maps themselves)."""
             self.send_response(200)
             self.send_header("Content-Type", "text/event-stream")
             self.send_header("Cache-Control", "no-store")
             self.send_header("Connection", "close")
             self.end_headers()
-            sent, idle = -1, 0
+            sent, idle, maps_sent, beat = -1, 0, None, 0
+            per_second = max(int(server.display_hz), 1)
             try:
                 while not server.stop.wait(1.0 / server.display_hz):
+                    beat, wrote = beat + 1, False
+                    agent = feed.selected
+                    if agent is not None and beat % per_second == 0:
+                        maps = feed.maps(agent)
+                        if maps is not maps_sent:  # the same object while nothing new came
+                            data = json.dumps({"agent": agent, **maps}).encode()
+                            self.wfile.write(b"event: maps\ndata: " + data + b"\n\n")
+                            maps_sent, wrote = maps, True
                     version, text = feed.picture()
                     if version != sent:
                         self.wfile.write(b"data: " + text.encode() + b"\n\n")
-                        sent, idle = version, 0
+                        sent, idle, wrote = version, 0, True
                     else:
                         idle += 1
                         if idle % int(5 * server.display_hz) == 0:
                             self.wfile.write(b": idle\n\n")  # finds a closed page
-                        else:
-                            continue
-                    self.wfile.flush()
+                            wrote = True
+                    if wrote:
+                        self.wfile.flush()
             except (BrokenPipeError, ConnectionResetError):
                 pass  # the page went away
             self.close_connection = True

@@ -89,7 +89,16 @@ def _check_field(value: object, kind: type, is_tuple: bool, where: str) -> objec
         return struct.unpack(f"<{len(value) // 8}d", value)  # NaN/inf: the message rejects them
     if not isinstance(value, list) or len(value) > MAX_TUPLE:
         raise ProtocolError(f"{where}: expected a list of at most {MAX_TUPLE} items")
+    if kind is int and _plain_ints(value):
+        return tuple(value)
     return tuple(_check_scalar(v, kind, where) for v in value)
+
+
+def _plain_ints(values: list) -> bool:
+    """Whether every item is an int (not a bool) within int64, as `_check_scalar` wants,
+    checked in C (map, set, min, max) rather than item by item: a map snapshot holds
+    thousands (the item-by-item check is the fallback, for its error message)."""
+    return set(map(type, values)) <= {int} and (not values or (min(values) >= -(2**63) and max(values) < 2**63))
 
 
 def decode(data: bytes, expected: type | tuple[type, ...] | None = None) -> object:

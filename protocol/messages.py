@@ -574,7 +574,8 @@ class AgentMap:
         _require(self.layer in MAP_LAYERS, f"AgentMap.layer must be one of {MAP_LAYERS}")
         _require(1 <= self.size <= 89 and self.size % 2 == 1, "AgentMap.size must be odd, 1 to 89")
         _require(len(self.cells) == self.size * self.size, "AgentMap.cells must hold size x size values")
-        _require(all(0 <= c <= MAP_LEVEL for c in self.cells), f"AgentMap.cells must be 0 to {MAP_LEVEL}")
+        # min and max run in C: a snapshot of nine 41 x 41 layers is 15,129 cells
+        _require(min(self.cells) >= 0 and max(self.cells) <= MAP_LEVEL, f"AgentMap.cells must be 0 to {MAP_LEVEL}")
 
 
 MESSAGE_TYPES: tuple[type, ...] = (

@@ -391,6 +391,13 @@ FRAME = EXAMPLES[SensorFrame]
         pytest.param(_with(FRAME, ranges=[[1.0]] * (4 * 8)), id="list-items-in-float-tuple"),
         pytest.param(_with(FRAME, ranges=[True] * (4 * 8)), id="bool-items-in-float-tuple"),
         pytest.param(_with(EXAMPLES[WorldStatus], agent_alive=[1, 0]), id="int-items-in-bool-tuple"),
+        # int tuples are checked in C as a whole first: the odd item out must still be caught
+        pytest.param(_with(EXAMPLES[AgentMap], cells=[1] * 8 + [True]), id="bool-item-in-int-tuple"),
+        pytest.param(_with(EXAMPLES[AgentMap], cells=[1] * 8 + [1.0]), id="float-item-in-int-tuple"),
+        pytest.param(_with(EXAMPLES[AgentMap], cells=[1] * 8 + ["1"]), id="str-item-in-int-tuple"),
+        pytest.param(_with(EXAMPLES[AgentMap], cells=[1] * 8 + [2**64 - 1]), id="item-over-int64-in-int-tuple"),
+        pytest.param(_with(EXAMPLES[AgentMap], cells=[1] * 8 + [-1]), id="map-cell-below-0"),
+        pytest.param(_with(EXAMPLES[AgentMap], cells=[1] * 8 + [128]), id="map-cell-over-level"),
         pytest.param(_with(EXAMPLES[WorldStatus], agent_ids=[1, 2]), id="int-items-in-str-tuple"),
         pytest.param(_with(EXAMPLES[Hello], pid=True), id="hello-bool-pid"),
         pytest.param(_with(EXAMPLES[Reinforcement], arm=True), id="reinforcement-bool-arm"),

@@ -5,7 +5,9 @@ tests/test_viewer_browser.py."""
 from __future__ import annotations
 
 import json
+import time
 import urllib.request
+from collections.abc import Callable
 
 import pytest
 
@@ -16,7 +18,7 @@ from protocol.messages import BEHAVIOURS, AgentState, WorldStatus, WorldView
 from recording.mcap_log import McapRecorder, read_recording
 from tests.conftest import RunningWorld, make, wait_until
 from tests.scripted import ScriptedBody
-from viewer.scene import MAPS_STEPS, Scene, Timeline, maps_interval
+from viewer.scene import MAPS_STEPS, Scene, Timeline, layer_cells, maps_interval
 
 # A filled site (B: a brick on a site) at (2.5, 2.5), an empty one at (4.5, 2.5), a brick, a
 # food disc, a wall cell and an agent start.
@@ -139,6 +141,56 @@ def test_the_page_asks_for_the_maps_of_the_agent_it_shows_only(bus):
             wait_until(lambda: requests("a1") == ["conag/v4/world/w0/alive/maps/v1/a1/10"], what="a1's request")
             get(server.url + "api/maps?agent=a2")
             wait_until(lambda: requests("a1") == [] and requests("a2"), what="the request to follow the page")
+    finally:
+        feed.close()
+
+
+def _maps_events(url: str, until: Callable[[list[dict]], bool], timeout: float = 20.0) -> list[dict]:
+    """The `maps` events of the page's event stream, read until `until(events)` holds."""
+    events, event = [], "message"
+    deadline = time.monotonic() + timeout
+    with urllib.request.urlopen(url + "api/events", timeout=timeout) as stream:
+        while not until(events):
+            assert time.monotonic() < deadline, f"maps events so far: {events}"
+            line = stream.readline().decode().rstrip("\n")
+            if line.startswith("event: "):
+                event = line[len("event: "):]
+            elif line.startswith("data: ") and event == "maps":
+                events.append(json.loads(line[len("data: "):]))
+            elif not line:
+                event = "message"
+    return events
+
+
+def test_the_shown_agents_maps_are_pushed_on_the_event_stream_once_each_when_they_change(bus):
+    # A page polling /api/maps every second cost it and the viewer more than the maps did: the
+    # stream that carries the pictures pushes a snapshot once, when a new one came.
+    from protocol import keys
+    from protocol.messages import AgentMap
+
+    feed = LiveFeed(bus.server_session(), "w0", maps_every=10, requester="v1").start()
+    agent = bus.client_session()
+    pub = agent.declare_publisher(keys.agent_maps("w0", "a1"))
+
+    def snapshot(tick: int, value: int) -> None:
+        for layer in ("config", "brick"):
+            pub.put(encode(AgentMap("a1", tick, layer, 3, (value,) * 9)))
+
+    try:
+        with ViewerServer(feed, display_hz=10).serve_in_thread() as server:
+            get(server.url + "api/maps?agent=a1")  # the page shows a1
+            wait_until(lambda: feed.asked_every == 10, what="a1's maps request")
+            snapshot(10, 3)
+            start = time.monotonic()
+            events = _maps_events(server.url, lambda ev: any(e["tick"] == 10 for e in ev))
+            assert events[-1]["agent"] == "a1" and events[-1]["size"] == 3
+            assert {k: layer_cells(v) for k, v in events[-1]["layers"].items()} == {"config": [3] * 9, "brick": [3] * 9}
+            # nothing new for three seconds: sent once only (a new stream gets the newest at once)
+            quiet = _maps_events(server.url, lambda ev: time.monotonic() > start + 3 and len(ev) >= 1, timeout=10)
+            assert [e["tick"] for e in quiet] == [10]
+            snapshot(20, 5)
+            events = _maps_events(server.url, lambda ev: any(e["tick"] == 20 for e in ev))
+            assert {k: layer_cells(v) for k, v in events[-1]["layers"].items()} == {"config": [5] * 9, "brick": [5] * 9}
     finally:
         feed.close()
 
@@ -353,7 +405,7 @@ def test_the_timeline_gives_an_agents_maps_at_a_tick():
     timeline = Timeline.from_entries(entries)
     assert timeline.maps_at("a1", 15)["tick"] == 10 and timeline.maps_at("a1", 99)["tick"] == 20
     assert timeline.maps_at("a1", 5)["layers"] == {} and timeline.maps_at("a2", 20)["size"] == 0
-    assert len(timeline.maps_at("a1", 20)["layers"]["config_nm"]) == brain.maps.size ** 2
+    assert len(layer_cells(timeline.maps_at("a1", 20)["layers"]["config_nm"])) == brain.maps.size ** 2
 
 
 def test_a_live_viewer_decodes_only_the_newest_snapshot_of_an_agents_maps():
@@ -367,7 +419,8 @@ def test_a_live_viewer_decodes_only_the_newest_snapshot_of_an_agents_maps():
            layer(20, "config", 3), b"not msgpack", layer(20, "brick", 4)]   # the newest, one bad message
     newest = decode_newest_maps(raw)
     assert [(m.tick, m.layer, m.cells[0]) for m in newest] == [(20, "config", 3), (20, "brick", 4)]
-    assert maps_picture(newest)["layers"] == {"config": [3] * 9, "brick": [4] * 9}
+    layers = maps_picture(newest)["layers"]
+    assert {name: layer_cells(cells) for name, cells in layers.items()} == {"config": [3] * 9, "brick": [4] * 9}
     assert decode_newest_maps([]) == [] and decode_newest_maps([b"junk"]) == []
 
 

@@ -24,6 +24,7 @@ from protocol import encode
 from recording.mcap_log import McapRecorder
 from tests.conftest import ROOT, SCENARIOS, RunningWorld, make, wait_until
 from tests.test_viewer import LAYOUT, view
+from viewer.scene import layer_cells
 
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 CHROMEDRIVER = shutil.which("chromedriver") or "/usr/bin/chromedriver"
@@ -213,7 +214,7 @@ def test_a_recorded_fig19_build_opens_and_plays(tmp_path, browser):
                    what="a1's nine maps")  # seen to take over 10 s with both cores busy elsewhere
         maps = browser.execute_script("return window.viewer.maps")
         assert maps["tick"] <= timeline["last"] and maps["size"] == 41
-        assert max(maps["layers"]["config"]) > 0  # the blueprint's sites on its configuration ESM
+        assert max(layer_cells(maps["layers"]["config"])) > 0  # the blueprint's sites on its configuration ESM
         shot = os.environ.get("CONAG_SCREENSHOT")
         if shot:
             browser.find_element(By.TAG_NAME, "body").screenshot(shot)

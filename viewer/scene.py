@@ -22,6 +22,7 @@ messages, recorded with `--maps-every`), as `maps_picture` gives it.
 
 from __future__ import annotations
 
+import base64
 import bisect
 import json
 from collections.abc import Callable, Iterable
@@ -68,13 +69,21 @@ def static_dir() -> Path:
 
 def maps_picture(layers: Iterable[AgentMap]) -> dict[str, Any]:
     """An agent's map snapshot as the page draws it: `{"tick", "size", "layers": {name: cells}}`
-    (the newest tick among `layers`, and only the layers of that tick)."""
+    (the newest tick among `layers`, and only the layers of that tick), each layer's cells
+    the base64 of its size x size bytes (values 0 to MAP_LEVEL), row by row: a tenth of
+    the work of JSON numbers, for the viewer and for a page on the run's own cores."""
     layers = list(layers)
     if not layers:
         return {"tick": None, "size": 0, "layers": {}}
     tick = max(m.tick for m in layers)
     now = [m for m in layers if m.tick == tick]
-    return {"tick": tick, "size": now[0].size, "layers": {m.layer: list(m.cells) for m in now}}
+    return {"tick": tick, "size": now[0].size,
+            "layers": {m.layer: base64.b64encode(bytes(m.cells)).decode("ascii") for m in now}}
+
+
+def layer_cells(encoded: str) -> list[int]:
+    """A layer of `maps_picture` back as its cell values."""
+    return list(base64.b64decode(encoded))
 
 
 def decode_maps(raw: Iterable[bytes]) -> list[AgentMap]:

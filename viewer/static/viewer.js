@@ -160,11 +160,18 @@ function drawDetails(p) {
 
 // the selected agent's maps: ESMs grey (dark = sure), NMs bright near a goal, dark far, black unreachable
 const MAP_ORDER = ["food", "water", "brick", "obstacle", "config", "agent", "config_nm", "brick_nm", "matching"];
-async function loadMaps() {
-  const id = viewer.selectedAgent, note = document.getElementById("mapsnote"), box = document.getElementById("maps");
-  if (!id) { box.innerHTML = ""; note.textContent = ""; viewer.mapsShown = null; return; }
+const painted = {};  // layer name -> the cells its canvas shows (of whichever agent is selected)
+async function loadMaps() {  // asked for: on a click, and for each picture of a recording
+  const id = viewer.selectedAgent;
+  if (!id) { showMaps(null, null); return; }
   const tick = viewer.picture ? viewer.picture.tick : 0;
-  const m = await (await fetch(`/api/maps?agent=${encodeURIComponent(id)}&tick=${tick}`)).json();
+  showMaps(id, await (await fetch(`/api/maps?agent=${encodeURIComponent(id)}&tick=${tick}`)).json());
+}
+
+function showMaps(id, m) {  // live, the viewer also pushes them once a second when they change
+  const note = document.getElementById("mapsnote"), box = document.getElementById("maps");
+  if (!id) { box.innerHTML = ""; note.textContent = ""; viewer.mapsShown = null; return; }
+  if (id !== viewer.selectedAgent) return;  // an answer for the agent shown before
   viewer.maps = m;
   if (!m.size) { box.innerHTML = ""; viewer.mapsShown = null;
     note.textContent = "no maps from this agent (a viewer or recorder asks for them with --maps-every N)"; return; }
@@ -178,25 +185,32 @@ async function loadMaps() {
     if (!cells) { if (c) c.parentElement.remove(); continue; }
     if (!c) {  // one figure per layer, made once and painted again for each snapshot
       const fig = document.createElement("figure"), cap = document.createElement("figcaption");
-      c = document.createElement("canvas"); c.dataset.layer = name; cap.textContent = name;
+      c = document.createElement("canvas"); c.dataset.layer = name; cap.textContent = name; delete painted[name];
       fig.appendChild(c); fig.appendChild(cap);
       const after = MAP_ORDER.slice(MAP_ORDER.indexOf(name) + 1)
         .map(n => box.querySelector(`canvas[data-layer="${n}"]`)).find(Boolean);
       box.insertBefore(fig, after ? after.parentElement : null);
     }
-    if (c.width !== m.size) { c.width = c.height = m.size; c.style.width = c.style.height = `${m.size * 2}px`; }
+    if (c.width !== m.size) { c.width = c.height = m.size; c.style.width = c.style.height = `${m.size * 2}px`;
+                              delete painted[name]; }
+    // A layer that did not change since it was painted (a food ESM, mostly) is not painted again:
+    // each canvas painted is one more for the browser to composite, on the run's own cores.
+    if (painted[name] === cells) continue;
+    painted[name] = cells;
+    viewer.mapPaints = (viewer.mapPaints || 0) + 1;
+    const bytes = atob(cells);  // base64 of the size x size cell values (viewer/scene.py, maps_picture)
     const g = c.getContext("2d"), img = g.createImageData(m.size, m.size), nm = name.endsWith("_nm");
-    cells.forEach((v, i) => {
+    for (let i = 0; i < bytes.length; i++) {
+      const v = bytes.charCodeAt(i);
       let r, gr, b;
       if (nm) { if (v >= 127) { r = gr = b = 0; } else { const k = Math.max(0, 1 - v / 40); r = 255 * k; gr = 200 * k; b = 60 * k; } }
       else { r = gr = b = 255 - 2 * v; }
       const o = 4 * i; img.data[o] = r; img.data[o + 1] = gr; img.data[o + 2] = b; img.data[o + 3] = 255;
-    });
+    }
     const mid = (m.size >> 1) * m.size + (m.size >> 1); img.data.set([200, 30, 90, 255], 4 * mid);
     g.putImageData(img, 0, 0);
   }
 }
-setInterval(() => { if (viewer.selectedAgent && viewer.mode === "live") loadMaps(); }, 1000);
 
 function selectAgent(id) { viewer.selectedAgent = id; if (viewer.picture) draw(viewer.picture); loadMaps(); }
 
@@ -248,6 +262,8 @@ function live() {
                                                         if (!viewer.frozen) draw(JSON.parse(p)); });
     pending = ev.data;  // parsed only if it is drawn
   };  // frozen: tests read one picture
+  // the shown agent's maps, pushed when they change (about once a second; nodes/viewer.py)
+  es.addEventListener("maps", (ev) => { const m = JSON.parse(ev.data); if (!viewer.frozen) showMaps(m.agent, m); });
   fetch("/api/scene").then(r => r.json()).then(p => { if (!viewer.frames) draw(p); });
 }
 
