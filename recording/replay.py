@@ -141,10 +141,12 @@ class LockstepScript:
 
     def _end_at_the_last_full_tick(self) -> None:
         """End the script at the last tick that holds the command of every agent the world
-        still sent frames to at the end. A recorder stopped while some agent's last commands
-        were still on their way (an idle-priority recorder on a busy machine reads its
-        socket late) holds that agent's frames but not its commands: a world fed the script
-        past that tick would wait for ever for a command the recording does not hold."""
+        still sent frames to. A recorder stopped while some agent's last commands were still
+        on their way (an idle-priority recorder on a busy machine reads its socket late)
+        holds that agent's frames but not its commands: a world fed the script past that
+        tick would wait for ever for a command the recording does not hold. (An agent that
+        went away has its frames end with its commands: a command answers the frame of its
+        tick, so the last frame is at most one tick past the last command.)"""
         last_frame: dict[str, int] = {}
         for t, a in self.frames:
             last_frame[a] = max(last_frame.get(a, -1), t)
@@ -153,12 +155,12 @@ class LockstepScript:
             for c in cmds:
                 if c.agent_id in last_command:
                     last_command[c.agent_id] = max(last_command[c.agent_id], t)
-        end = max(last_frame.values(), default=0)
-        short = [(last_command[a], a) for a in last_frame if last_frame[a] == end and last_command[a] < self.last_tick]
+        short = [(last_command[a], a) for a in last_frame
+                 if last_command[a] < min(last_frame[a] - 1, self.last_tick)]
         if short:
             tick, agent = min(short)
             self.cut_short = (f"the recording holds no command of {agent} after tick {tick}, though it holds its "
-                              f"frames to tick {end} (the recorder stopped before they reached it)")
+                              f"frames to tick {last_frame[agent]} (the recorder stopped before they reached it)")
             self.last_tick = max(tick, 0)
 
     def agents(self) -> list[str]:
