@@ -457,6 +457,11 @@ def cmd_run(args) -> int:
           f"{summary['total_distance']:.1f}", flush=True)
     if args.record:
         print(f"recording written to {args.record}")
+        from recording.mcap_log import read_end, world_cut_short
+
+        short = world_cut_short(read_end(args.record), summary["ticks"])
+        if short:
+            print(f"warning: the recording {short}", file=sys.stderr, flush=True)
     if args.summary == "-":
         print(json.dumps(summary, indent=2))
     elif args.summary:

@@ -207,6 +207,32 @@ def read_recording(path: str | Path, keep: Callable[[str], bool] | None = None) 
         return _read_stream(f, keep)
 
 
+def read_end(path: str | Path) -> dict[str, str]:
+    """The `conag.end` metadata of a finished recording, from its summary alone (empty for
+    a recording cut short, or one that is not there)."""
+    try:
+        with open(path, "rb") as f:
+            return next((dict(m.metadata) for m in make_reader(f).iter_metadata() if m.name == END_METADATA), {})
+    except Exception:  # noqa: BLE001 -- no summary (McapError), no file: nothing to say
+        return {}
+
+
+def world_cut_short(end: Mapping[str, str], final_tick: int) -> str:
+    """What a run's recording lacks of the world ('' if nothing): the world publishes a
+    status as it stops, so a recording that heard the whole run holds one of the run's last
+    tick (`end["ticks"]`, the newest heard). An idle recorder starved longer than zenoh
+    waits on a full queue (5 s) had the world's link to it closed, and heard no more."""
+    try:
+        heard = int(end.get("ticks", ""))
+    except ValueError:
+        return "holds no status of the world"
+    if heard >= final_tick:
+        return ""
+    return (f"holds the world's messages only up to about tick {heard} of {final_tick} (the recorder fell too far "
+            "behind and the world's link to it was closed: record with --record-priority low or normal on a busy "
+            "machine)")
+
+
 def _entry(channel: Channel, message: Message, tick_ns: int) -> Entry:
     return Entry(channel.topic, message.publish_time // tick_ns, message.sequence, message.log_time,
                  bytes(message.data))

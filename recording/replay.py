@@ -144,9 +144,11 @@ class LockstepScript:
         still sent frames to. A recorder stopped while some agent's last commands were still
         on their way (an idle-priority recorder on a busy machine reads its socket late)
         holds that agent's frames but not its commands: a world fed the script past that
-        tick would wait for ever for a command the recording does not hold. (An agent that
-        went away has its frames end with its commands: a command answers the frame of its
-        tick, so the last frame is at most one tick past the last command.)"""
+        tick would wait for ever for a command the recording does not hold. So the script
+        ends before the first tick at which an agent had a frame (it was attached) but the
+        recording holds no command of it; the last tick of a run is often one (the world
+        stopped there, and some answers to its last frames came too late to be recorded).
+        An agent that went away has its frames end with its commands: it cuts nothing."""
         last_frame: dict[str, int] = {}
         for t, a in self.frames:
             last_frame[a] = max(last_frame.get(a, -1), t)
@@ -156,7 +158,7 @@ class LockstepScript:
                 if c.agent_id in last_command:
                     last_command[c.agent_id] = max(last_command[c.agent_id], t)
         short = [(last_command[a], a) for a in last_frame
-                 if last_command[a] < min(last_frame[a] - 1, self.last_tick)]
+                 if last_command[a] < min(last_frame[a], self.last_tick)]
         if short:
             tick, agent = min(short)
             self.cut_short = (f"the recording holds no command of {agent} after tick {tick}, though it holds its "

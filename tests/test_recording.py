@@ -92,6 +92,20 @@ def test_a_recording_has_a_channel_per_key_with_ticks_sequences_and_metadata(tmp
     assert recording.entries[-1].tick == 7 and recording.entries[-1].seq == 1
 
 
+def test_a_recording_that_lost_the_world_before_the_run_ended_says_so(tmp_path):
+    from recording.mcap_log import read_end, world_cut_short
+
+    rec = McapRecorder(tmp_path / "r.mcap")
+    rec.add(keys.sensors(W, "a1"), _frame(0), 1)
+    rec.close({"ticks": "115"})     # the newest status it heard
+    end = read_end(tmp_path / "r.mcap")
+    assert end["ticks"] == "115"
+    assert "only up to about tick 115 of 300" in world_cut_short(end, 300)
+    assert world_cut_short(end, 115) == ""
+    assert world_cut_short({}, 300) == "holds no status of the world"
+    assert read_end(tmp_path / "missing.mcap") == {}
+
+
 def test_a_recording_cut_by_sigkill_reads_up_to_its_last_flushed_chunk(tmp_path):
     rec = McapRecorder(tmp_path / "r.mcap")
     for t in range(50):
@@ -203,6 +217,21 @@ def test_a_recording_that_lost_an_agents_last_commands_is_replayed_up_to_its_las
     script = LockstepScript.from_entries(read_recording(tmp_path / "r.mcap").entries)
     assert script.last_tick == 2
     assert "no command of a2 after tick 2" in script.cut_short
+
+
+def test_a_recording_whose_last_tick_lacks_an_agents_command_is_replayed_up_to_the_tick_before(tmp_path):
+    # The world stopped at tick 5 (its last frames went out); a2's answer to frame 5 came too
+    # late for the recorder, a1's did not: a world fed a1's command of tick 5 waits for a2's.
+    with McapRecorder(tmp_path / "r.mcap") as rec:
+        for body, a in enumerate(("a1", "a2")):
+            rec.add(keys.welcome(W, a), encode(Welcome(W, a, 0, body, 1.0, 1.0, 0.0, False, 0, 1, 6.0, 1.0, (), ())), 1)
+        for t in range(6):
+            for a in ("a1", "a2"):
+                rec.add(keys.sensors(W, a), _frame(t, a), 10 + t)
+                if a == "a1" or t < 5:
+                    rec.add(keys.command(W, a), _cmd(t, a), 10 + t)
+    script = LockstepScript.from_entries(read_recording(tmp_path / "r.mcap").entries)
+    assert script.last_tick == 4 and "no command of a2 after tick 4" in script.cut_short
 
 
 def test_an_agent_that_went_away_does_not_cut_the_replay_short(tmp_path):
