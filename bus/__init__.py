@@ -14,7 +14,7 @@ zenoh itself is imported only when a session is opened or a liveliness sample re
 `conag --help` does not load it.
 """
 
-from bus.declarations import Declarations, token_event, undeclare, watch_tokens
+from bus.declarations import Declarations, token_event, undeclare, wait_for_token, watch_tokens
 from bus.inbox import Inbox, Presence
 from bus.session import (
     DEFAULT_ENDPOINT,
@@ -27,4 +27,5 @@ from bus.session import (
 )
 
 __all__ = ["DEFAULT_ENDPOINT", "MODES", "BusOptions", "Declarations", "Inbox", "Presence", "is_client",
-           "join_callback_threads", "make_config", "open_session", "token_event", "undeclare", "watch_tokens"]
+           "join_callback_threads", "make_config", "open_session", "token_event", "undeclare", "wait_for_token",
+           "watch_tokens"]

@@ -121,7 +121,7 @@ def teacher_role(world: str) -> Role:
         ("publish", (keys.all_agents(world, "reinforcement"),)),
         ("subscribe", (keys.all_agents(world, "decision"),)),
         ("token", (keys.all_teacher_tokens(world),)),
-        ("watch", (keys.all_agent_tokens(world),)),
+        ("watch", (keys.all_agent_tokens(world), keys.all_recorder_tokens(world))),
     ))
 
 

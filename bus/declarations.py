@@ -12,6 +12,7 @@ keeps the set of ids whose token is up, for a loop that polls it.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from typing import TypeVar
 
@@ -69,3 +70,17 @@ def watch_tokens(session, key: str, on_event: Callable[[str, bool], None]):
     thread, tokens already there first; returns the subscriber (to undeclare)."""
     return session.liveliness().declare_subscriber(key, lambda sample: on_event(*token_event(sample)),
                                                    history=True)
+
+
+def wait_for_token(session, key: str, timeout: float, poll: float = 0.05) -> bool:
+    """Wait until a liveliness token matching `key` reaches `session`; False if none came
+    within `timeout` seconds. (On the one-host bus, peers do not forward for each other: a
+    peer's token comes only over a direct link to it, and so does what it publishes.)"""
+    deadline = time.monotonic() + timeout
+    while True:
+        left = deadline - time.monotonic()
+        if any(r.ok is not None for r in session.liveliness().get(key, timeout=min(max(left, 0.05), 0.5))):
+            return True
+        if time.monotonic() >= deadline:
+            return False
+        time.sleep(poll)

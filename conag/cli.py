@@ -57,6 +57,7 @@ error; {EXIT_INCOMPLETE} not complete when the tick limit passed; {EXIT_STALLED}
 interrupted (Ctrl-C or SIGTERM) before the structure was complete"""
 CHECKPOINT_EVERY = 100  # world_server.checkpoint.DEFAULT_EVERY, without importing it for --help
 AGENT_MAP_SIZE = 41  # AgentConfig's default, without importing the agent for --help
+TEACHER_RECORDER_WAIT = 60.0  # seconds `conag teacher --recorded` waits for the recorder before it teaches
 
 
 def _status_line(st) -> str:
@@ -408,7 +409,8 @@ def cmd_teacher(args) -> int:
         session = open_session(_bus(args))
         try:
             teacher = run_teacher(session, args.world_id, stop, args.id, on_ready=ready,
-                                  on_progress=None if args.quiet else show)
+                                  on_progress=None if args.quiet else show,
+                                  recorded=TEACHER_RECORDER_WAIT if args.recorded else 0.0)
         finally:
             session.close()
     print(f"final: {teacher.progress()}  bad {teacher.bad_messages}", flush=True)
@@ -652,6 +654,9 @@ def _add_teacher(sub) -> None:
     t = sub.add_parser("teacher", help="run the teacher: reinforce learning students (paper §5.1)")
     t.add_argument("--id", default="teacher", help="teacher id for its liveliness token (default teacher)")
     t.add_argument("--quiet", action="store_true", help="no progress lines")
+    t.add_argument("--recorded", action="store_true",
+                   help="the run is recorded: start teaching once a recorder of the world is heard (at most "
+                        f"{TEACHER_RECORDER_WAIT:g} s), so the recording holds the first reinforcements")
     _bus_args(t)
     t.set_defaults(func=cmd_teacher)
 

@@ -434,8 +434,8 @@ def _wait_until(*conditions: Callable[[], bool], poll: float = 0.1) -> None:
 
 def _start_teacher(opts: RunOptions) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "conag", "teacher", "--world-id", opts.world_id,
-                             *bus_flags(opts, TEACHER), "--quiet"], stdin=subprocess.DEVNULL,
-                            stdout=subprocess.DEVNULL)
+                             *bus_flags(opts, TEACHER), "--quiet", *(["--recorded"] if opts.record else [])],
+                            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
 
 
 def _start_recorder(opts: RunOptions) -> subprocess.Popen:

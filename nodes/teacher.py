@@ -19,7 +19,7 @@ import time
 
 import zenoh
 
-from bus import Declarations, Inbox, Presence, undeclare
+from bus import Declarations, Inbox, Presence, undeclare, wait_for_token
 from protocol import keys
 from protocol.codec import ProtocolError, decode, encode
 from protocol.messages import Decision
@@ -90,13 +90,23 @@ class TeacherLink:
 
 def run_teacher(session: zenoh.Session, world_id: str, stop, teacher_id: str = "teacher",
                 on_progress=None, progress_every: float = 1.0, teacher: Teacher | None = None,
-                on_ready=None) -> Teacher:
+                on_ready=None, recorded: float = 0.0) -> Teacher:
     """Reinforce every student of `world_id` until `stop` is set.
 
     `on_ready()` once the subscriptions and the token are declared; `on_progress(teacher,
     present)` every `progress_every` seconds (`present`: the students whose token is up).
+    `recorded` > 0: the run is recorded; wait up to that many seconds for the recorder's
+    token first (its link to this process), so that the recording holds the first
+    reinforcements too (students decide aloud only once they see the teacher's token).
     """
     teacher = teacher if teacher is not None else Teacher()
+    if recorded > 0:
+        while not stop.is_set() and not wait_for_token(session, keys.all_recorder_tokens(world_id), 0.5):
+            recorded -= 0.5
+            if recorded <= 0:
+                log.warning("teacher %s: no recorder of world %s heard; teaching anyway (the recording may miss "
+                            "the first reinforcements)", teacher_id, world_id)
+                break
     with TeacherLink(session, world_id, teacher_id) as link:
         if on_ready is not None:
             on_ready()

@@ -33,7 +33,7 @@ from collections.abc import Callable
 
 import zenoh
 
-from bus import Declarations, watch_tokens
+from bus import Declarations, wait_for_token, watch_tokens
 from protocol import keys
 from protocol.codec import ProtocolError, decode, encode
 from protocol.messages import AgentCommand, Hello, SensorFrame, Welcome
@@ -140,15 +140,7 @@ class WorldLink:
         what this agent publishes: before it, an agent attached at once lost its first
         commands from the recording (its link to an idle-priority recorder on a busy machine
         took seconds), and a replay of it could not go past them."""
-        key = keys.all_recorder_tokens(self.world_id)
-        deadline = time.monotonic() + timeout
-        while True:
-            left = deadline - time.monotonic()
-            if any(r.ok is not None for r in self.session.liveliness().get(key, timeout=min(max(left, 0.05), 0.5))):
-                return True
-            if time.monotonic() >= deadline:
-                return False
-            time.sleep(poll)
+        return wait_for_token(self.session, keys.all_recorder_tokens(self.world_id), timeout, poll)
 
     def attach(self, timeout: float = 10.0, retry: float = 0.05) -> Welcome:
         """Ask the world for this agent's body; retry until it answers or `timeout` passes."""

@@ -128,6 +128,30 @@ def test_a_burst_of_2000_decisions_gets_2000_reinforcements_in_order(bus):
         teacher.kill()
 
 
+def test_a_recorded_teacher_teaches_only_once_it_hears_the_recorder(bus):
+    # Peers do not forward for each other: the recorder gets the teacher's reinforcements only
+    # over its own link to the teacher. A recorded teacher shows its token (students then
+    # decide aloud) once the recorder's token has come over that link.
+    from nodes.teacher import run_teacher
+
+    session, watcher = bus.server_session(), bus.client_session()
+    stop = threading.Event()
+    thread = threading.Thread(target=run_teacher, args=(session, "w0", stop), kwargs=dict(recorded=30.0), daemon=True)
+    thread.start()
+
+    def teachers():
+        return [r for r in watcher.liveliness().get(keys.all_teacher_tokens("w0"), timeout=0.5) if r.ok is not None]
+
+    try:
+        assert teachers() == [] and teachers() == []   # a second and more in: still waiting
+        token = bus.client_session().liveliness().declare_token(keys.recorder_token("w0", "recorder"))
+        wait_until(teachers, 20, what="the teacher's token once the recorder is up")
+        token.undeclare()
+    finally:
+        stop.set()
+        thread.join(10)
+
+
 @pytest.mark.slow
 def test_a_learning_agent_process_learns_from_a_teacher_process_until_it_makes_no_errors(bus, start_world, tmp_path):
     """Random weights, a real teacher, a real `conag agent --learn` on the 30-site walls: errors per
