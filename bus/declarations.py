@@ -72,15 +72,16 @@ def watch_tokens(session, key: str, on_event: Callable[[str, bool], None]):
                                                    history=True)
 
 
-def wait_for_token(session, key: str, timeout: float, poll: float = 0.05) -> bool:
+def wait_for_token(session, key: str, timeout: float, poll: float = 0.05, stop=None) -> bool:
     """Wait until a liveliness token matching `key` reaches `session`; False if none came
-    within `timeout` seconds. (On the one-host bus, peers do not forward for each other: a
-    peer's token comes only over a direct link to it, and so does what it publishes.)"""
+    within `timeout` seconds, or once `stop` (an Event) is set. (On the one-host bus, peers
+    do not forward for each other: a peer's token comes only over a direct link to it, and
+    so does what it publishes.)"""
     deadline = time.monotonic() + timeout
     while True:
         left = deadline - time.monotonic()
         if any(r.ok is not None for r in session.liveliness().get(key, timeout=min(max(left, 0.05), 0.5))):
             return True
-        if time.monotonic() >= deadline:
+        if time.monotonic() >= deadline or (stop is not None and stop.is_set()):
             return False
         time.sleep(poll)

@@ -605,14 +605,19 @@ def _add_perturb(sub) -> None:
     q.set_defaults(func=cmd_perturb)
 
 
-def _add_agent(sub) -> None:
-    a = sub.add_parser("agent", help="run one agent process")
-    a.add_argument("--id", required=True, help="agent id; a restarted process with the same id gets its body back")
-    a.add_argument("--seed", type=int, default=0, help="seed of the agent's own randomness (exploring)")
+def _attach_args(a) -> None:
+    """How `conag agent` and `conag agents` attach."""
     a.add_argument("--attach-timeout", type=float, default=30.0, help="seconds to wait for the world")
     a.add_argument("--recorded", action="store_true",
                    help="the run is recorded: attach once a recorder of the world is heard (at most --attach-timeout "
                         "seconds), so the recording holds this agent's messages from its first tick")
+
+
+def _add_agent(sub) -> None:
+    a = sub.add_parser("agent", help="run one agent process")
+    a.add_argument("--id", required=True, help="agent id; a restarted process with the same id gets its body back")
+    a.add_argument("--seed", type=int, default=0, help="seed of the agent's own randomness (exploring)")
+    _attach_args(a)
     a.add_argument("--map-size", type=int, default=AGENT_MAP_SIZE, metavar="N",
                    help=f"cells per side of the agent's maps, odd (default {AGENT_MAP_SIZE})")
     a.add_argument("--nearest-first", action="store_true",
@@ -637,10 +642,7 @@ def _add_agents(sub) -> None:
                                    "(with --stdin-control) stops one agent alone.")
     a.add_argument("--ids", required=True, metavar="IDS", help="agent ids: ranges and commas, e.g. a1..a20 or a1,a3")
     a.add_argument("--seed", type=int, default=0, help="seed of every agent's own randomness (as conag agent)")
-    a.add_argument("--attach-timeout", type=float, default=30.0, help="seconds to wait for the world")
-    a.add_argument("--recorded", action="store_true",
-                   help="the run is recorded: attach once a recorder of the world is heard (at most --attach-timeout "
-                        "seconds), so the recording holds this agent's messages from its first tick")
+    _attach_args(a)
     a.add_argument("--map-size", type=int, default=AGENT_MAP_SIZE, metavar="N",
                    help=f"cells per side of the agents' maps, odd (default {AGENT_MAP_SIZE})")
     a.add_argument("--nearest-first", action="store_true", help="no goal sequencing (as conag agent)")

@@ -100,13 +100,10 @@ def run_teacher(session: zenoh.Session, world_id: str, stop, teacher_id: str = "
     reinforcements too (students decide aloud only once they see the teacher's token).
     """
     teacher = teacher if teacher is not None else Teacher()
-    if recorded > 0:
-        while not stop.is_set() and not wait_for_token(session, keys.all_recorder_tokens(world_id), 0.5):
-            recorded -= 0.5
-            if recorded <= 0:
-                log.warning("teacher %s: no recorder of world %s heard; teaching anyway (the recording may miss "
-                            "the first reinforcements)", teacher_id, world_id)
-                break
+    heard = recorded <= 0 or wait_for_token(session, keys.all_recorder_tokens(world_id), recorded, stop=stop)
+    if not heard and not stop.is_set():
+        log.warning("teacher %s: no recorder of world %s heard within %g s; teaching anyway (the recording may "
+                    "miss the first reinforcements)", teacher_id, world_id, recorded)
     with TeacherLink(session, world_id, teacher_id) as link:
         if on_ready is not None:
             on_ready()

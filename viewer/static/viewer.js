@@ -191,13 +191,11 @@ function showMaps(id, m) {  // live, the viewer also pushes them once a second w
         .map(n => box.querySelector(`canvas[data-layer="${n}"]`)).find(Boolean);
       box.insertBefore(fig, after ? after.parentElement : null);
     }
-    if (c.width !== m.size) { c.width = c.height = m.size; c.style.width = c.style.height = `${m.size * 2}px`;
-                              delete painted[name]; }
+    if (c.width !== m.size) { c.width = c.height = m.size; c.style.width = c.style.height = `${m.size * 2}px`; }
     // A layer that did not change since it was painted (a food ESM, mostly) is not painted again:
     // each canvas painted is one more for the browser to composite, on the run's own cores.
     if (painted[name] === cells) continue;
     painted[name] = cells;
-    viewer.mapPaints = (viewer.mapPaints || 0) + 1;
     const bytes = atob(cells);  // base64 of the size x size cell values (viewer/scene.py, maps_picture)
     const g = c.getContext("2d"), img = g.createImageData(m.size, m.size), nm = name.endsWith("_nm");
     for (let i = 0; i < bytes.length; i++) {
