@@ -4,6 +4,6 @@ Pure core (no zenoh): `esm` (egocentric spatial maps), `spreading` (navigation m
 `matching` (goal sequencing, paper §6), `far_memory`, `network` (the Fig. 8 construction
 network), `learning` (the student network of §5.1 and its delta rule), `qlearning`,
 `motivations`, `steering` and `brain` (one decision step). Its process shell is
-`nodes.agent` (`conag agent`), with `nodes.world_link`, `nodes.agent_feeds` and
-`nodes.student_link`; `sim` runs brains in one process with the world core.
+`agent_runtime.node` (`conag agent`), with `agent_runtime.world_link`, `agent_runtime.feeds` and
+`agent_runtime.student_link`; `conag.sim` runs brains in one process with the world core.
 """

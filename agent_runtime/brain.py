@@ -453,7 +453,7 @@ class Brain:
         Only the brick an agent dropped itself lets its body pass, so this is one it dropped
         before this brain knew: a process started again, or a world resumed from a
         checkpoint, while the body was still on it. A lone agent restarted in that moment
-        stepped off into nested_squares' inner ring and was shut in (`conag chaos`, 30/32).
+        stepped off into nested_squares' inner ring and was shut in (`python3 -m faults.chaos`, 30/32).
         The margin keeps a brick merely touching (the physics lets bodies sink in a
         little) from counting."""
         if _nearest_reading(bricks) >= self._release - _OVERLAP_MARGIN:

@@ -6,7 +6,7 @@ wall layer and the Explore sweep cost (issue 10).
 
 For each layout (scenarios/fig6.toml and three from the generalisation suite: a 21 x 21,
 a 51 x 50 and a 117 x 116 world, the large ones with the blueprint or the supply beyond
-the 41 x 41 maps), the in-process sim (sim/loop.py, default AgentConfig: 41 x 41 maps,
+the 41 x 41 maps), the in-process sim (conag/sim/loop.py, default AgentConfig: 41 x 41 maps,
 goal sequencing on) warms up for `--warmup` ticks, then every agent's `Brain.step(frame)`
 is timed on every tick for `--ticks` ticks (the world's step is not timed). Reported: the
 median and 90th percentile of one step, the share of steps that planned with goals
@@ -20,7 +20,7 @@ import statistics
 import time
 from pathlib import Path
 
-import sim
+from conag import sim
 from world_server.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent

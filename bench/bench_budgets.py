@@ -63,9 +63,9 @@ def _free_port() -> int:
 def realtime_ticks_per_second(seconds: float = 1.0) -> tuple[float, float]:
     """(measured ticks per second, the configured tick_rate) of a realtime world server
     serving quick_wall with no agent, on a loopback zenoh session."""
-    from bus import BusOptions, open_session
-    from nodes.world_server import WorldServer
+    from protocol.bus import BusOptions, open_session
     from world_server.scenario import load_scenario
+    from world_server.server import WorldServer
     from world_server.world import World
 
     scenario = load_scenario(ROOT / "scenarios" / "quick_wall.toml")

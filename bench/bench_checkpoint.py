@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.loop import start
+from conag.sim.loop import start
 from world_server.checkpoint import checkpoint_world, write_checkpoint
 from world_server.scenario import load_scenario, parse_scenario
 from world_server.world import World

@@ -3,7 +3,7 @@
     python3 -m bench.bench_decision              # the table of BENCHMARKS.md
     python3 -m bench.bench_decision --quick      # a smoke run, not a measurement
 
-For each map size, scenarios/fig6.toml runs in-process (`sim.start`, one agent,
+For each map size, scenarios/fig6.toml runs in-process (`conag.sim.start`, one agent,
 `AgentConfig(map_size=...)`) for a warm-up of 300 ticks, so the ESMs hold a realistic
 picture (blueprint, the food-and-water wall, bricks). Then the sim keeps running, and on
 every tick until the structure is complete (about 540 ticks; then a new
@@ -32,9 +32,9 @@ from pathlib import Path
 
 import numpy as np
 
-import sim
 from agent_runtime.config import AgentConfig
 from bench.bench_spreading import scipy_field, scipy_graph
+from conag import sim
 from world_server.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -1,6 +1,6 @@
 """Steps per second of conag.env (every step over zenoh, in-process loopback) against the
 in-process simulator on the same scenario: the world alone (`World`, the same commands, no
-bus) and `sim.SimRun` (the world and ConAg's brains in one loop).
+bus) and `conag.sim.SimRun` (the world and ConAg's brains in one loop).
 
     python3 -m bench.bench_env [--seconds S] [--scenario FILE]
 """
@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 
-import sim
+from conag import sim
 from conag.env import ConAgParallelEnv
 from world_server.scenario import load_scenario
 from world_server.world import World

@@ -9,7 +9,7 @@ For each agent count, on one scenario and seed (`scenarios/large/scale.toml` by 
 generated 60 x 60 world, 136 open sites, room for 100 agents round its starts), one after
 the other on the same machine:
 
-* in-process: `sim.start` and `SimRun.step` in a fresh interpreter (the simulator the
+* in-process: `conag.sim.start` and `SimRun.step` in a fresh interpreter (the simulator the
   experiments use: one core, the agents one after another);
 * processes: `conag run --agents N --max-ticks T --stall-ticks 0 --profile ...`: a world
   process and one process per agent (with `--per-process K`, `conag agents` processes of K
@@ -136,7 +136,7 @@ def _agents_in(cmd: str) -> int:
     """How many agents an agent process's command line serves (`conag agents --ids a1..a20`)."""
     words = cmd.split()
     if "--ids" in words:
-        from nodes.agent_host import parse_ids
+        from agent_runtime.host import parse_ids
 
         return len(parse_ids(words[words.index("--ids") + 1]))
     return 1
@@ -146,7 +146,7 @@ def _agents_in(cmd: str) -> int:
 
 def sim_child(scenario: str, agents: int, ticks: int, launched: float, out: str) -> None:
     """The in-process row, run in a fresh interpreter (`--child`): imports count in its start-up."""
-    from sim.loop import start
+    from conag.sim.loop import start
     from world_server.scenario import load_scenario
 
     run = start(load_scenario(scenario), agents=agents)

@@ -31,7 +31,7 @@ import sys
 import tempfile
 
 from bench.bench_record import ROOT, BuildClock, paired_slowdown, slowdown, tree_cpu
-from viewer.scene import DISPLAY_HZ
+from conag.viewer.scene import DISPLAY_HZ
 
 
 def one_run(scenario: str, agents: int, ticks: int, port: int, view_port: int | None, select: str | None,

@@ -78,8 +78,8 @@ def ticks_per_second(n_agents: int, seconds: float, repeats: int = 5) -> list[fl
 
 def _agent_side(endpoint: str, ready, done) -> None:
     """Agent process: the real agent link, answering every frame with a command."""
-    from bus import BusOptions, open_session
-    from nodes.world_link import WorldLink
+    from agent_runtime.world_link import WorldLink
+    from protocol.bus import BusOptions, open_session
 
     session = open_session(BusOptions(connect=(endpoint,)))
     try:
@@ -97,11 +97,11 @@ def round_trip_ms(samples: int, endpoint: str) -> tuple[float, float]:
     """(median, 90th percentile) of frame -> command round trips between two processes.
 
     The world side hands samples from zenoh's callback thread to its loop through a
-    queue, as the world server does; the agent side is `nodes.world_link.WorldLink`.
+    queue, as the world server does; the agent side is `agent_runtime.world_link.WorldLink`.
     Both ends decode what they receive and encode what they send.
     """
-    from bus import BusOptions, open_session
     from protocol import keys
+    from protocol.bus import BusOptions, open_session
     from protocol.codec import decode, encode
     from protocol.messages import AgentCommand
 

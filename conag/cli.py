@@ -10,7 +10,6 @@
     conag agents --ids a1..a20  several agents in one process (each its own token and state)
     conag teacher             the teacher process: reinforces learning students (paper §5.1)
     conag run SCENARIO        a world and its agents as processes, until the structure is done
-    conag chaos SCENARIO      builds while agent processes are SIGKILLed at random (some restarted)
     conag generate --seed N   write seeded, buildable scenario files (or a --suite of them)
     conag check FILE...       parse scenario files and check their structure can be built
     conag record OUT.mcap     record every message of a world to an MCAP file
@@ -33,16 +32,16 @@ import threading
 import time
 from dataclasses import asdict
 
-from bus import BusOptions, Declarations, is_client, open_session
 from conag.common import PRIORITIES, RECORDER_PRIORITY, ignore_repeat
 from conag.common import bus_args as _bus_args
 from conag.common import bus_options as _bus
 from conag.common import stop_on_signals as _stop_on_signals
 from conag.layouts import add_commands as add_layout_commands
-from conag.recordings import add_commands as add_recording_commands
+from conag.recording.command import add_commands as add_recording_commands
 from conag.secure import add_commands as add_secure_commands
 from conag.secure import check_agent_credential
-from conag.view import add_commands as add_view_commands
+from conag.viewer.command import add_commands as add_view_commands
+from protocol.bus import BusOptions, Declarations, is_client, open_session
 from world_server.summary import write_summary
 
 EXIT_ERROR = 1         # something failed (conag run: e.g. the world kept dying as soon as it started)
@@ -69,9 +68,9 @@ def _status_line(st) -> str:
 def cmd_world(args) -> int:
     import numpy as np
 
-    from nodes.world_server import WorldServer
     from world_server.checkpoint import DEFAULT_EVERY, CheckpointPlan
     from world_server.scenario import load_scenario
+    from world_server.server import WorldServer
     from world_server.world import World
 
     plan = None
@@ -266,7 +265,7 @@ def cmd_render(args) -> int:
     from world_server.scenario import load_scenario
 
     if args.agent_maps:
-        from sim.render_agent import render_agent_maps
+        from conag.sim.render_agent import render_agent_maps
 
         out = render_agent_maps(load_scenario(args.scenario), args.out,
                                 agent=args.agent or "a1", ticks=args.ticks or 0)
@@ -321,7 +320,7 @@ def _agent_options(args):
     """The AgentOptions `conag agent` asks for (ValueError for learning flags without --learn)."""
     from agent_runtime.config import AgentConfig
     from agent_runtime.learning import Student
-    from nodes.agent import AgentOptions, Learning
+    from agent_runtime.node import AgentOptions, Learning
 
     if not args.learn and (args.eta is not None or args.weights_out or args.save_every is not None):
         raise ValueError("--eta, --weights-out and --save-every need --learn")
@@ -337,8 +336,8 @@ def _agent_options(args):
 
 
 def cmd_agent(args) -> int:
-    from nodes.agent import AgentReport, run_agent
-    from nodes.world_link import AttachError
+    from agent_runtime.node import AgentReport, run_agent
+    from agent_runtime.world_link import AttachError
 
     opts = _agent_options(args)
     check_agent_credential(args.zenoh_config, args.id)
@@ -363,9 +362,9 @@ def cmd_agent(args) -> int:
 
 def cmd_agents(args) -> int:
     from agent_runtime.config import AgentConfig
-    from nodes.agent import AgentOptions
-    from nodes.agent_host import AgentHost, host_options, parse_ids, read_stop_requests
-    from nodes.world_link import AttachError
+    from agent_runtime.host import AgentHost, host_options, parse_ids, read_stop_requests
+    from agent_runtime.node import AgentOptions
+    from agent_runtime.world_link import AttachError
 
     ids = parse_ids(args.ids)
     base = AgentOptions(args.world_id, ids[0], AgentConfig(map_size=args.map_size,
@@ -392,7 +391,7 @@ def cmd_agents(args) -> int:
 
 
 def cmd_teacher(args) -> int:
-    from nodes.teacher import run_teacher
+    from teacher.node import run_teacher
 
     last = [""]
 
@@ -419,9 +418,9 @@ def cmd_teacher(args) -> int:
 
 def cmd_run(args) -> int:
     from agent_runtime.config import AgentConfig
-    from bus import DEFAULT_ENDPOINT
     from conag.layouts import warn_if_unbuildable
     from conag.run import RunOptions, run
+    from protocol.bus import DEFAULT_ENDPOINT
     from world_server.scenario import load_scenario
 
     AgentConfig(map_size=args.map_size)  # a bad size is a usage error here, not in every agent
@@ -459,7 +458,7 @@ def cmd_run(args) -> int:
           f"{summary['total_distance']:.1f}", flush=True)
     if args.record:
         print(f"recording written to {args.record}")
-        from recording.mcap_log import read_end, world_cut_short
+        from conag.recording.mcap_log import read_end, world_cut_short
 
         short = world_cut_short(read_end(args.record), summary["ticks"])
         if short:
@@ -497,32 +496,6 @@ def _report_a_slow_stop(stop: threading.Event, after: float = SLOW_STOP) -> None
     threading.Thread(target=watch, name="slow-stop-report", daemon=True).start()
 
 
-def cmd_chaos(args) -> int:
-    from conag.chaos import ChaosOptions, chaos, report
-
-    opts = ChaosOptions(args.scenario, runs=args.runs, kill_every=args.kill_every, min_life=args.min_life,
-                        restart_share=args.restart_share,
-                        min_alive=args.min_alive, seed=args.seed, agents=args.agents, max_ticks=args.max_ticks,
-                        stall_ticks=args.stall_ticks, run_timeout=args.run_timeout, world_seed=args.world_seed,
-                        kill_world_every=args.kill_world_every, checkpoint_every=args.checkpoint_every)
-    with _stop_on_signals() as stop:
-        results = chaos(opts, stop, log=lambda line: print(line, flush=True))
-    out = report(opts, results)
-    print(f"chaos {args.scenario}: {out['completed']}/{out['total']} runs complete, bricks_total kept in "
-          f"{out['bricks_kept']}/{out['total']}"
-          + (f", {out['world_kills']} world kills survived, at most {out['max_ticks_lost']} ticks lost per kill"
-             if out["world_kills"] else ""))
-    if args.json:
-        with open(args.json, "w", encoding="utf-8") as f:
-            json.dump(out, f, indent=2)
-            f.write("\n")
-    if out["bricks_kept"] < out["total"]:
-        return EXIT_ERROR
-    if len(results) < opts.runs:
-        return EXIT_INTERRUPTED
-    return 0 if out["completed"] == out["total"] else EXIT_INCOMPLETE
-
-
 def cmd_control(args) -> int:
     from conag.run import control
 
@@ -539,7 +512,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="conag", description="ConAg: agents that build structures from a blueprint.")
     p.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for add in (_add_world, _add_status, _add_perturb, _add_agent, _add_agents, _add_teacher, _add_run, _add_chaos,
+    for add in (_add_world, _add_status, _add_perturb, _add_agent, _add_agents, _add_teacher, _add_run,
                 _add_control, _add_render, add_layout_commands, add_recording_commands, add_view_commands,
                 _add_router, add_secure_commands):
         add(sub)  # add_layout_commands: generate, check; add_recording_commands: record, replay, echo; keys
@@ -713,39 +686,6 @@ def _add_run(sub) -> None:
     g.add_argument("--eta", type=float, metavar="RATE", help="their learning rate (default 0.1)")
     g.add_argument("--weights-dir", metavar="DIR", help="each student saves its weights to DIR/<id>.json")
     u.set_defaults(func=cmd_run)
-
-
-def _add_chaos(sub) -> None:
-    c = sub.add_parser("chaos", help="build while agent processes are SIGKILLed at random (some restarted)",
-                       epilog=f"exit codes: 0 every run complete with bricks_total kept; {EXIT_ERROR} some run "
-                              f"changed bricks_total; {EXIT_INCOMPLETE} some run did not complete; "
-                              f"{EXIT_INTERRUPTED} interrupted")
-    c.add_argument("scenario")
-    c.add_argument("--runs", type=int, default=1, help="conag runs, one after the other (default 1)")
-    c.add_argument("--kill-every", type=float, default=3.0, metavar="S",
-                   help="mean wall seconds between agent kills (default 3; 0: no agent is killed)")
-    c.add_argument("--min-life", type=_non_negative, default=200, metavar="N",
-                   help="kill an agent only once the world has ticked N ticks since it was (re)started "
-                        "(default 200): on a slow machine a process killed sooner has done nothing yet")
-    c.add_argument("--restart-share", type=float, default=0.5, metavar="P",
-                   help="chance that a killed agent is started again at once (default 0.5)")
-    c.add_argument("--kill-world-every", type=float, default=0.0, metavar="S",
-                   help="also SIGKILL the world process every S wall seconds on average (default 0: never); "
-                        "conag run restarts it from its last checkpoint")
-    c.add_argument("--checkpoint-every", type=_positive, metavar="N",
-                   help=f"the world's checkpoint interval in ticks (default {CHECKPOINT_EVERY})")
-    c.add_argument("--min-alive", type=int, default=1, metavar="N",
-                   help="never leave fewer agents alive (a kill then restarts; default 1)")
-    c.add_argument("--seed", type=int, default=0, help="seed of the kill schedule (default 0)")
-    c.add_argument("--world-seed", type=int, help="the world's seed (default: the scenario's)")
-    c.add_argument("--agents", type=int, help="number of agents (default: the scenario's)")
-    c.add_argument("--max-ticks", type=int, help="tick limit per run (default: the scenario's)")
-    c.add_argument("--stall-ticks", type=_non_negative, default=3000, metavar="N",
-                   help="a run stops as stalled after N ticks without a site filled (default 3000)")
-    c.add_argument("--run-timeout", type=float, default=600.0, metavar="S",
-                   help="stop a run after S wall seconds (default 600)")
-    c.add_argument("--json", metavar="PATH", help="write every run's figures as JSON")
-    c.set_defaults(func=cmd_chaos)
 
 
 def _add_control(sub) -> None:

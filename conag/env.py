@@ -45,12 +45,12 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
 from agent_runtime.brain import Brain
-from bus import BusOptions, open_session
-from nodes.world_link import WorldLink
-from nodes.world_server import WorldServer
+from agent_runtime.world_link import WorldLink
+from protocol.bus import BusOptions, open_session
 from protocol.messages import ACTIONS, CHANNELS, Decision, SensorFrame, Welcome
 from teacher.core import Teacher
 from world_server.scenario import Scenario, load_scenario
+from world_server.server import WorldServer
 from world_server.world import World
 
 RewardFn = Callable[["ConAgParallelEnv", str, int], float]
@@ -241,7 +241,7 @@ class ConAgParallelEnv(ParallelEnv):
 
     def close(self) -> None:
         """Stop the world and close both sessions."""
-        from bus import join_callback_threads
+        from protocol.bus import join_callback_threads
 
         self._stop_world()
         for s in (self._session, self._server_session):

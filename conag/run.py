@@ -16,7 +16,7 @@ start if it had written none yet); the agents wait for it and attach again by th
 A world that dies `MAX_QUICK_DEATHS` times in a row within `QUICK_DEATH` seconds of
 starting, before it got a checkpoint further, ends the run as an error.
 
-With `record`, a `conag record` process records the run (`nodes/recorder.py`): it starts
+With `record`, a `conag record` process records the run (`conag/recording/recorder.py`): it starts
 after the world and before the agents, which start once it has heard the world, so the
 recording holds every tick; it stops last, after the agents' final state reports. It runs
 at `record_priority` ("idle" by default: Linux SCHED_IDLE), so the world and the agents get
@@ -41,11 +41,11 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from bus import Declarations, open_session
-from bus.acl import OBSERVER, TEACHER, WORLD, agent_user
 from conag.common import RECORDER_PRIORITY
 from conag.secure import bus_flags, run_bus_options, secure_bus
 from protocol import keys
+from protocol.bus import Declarations, open_session
+from protocol.bus.acl import OBSERVER, TEACHER, WORLD, agent_user
 from protocol.codec import ProtocolError, decode, encode
 from protocol.messages import AgentState, RunControl, RunControlResult, WorldStatus
 from world_server.checkpoint import DEFAULT_EVERY, CheckpointError, newest_good, read_checkpoint

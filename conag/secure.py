@@ -2,8 +2,8 @@
 
     conag keys OUTDIR --agents N [--world-id W] [--router tcp/HOST:7447] [--router-listen EP]
 
-writes a deployment (`bus.deployment`): a router configuration with user/password
-authentication and the access control of `bus.acl`, its credentials dictionary, and one
+writes a deployment (`protocol.bus.deployment`): a router configuration with user/password
+authentication and the access control of `protocol.bus.acl`, its credentials dictionary, and one
 client configuration per process (world, teacher, operator, observer, agent-a1..aN), all
 0600. `conag run --secure [DIR]` uses one (DIR, or a fresh one in the run's temporary
 directory): it starts `conag router` with it on the run's endpoint and starts every process
@@ -21,9 +21,9 @@ from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
 
-from bus import BusOptions, make_config
-from bus.acl import OPERATOR, agent_user
-from bus.deployment import (
+from protocol.bus import BusOptions, make_config
+from protocol.bus.acl import OPERATOR, agent_user
+from protocol.bus.deployment import (
     DEFAULT_ROUTER,
     ROUTER_FILE,
     DeploymentSpec,

@@ -3,7 +3,7 @@
 Paper §5.1: a student with random weights (excitatory in [0, 0.5], inhibitory in
 [-0.5, 0]) builds in the environment of Fig. 6 while the teacher reinforces its arm and
 motor choices; a trial is 1,000 steps, after which the environment is reset and the
-agent put back at its start (sim/trials.py says why the bricks are reset too); an
+agent put back at its start (conag/sim/trials.py says why the bricks are reset too); an
 error is a step where the student's (arm, motor) differs from the teacher's. For each
 learning rate of the delta rule (agent_runtime/learning.py), and for Q-learning from the
 same signals (agent_runtime/qlearning.py), 50 runs: mean and one standard deviation of
@@ -12,7 +12,7 @@ students, learning off, are put into novel environments (quick_wall, Fig. 17) an
 teacher counts their errors while they build.
 
 Runs in one process per core (spawn), each run with the real World, Brain, Student /
-QLearner and teacher core (`sim.trials`, stepping `sim.loop` in lockstep). Writes
+QLearner and teacher core (`conag.sim.trials`, stepping `conag.sim.loop` in lockstep). Writes
 fig9_learning.md (tables), fig9_learning.png (Fig. 9), fig9_learning.json (every run's
 errors per trial) and fig9_student.json (a trained student: `conag agent --weights-in`).
 
@@ -37,7 +37,7 @@ from agent_runtime.config import AgentConfig
 from agent_runtime.learning import Student
 from agent_runtime.network import engineered
 from agent_runtime.qlearning import QLearner
-from sim.trials import run_learning, run_trial, trial_seed
+from conag.sim.trials import run_learning, run_trial, trial_seed
 from teacher.core import Teacher
 from world_server.scenario import load_scenario
 

@@ -2,7 +2,7 @@
 
 A suite of generated layouts (`world_server/generator.py`, committed as files under
 experiments/generalisation/layouts/, so a change to the generator cannot silently change
-the benchmark) is built in-process (sim/loop.py: the real World and Brain code, lockstep,
+the benchmark) is built in-process (conag/sim/loop.py: the real World and Brain code, lockstep,
 headless), each layout once with goal sequencing (ConAg-TS, the default agent) and once
 nearest-first (the plain agent of §4), in the same run. Every layout passed the
 buildability check when it was generated. A run stops when the structure is complete, when
@@ -39,8 +39,8 @@ from pathlib import Path
 
 import numpy as np
 
-import sim
 from agent_runtime.config import AgentConfig
+from conag import sim
 from experiments.journal import Journal
 from experiments.report import write_section
 from experiments.workers import pool
@@ -326,7 +326,7 @@ def markdown(outcomes: list[Outcome], args: argparse.Namespace, seconds: float, 
 `python3 -m experiments.generalisation` builds {layouts} generated layouts (committed under
 `experiments/generalisation/layouts/`, made by `python3 -m experiments.generalisation --generate`:
 `world_server/generator.py` suite seed {SUITE_SEED}, every layout passing the buildability check), each
-with goal sequencing and nearest-first in the same run, in-process (sim/loop.py, lockstep, the default
+with goal sequencing and nearest-first in the same run, in-process (conag/sim/loop.py, lockstep, the default
 `AgentConfig` but for goal sequencing, hunger and thirst on). A run stops when complete, after
 {args.stall} ticks with no site filled (stalled; on large worlds the world's cells per agent if
 that is more, the time to sweep it for a supply), or at the layout's `max_ticks`. Distance / bound:

@@ -1,7 +1,7 @@
 """G3 (paper §6, Fig. 13): goal sequencing (ConAg-TS) against nearest-first on the paper's layouts.
 
 Every scenario of §6 (Fig. 17, 18, 19, 20, nested squares) is built by the real world core
-and agent brains in one process (sim/loop.py, lockstep, headless), once with the plain
+and agent brains in one process (conag/sim/loop.py, lockstep, headless), once with the plain
 nearest-first agent of §4 and once with goal sequencing, with 1 and with 3 agents and
 several seeds. Hunger and thirst are off, so the distance walked is construction only.
 
@@ -33,8 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
-import sim
 from agent_runtime.config import AgentConfig
+from conag import sim
 from experiments.replay import lower_bound, replay
 from experiments.report import write_section
 from experiments.workers import pool

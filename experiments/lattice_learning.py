@@ -1,7 +1,7 @@
 """R3 / Fig. 11: errors per epoch while a network learns the square rule set by imitation.
 
 For corner-seeded and side-seeded squares, over several seeds: collect the
-teacher's decisions, train the one-hidden-layer network (baselines/learned.py),
+teacher's decisions, train the one-hidden-layer network (conag/baselines/learned.py),
 record errors per epoch, and check whether the trained network, driving the
 lattice simulation, builds the square.  Writes experiments/lattice_learning.png
 and experiments/lattice_learning.md.
@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from baselines.learned import learn, simulate_policy
-from baselines.rules import square_rules
+from conag.baselines.learned import learn, simulate_policy
+from conag.baselines.rules import square_rules
 
 SEEDINGS = ("corners", "sides")
 

@@ -8,8 +8,8 @@ The same three tasks for both systems:
   cell outward while the ring is being built;
 * nested squares (Fig. 14): a small ring inside a larger ring.
 
-Reactive system: baselines/ (Jones & Mataric lattice, transition rule sets).
-ConAg: the real world core and agent brains in one process (sim/loop.py), on
+Reactive system: conag/baselines/ (Jones & Mataric lattice, transition rule sets).
+ConAg: the real world core and agent brains in one process (conag/sim/loop.py), on
 scenarios built here from layout text: the ring is a ring of drop sites, the
 seeds are bricks already on their sites (`B`), free bricks stand around.
 
@@ -27,11 +27,11 @@ from pathlib import Path
 
 import numpy as np
 
-import sim
 from agent_runtime.config import AgentConfig
-from baselines.lattice import LATTICE_BRICK, Result, RuleSet, simulate
-from baselines.perturb import NestedResult, nested_squares, run_perturbed
-from baselines.rules import square_rules
+from conag import sim
+from conag.baselines.lattice import LATTICE_BRICK, Result, RuleSet, simulate
+from conag.baselines.perturb import NestedResult, nested_squares, run_perturbed
+from conag.baselines.rules import square_rules
 from experiments.report import write_section
 from protocol.messages import Perturbation
 from world_server.scenario import parse_scenario
@@ -333,7 +333,7 @@ def pictures(square, moved, nested, outdir: Path):
     fig.savefig(paths[-1], dpi=110, bbox_inches="tight")
     plt.close(fig)
 
-    from baselines.rules import square_target
+    from conag.baselines.rules import square_target
     out = nested.runs[0]
     world = out.world
     shape = world.grid.shape
@@ -465,9 +465,9 @@ Re-run (from the repository root):
     python3 -m experiments.reactive_vs_conag --quick   # smoke run (fewer seeds, shorter budgets)
 
 This file was written by {'a `--quick`' if quick else 'the full'} run.
-Reactive system: `baselines/` (Jones & Mataric lattice; one step = every agent senses its 8
+Reactive system: `conag/baselines/` (Jones & Mataric lattice; one step = every agent senses its 8
 neighbours and applies the first matching transition rule, or moves at random), rng seeds
-{rseeds}, 8 agents that keep entering from the border. ConAg: `sim/loop.py` (the real world
+{rseeds}, 8 agents that keep entering from the border. ConAg: `conag/sim/loop.py` (the real world
 core and agent brains, lockstep, in one process; goal sequencing on, as by default, except in
 the rows marked nearest-first), seeds {cseeds}, 1-3 agents, on scenarios built
 from layout text in the script: a 6x6 ring of 20 drop sites whose 4 corners (resp. 4 side
@@ -476,12 +476,12 @@ in a band around it. One tick = one world step (every agent answers once); latti
 ConAg ticks are different units and are not comparable in size, only in outcome.
 
 Moved brick. Reactive: after step 10 the first brick placed by an agent is moved one cell
-outward (`baselines/perturb.py`). ConAg: once 3 bricks were placed by agents, the first filled
+outward (`conag/baselines/perturb.py`). ConAg: once 3 bricks were placed by agents, the first filled
 non-seed site's brick is moved one cell outward with `world.perturb(Perturbation("move", ...))`;
 in {stray}/{len(moves)} runs the move left its site unfilled and put the brick off every site.
 
 Nested squares. Reactive: a 4x4 ring inside a 12x12 ring, corner seeds, corner rules
-(`baselines/perturb.nested_squares`), {nested.max_steps} steps. ConAg: a 4x4 ring inside an
+(`conag/baselines/perturb.nested_squares`), {nested.max_steps} steps. ConAg: a 4x4 ring inside an
 8x8 ring (one free cell between them), corner seeds as `B`, free bricks outside (at least two
 empty cells away from the outer ring).
 

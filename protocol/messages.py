@@ -353,7 +353,7 @@ class LockstepTimeout:
 
     Their commands for `tick`, when they come, are refused (a lockstep command counts for
     the tick it names only): the bodies kept their speed set points, with no turn and no
-    action, for that step, and a replay must step them the same way (`recording.replay`).
+    action, for that step, and a replay must step them the same way (`conag.recording.replay`).
     """
 
     world_id: str

@@ -17,9 +17,9 @@ from typing import TypeVar
 import numpy as np
 import pytest
 
-from bus import BusOptions, open_session
-from nodes.world_server import WorldServer
+from protocol.bus import BusOptions, open_session
 from world_server.scenario import load_scenario, parse_scenario
+from world_server.server import WorldServer
 from world_server.world import World
 
 ROOT = Path(__file__).resolve().parent.parent

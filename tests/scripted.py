@@ -11,8 +11,8 @@ import argparse
 import math
 import sys
 
-from bus import BusOptions, open_session
-from nodes.world_link import WorldLink
+from agent_runtime.world_link import WorldLink
+from protocol.bus import BusOptions, open_session
 
 
 class ScriptedBody:

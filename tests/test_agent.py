@@ -12,10 +12,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-import sim
 from agent_runtime.config import AgentConfig
 from agent_runtime.motivations import Motivations
 from agent_runtime.network import STATE_NODES, engineered
+from conag import sim
 from protocol.messages import Perturbation
 from tests.conftest import SCENARIOS
 from world_server.scenario import load_scenario

@@ -13,13 +13,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import sim
 from agent_runtime.brain import Brain, _mouth_side
 from agent_runtime.config import AgentConfig
 from agent_runtime.esm import BRICK, CONFIG, FOOD, OBSTACLE, WATER
 from agent_runtime.far_memory import FarMemory, border_seed
 from agent_runtime.sealing import FRESH_SITE, SEAL_MEMORY, enclosed_sites, pocket_beside
 from agent_runtime.spreading import distance_field, seeded_distance_field
+from conag import sim
 from protocol.messages import BEHAVIOURS, CHANNELS, NO_READING, SensorFrame, Welcome
 from world_server.discs import BRICK_DISC
 from world_server.scenario import load_scenario, parse_scenario
@@ -183,7 +183,7 @@ def test_a_brain_that_knows_nothing_beyond_the_sites_fills_none_near_it():
     # with a brick in its gripper and has seen nothing but the cells round it: no supply, no
     # ground beyond the checked square. It cannot tell a ring's last gap from any site, so
     # none near is filled until it has seen more. Before, it dropped at once and walled
-    # itself inside a ring with a site still open (nested_squares under `conag chaos`).
+    # itself inside a ring with a site still open (nested_squares under `python3 -m faults.chaos`).
     brain, goals, open_sites, blocked, _ = _corridor_with_a_far_way_out()
     c = brain.centre
     brain.maps.clear_age[open_sites] = 0.0
@@ -370,7 +370,7 @@ def test_a_brain_started_on_a_brick_its_body_dropped_leaves_it_away_from_the_poc
     # A process started again (or a world resumed) while the body still stood on the brick
     # it had dropped in a ring's last gap: the new brain never saw the drop. A brick nearer
     # than touching can only be that one, so it heads north, out of the ring, all the same
-    # (a lone agent restarted in that moment under `conag chaos` was shut in at 30/32).
+    # (a lone agent restarted in that moment under `python3 -m faults.chaos` was shut in at 30/32).
     south = (1.0, -math.pi / 2)
     welcome = replace(_welcome(([60.5], [50.5])), agent_radius=0.3, disc_radius=0.5)  # touching: 0.8 apart
     brain = Brain(welcome, AgentConfig(), np.random.default_rng(0))

@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from baselines.lattice import (
+from conag.baselines.lattice import (
     BLANK,
     LATTICE_BRICK,
     NO_BRICK,
@@ -17,8 +17,8 @@ from baselines.lattice import (
     sense,
     simulate,
 )
-from baselines.perturb import nested_squares, run_perturbed
-from baselines.rules import (
+from conag.baselines.perturb import nested_squares, run_perturbed
+from conag.baselines.rules import (
     CORNER_GROWTH,
     corner_seeds,
     side_seeded,

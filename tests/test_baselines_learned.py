@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from baselines.lattice import BLANK, SEEN_EDGE, SEEN_FREE, SEEN_WALL, simulate
-from baselines.learned import (
+from conag.baselines.lattice import BLANK, SEEN_EDGE, SEEN_FREE, SEEN_WALL, simulate
+from conag.baselines.learned import (
     EXPLORE,
     ImitationNet,
     NetPolicy,
@@ -18,7 +18,7 @@ from baselines.learned import (
     simulate_policy,
     to_class,
 )
-from baselines.rules import square_rules
+from conag.baselines.rules import square_rules
 
 N = 6
 
@@ -59,7 +59,7 @@ def test_classes_round_trip():
 
 @pytest.mark.parametrize("seeding", ["corners", "sides"])
 def test_teacher_policy_reproduces_lattice_simulate(seeding):
-    """The adapter is a faithful stand-in for `simulate` (same random stream)."""
+    """The adapter is a faithful stand-in for `conag.simulate` (same random stream)."""
     rule_set, seeds, shape = square_rules(N, seeding)
     ref = simulate(rule_set, seeds, shape, 8, 20000, np.random.default_rng(3))
     teacher = RecordingTeacher(rule_set, n_states_of(rule_set, seeds))

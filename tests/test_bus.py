@@ -7,8 +7,8 @@ import time
 
 import pytest
 
-from bus import Declarations, Inbox, Presence, join_callback_threads, undeclare
-from bus.session import CALLBACK_THREAD
+from protocol.bus import Declarations, Inbox, Presence, join_callback_threads, undeclare
+from protocol.bus.session import CALLBACK_THREAD
 
 
 class Entity:

@@ -1,15 +1,23 @@
-"""`conag chaos`: a build goes on while agent processes are SIGKILLed at random, some started
+"""`python3 -m faults.chaos`: a build goes on while agent processes are SIGKILLed at random, some started
 again and some left dead; it completes and no brick is lost or made. The runs are slow tests;
 whom a kill may pick is checked without one."""
 
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 
 import pytest
 
-from conag.chaos import ChaosOptions, Roster
-from tests.conftest import conag
+from faults.chaos import ChaosOptions, Roster
+from tests.conftest import ROOT
+
+
+def chaos(*args, timeout: float) -> subprocess.CompletedProcess:
+    """`python3 -m faults.chaos ARGS...` to the end, from the repository root."""
+    return subprocess.run([sys.executable, "-m", "faults.chaos", *map(str, args)], cwd=ROOT, capture_output=True,
+                          text=True, timeout=timeout)
 
 
 def test_a_kill_spares_an_agent_until_it_has_lived_min_life_ticks():
@@ -33,7 +41,7 @@ def test_nested_squares_completes_under_random_kills_with_bricks_total_kept(tmp_
     # lives 30-80 ticks at a time stalls at 31/32: each new process has to see inside the
     # outer ring again before it closes it); --min-life (200 ticks) spares it until it has.
     out = tmp_path / "chaos.json"
-    r = conag("chaos", "scenarios/nested_squares.toml", "--runs", 2, "--kill-every", 1.5, "--seed", 1, "--json", out,
+    r = chaos("scenarios/nested_squares.toml", "--runs", 2, "--kill-every", 1.5, "--seed", 1, "--json", out,
               timeout=600)
     assert r.returncode == 0, r.stdout + r.stderr
     report = json.loads(out.read_text())
@@ -53,7 +61,7 @@ def test_nested_squares_completes_while_its_world_is_sigkilled(tmp_path):
     # themselves. One agent: a build of about 2,700 ticks, long enough for a few kills even
     # on an idle machine (with two it ended after two kills, the second as it completed).
     out = tmp_path / "chaos.json"
-    r = conag("chaos", "scenarios/nested_squares.toml", "--agents", 1, "--runs", 1, "--kill-every", 0,
+    r = chaos("scenarios/nested_squares.toml", "--agents", 1, "--runs", 1, "--kill-every", 0,
               "--kill-world-every", 1, "--checkpoint-every", 50, "--seed", 2, "--json", out, timeout=600)
     assert r.returncode == 0, r.stdout + r.stderr
     report = json.loads(out.read_text())

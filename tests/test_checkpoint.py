@@ -9,8 +9,8 @@ import os
 import numpy as np
 import pytest
 
+from conag.sim.loop import start
 from protocol.codec import encode
-from sim.loop import start
 from tests.conftest import SCENARIOS, make
 from world_server.checkpoint import (
     CheckpointError,

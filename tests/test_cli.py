@@ -131,8 +131,8 @@ def test_render_writes_a_png(tmp_path):
 
 
 def test_world_logs_rejections_at_v_after_the_subcommand_and_perturb_add_needs_force_on_a_site():
-    from bus import BusOptions, open_session
     from protocol import keys
+    from protocol.bus import BusOptions, open_session
 
     ep = f"tcp/127.0.0.1:{free_port()}"
     world = Process("world", str(QUICK_WALL), "--ticks", "100000000", "--listen", ep, "-v")

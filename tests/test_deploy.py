@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 import zenoh
 
-from bus import BusOptions, make_config, open_session
-from nodes.world_link import WorldLink
+from agent_runtime.world_link import WorldLink
+from protocol.bus import BusOptions, make_config, open_session
 from tests.conftest import ROOT, SCENARIOS, Process, RunningWorld, free_port
 from world_server.scenario import load_scenario
 from world_server.world import World
@@ -168,7 +168,7 @@ def test_router_listens_where_its_config_file_says(tmp_path):
 
 def test_a_router_gets_more_receive_workers_unless_told_otherwise(monkeypatch):
     """deploy/README.md: a link closed with bytes unsent blocks a receive worker (zenoh #1101)."""
-    from bus.session import ROUTER_RUNTIME
+    from protocol.bus.session import ROUTER_RUNTIME
 
     monkeypatch.delenv("ZENOH_RUNTIME", raising=False)
     open_session(BusOptions(listen=(f"tcp/127.0.0.1:{free_port()}",), mode="router"), serve=True).close()

@@ -11,8 +11,8 @@ import time
 import numpy as np
 import pytest
 
-from nodes.agent import AgentOptions, AgentReport, run_agent
-from nodes.world_link import WorldLink
+from agent_runtime.node import AgentOptions, AgentReport, run_agent
+from agent_runtime.world_link import WorldLink
 from protocol import keys
 from protocol.codec import encode
 from protocol.messages import CHANNELS, SensorFrame

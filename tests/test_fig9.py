@@ -12,7 +12,7 @@ import pytest
 from agent_runtime.learning import Student
 from agent_runtime.network import engineered
 from agent_runtime.qlearning import QLearner
-from sim.trials import run_learning, run_trial, trial_seed
+from conag.sim.trials import run_learning, run_trial, trial_seed
 from teacher.core import Teacher
 from tests.conftest import ROOT, SCENARIOS
 from world_server.scenario import load_scenario

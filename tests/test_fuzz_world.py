@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 import zenoh
 
-from bus import BusOptions, open_session
 from protocol import keys
+from protocol.bus import BusOptions, open_session
 from protocol.codec import decode, encode
 from protocol.messages import Perturbation, PerturbResult, WorldStatus
 from tests.conftest import ROOT, free_port, wait_until

@@ -8,8 +8,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import sim
 from agent_runtime.config import AgentConfig
+from conag import sim
 from tests.conftest import SCENARIOS
 from world_server.scenario import load_scenario
 

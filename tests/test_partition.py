@@ -1,9 +1,9 @@
 """Issue 12, point 4: a build across three hosts survives one host cut off for 10 s.
 
-The hosts are Linux network namespaces joined by veth links to a bridge (`conag.netns`):
+The hosts are Linux network namespaces joined by veth links to a bridge (`faults.netns`):
 the router and the world on host 1, agents a1 and a2 on host 2, a3 on host 3, every process
 a client of the router, as deploy/README.md sets them up. Host 2's link goes down for 10 s
-mid-build (`conag.partition`). Everything asserted is read from the world's statuses
+mid-build (`faults.partition`). Everything asserted is read from the world's statuses
 (`conag status --watch --json` on host 1) and its summary. Skipped where namespaces cannot
 be made (not root, no `ip`, a container that refuses).
 """
@@ -15,8 +15,8 @@ import subprocess
 
 import pytest
 
-from conag.netns import unavailable
-from conag.partition import PartitionOptions, partition_run
+from faults.netns import unavailable
+from faults.partition import PartitionOptions, partition_run
 
 pytestmark = pytest.mark.slow
 

@@ -4,9 +4,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from baselines.lattice import LATTICE_BRICK
-from baselines.perturb import run_perturbed
-from baselines.rules import square_rules
+from conag.baselines.lattice import LATTICE_BRICK
+from conag.baselines.perturb import run_perturbed
+from conag.baselines.rules import square_rules
 from experiments import reactive_vs_conag as rvc
 
 

@@ -11,12 +11,12 @@ import time
 
 import pytest
 
-from conag.partition import PartitionRun, measure
-from nodes.agent import AgentOptions, AgentReport, run_agent
-from nodes.world_link import WorldLink
-from nodes.world_server import WorldServer
+from agent_runtime.node import AgentOptions, AgentReport, run_agent
+from agent_runtime.world_link import WorldLink
+from faults.partition import PartitionRun, measure
 from tests.conftest import RunningWorld, make, wait_until
 from tests.scripted import ScriptedBody
+from world_server.server import WorldServer
 
 ONE = '''
 name = "one"

@@ -30,10 +30,13 @@ import pytest
 from mcap.reader import make_reader
 
 from agent_runtime.config import AgentConfig
-from nodes.agent import AgentOptions, run_agent
-from nodes.echo import run_echo
-from nodes.recorder import RecordReport, drain_until_quiet, run_recorder
-from nodes.replayer import drive_world, publish_recording
+from agent_runtime.node import AgentOptions, run_agent
+from conag.recording.echo import RateMeter, describe
+from conag.recording.echo_node import run_echo
+from conag.recording.mcap_log import McapRecorder, read_recording
+from conag.recording.recorder import RecordReport, drain_until_quiet, run_recorder
+from conag.recording.replay import Comparison, LockstepScript, paced
+from conag.recording.replayer import drive_world, publish_recording
 from protocol import keys
 from protocol.codec import decode, encode
 from protocol.messages import (
@@ -46,9 +49,6 @@ from protocol.messages import (
     Welcome,
     WorldStatus,
 )
-from recording.echo import RateMeter, describe
-from recording.mcap_log import McapRecorder, read_recording
-from recording.replay import Comparison, LockstepScript, paced
 from tests.conftest import SCENARIOS, Bus, Process, RunningWorld, conag, free_port, wait_until
 from world_server.scenario import load_scenario
 from world_server.world import World
@@ -93,7 +93,7 @@ def test_a_recording_has_a_channel_per_key_with_ticks_sequences_and_metadata(tmp
 
 
 def test_a_recording_that_lost_the_world_before_the_run_ended_says_so(tmp_path):
-    from recording.mcap_log import read_end, world_cut_short
+    from conag.recording.mcap_log import read_end, world_cut_short
 
     rec = McapRecorder(tmp_path / "r.mcap")
     rec.add(keys.sensors(W, "a1"), _frame(0), 1)

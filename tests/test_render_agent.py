@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
-import sim
 from agent_runtime.esm import CONFIG
+from conag import sim
 from conag.cli import main
-from sim.render_agent import nm_obstacles, render_agent_maps
+from conag.sim.render_agent import nm_obstacles, render_agent_maps
 from tests.conftest import ROOT, SCENARIOS
 from world_server.scenario import load_scenario
 
@@ -85,7 +85,7 @@ def test_negative_ticks_are_refused(tmp_path, fig6):
 
 
 def test_with_goal_sequencing_the_matching_grid_is_drawn(fig6):
-    from sim.render_agent import _figure
+    from conag.sim.render_agent import _figure
 
     run = sim.start(load_scenario(SCENARIOS / "fig18.toml"))
     brain = run.brains["a1"]

@@ -12,8 +12,8 @@ from concurrent.futures import ThreadPoolExecutor
 
 import pytest
 
-from bus.deployment import client_file
 from conag.cli import main as conag_main
+from protocol.bus.deployment import client_file
 from tests.conftest import ROOT, conag, free_port
 
 pytestmark = pytest.mark.slow

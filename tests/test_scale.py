@@ -49,7 +49,7 @@ def test_border_seed_is_the_octile_distance_to_the_nearest_target_beyond_the_map
 
 
 def test_parse_ids_takes_ranges_and_lists_and_refuses_nonsense():
-    from nodes.agent_host import parse_ids
+    from agent_runtime.host import parse_ids
 
     assert parse_ids("a1..a3") == ["a1", "a2", "a3"]
     assert parse_ids("a1,a3..a4, b7") == ["a1", "a3", "a4", "b7"]
@@ -61,8 +61,8 @@ def test_parse_ids_takes_ranges_and_lists_and_refuses_nonsense():
 def test_a_host_serves_each_agent_its_own_body_and_stops_one_alone(bus, start_world):
     import threading
 
-    from nodes.agent import AgentOptions
-    from nodes.agent_host import AgentHost, host_options
+    from agent_runtime.host import AgentHost, host_options
+    from agent_runtime.node import AgentOptions
     from tests.conftest import scenario, wait_until
 
     rw = start_world(scenario("A.A.A\n.....\n..b..\n..+..", agents=3), wait_agents=3)

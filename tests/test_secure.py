@@ -1,5 +1,5 @@
-"""A secure deployment on disk (`conag keys`, `bus.deployment`) and the ACL it carries
-(`bus.acl`): private files, random passwords, zenoh parses every file, and each rule lets
+"""A secure deployment on disk (`conag keys`, `protocol.bus.deployment`) and the ACL it carries
+(`protocol.bus.acl`): private files, random passwords, zenoh parses every file, and each rule lets
 exactly the identities of the issue's list do each thing."""
 
 from __future__ import annotations
@@ -10,11 +10,18 @@ import stat
 import pytest
 import zenoh
 
-from bus import BusOptions, make_config
-from bus.acl import OBSERVER, OPERATOR, TEACHER, WORLD, access_control, agent_user, roles
-from bus.deployment import DICTIONARY_FILE, MANIFEST_FILE, ROUTER_FILE, DeploymentSpec, client_file, write_deployment
 from conag.cli import main as conag_main
 from protocol import keys
+from protocol.bus import BusOptions, make_config
+from protocol.bus.acl import OBSERVER, OPERATOR, TEACHER, WORLD, access_control, agent_user, roles
+from protocol.bus.deployment import (
+    DICTIONARY_FILE,
+    MANIFEST_FILE,
+    ROUTER_FILE,
+    DeploymentSpec,
+    client_file,
+    write_deployment,
+)
 
 W = "w0"
 AGENTS = ("a1", "a2", "a3")
@@ -152,7 +159,7 @@ def test_an_agent_refuses_another_agents_credential_at_once(tmp_path, capsys):
 
 def test_a_world_through_a_router_is_told_apart(tmp_path):
     """`conag world` sends lockstep frames BLOCK when it is a client of a router (is_client)."""
-    from bus import is_client
+    from protocol.bus import is_client
 
     write_deployment(tmp_path, DeploymentSpec(("a1",)))
     assert is_client(BusOptions(zenoh_config=str(tmp_path / client_file(WORLD))), serve=True)

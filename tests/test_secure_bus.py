@@ -1,5 +1,5 @@
 """Intrusions on a secure bus, refused: a zenoh router with the deployment's ACL on loopback
-(`bus.deployment`, opened in this process), a world and a rightful agent `a1` as clients
+(`protocol.bus.deployment`, opened in this process), a world and a rightful agent `a1` as clients
 with their own credentials, and intruders holding no credential, a wrong password, or the
 credential of another identity (another agent, the teacher, the observer, the operator, the
 world). Every attack is checked on what the world or the victim did (the body did not move,
@@ -21,12 +21,12 @@ import numpy as np
 import pytest
 import zenoh
 
-from bus import BusOptions, open_session
-from bus.acl import OBSERVER, OPERATOR, TEACHER, WORLD, agent_user
-from bus.deployment import ROUTER_FILE, DeploymentSpec, client_file, write_deployment
+from agent_runtime.world_link import AttachError, WorldLink
 from conag.run import _on_control, control
-from nodes.world_link import AttachError, WorldLink
 from protocol import keys
+from protocol.bus import BusOptions, open_session
+from protocol.bus.acl import OBSERVER, OPERATOR, TEACHER, WORLD, agent_user
+from protocol.bus.deployment import ROUTER_FILE, DeploymentSpec, client_file, write_deployment
 from protocol.codec import decode, encode
 from protocol.messages import AgentCommand, Hello, Perturbation, PerturbResult, Reinforcement, SensorFrame
 from tests.conftest import SCENARIOS, RunningWorld, free_port, wait_until

@@ -5,10 +5,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import sim
 from agent_runtime.network import engineered
+from conag import sim
+from conag.sim.trials import run_trial
 from protocol.messages import WorldStatus
-from sim.trials import run_trial
 from teacher.core import Teacher
 from world_server.scenario import load_scenario
 from world_server.stall import StallWatch

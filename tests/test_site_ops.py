@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import sim
+from conag import sim
 from protocol.codec import decode, encode
 from protocol.messages import Blueprint, Perturbation
 from tests.conftest import make

@@ -11,8 +11,8 @@ import time
 
 import pytest
 
-from bus import Inbox
 from protocol import keys
+from protocol.bus import Inbox
 from protocol.codec import decode
 from protocol.messages import AgentState, Blueprint, WorldStatus
 from tests.conftest import Process, conag, wait_until

@@ -8,7 +8,7 @@ import json
 
 import pytest
 
-import sim
+from conag import sim
 from protocol.messages import BEHAVIOURS, AgentState, Perturbation, WorldStatus
 from tests.conftest import conag, free_port
 from world_server.scenario import parse_scenario

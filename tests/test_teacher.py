@@ -19,7 +19,7 @@ import zenoh
 from agent_runtime.config import AgentConfig
 from agent_runtime.learning import Student
 from agent_runtime.network import ARM_OUTPUTS, MOTOR_OUTPUTS, NONE, engineered
-from nodes.agent import AgentOptions, AgentReport, Learning, run_agent
+from agent_runtime.node import AgentOptions, AgentReport, Learning, run_agent
 from protocol import keys
 from protocol.codec import decode, encode
 from protocol.messages import Decision, Reinforcement
@@ -132,7 +132,7 @@ def test_a_recorded_teacher_teaches_only_once_it_hears_the_recorder(bus):
     # Peers do not forward for each other: the recorder gets the teacher's reinforcements only
     # over its own link to the teacher. A recorded teacher shows its token (students then
     # decide aloud) once the recorder's token has come over that link.
-    from nodes.teacher import run_teacher
+    from teacher.node import run_teacher
 
     session, watcher = bus.server_session(), bus.client_session()
     stop = threading.Event()

@@ -11,14 +11,14 @@ from collections.abc import Callable
 
 import pytest
 
-from nodes.viewer import LiveFeed, ViewerServer
-from nodes.world_link import WorldLink
+from agent_runtime.world_link import WorldLink
+from conag.recording.mcap_log import McapRecorder, read_recording
+from conag.viewer.scene import MAPS_STEPS, Scene, Timeline, layer_cells, maps_interval
+from conag.viewer.server import LiveFeed, ViewerServer
 from protocol import encode
 from protocol.messages import BEHAVIOURS, AgentState, WorldStatus, WorldView
-from recording.mcap_log import McapRecorder, read_recording
 from tests.conftest import RunningWorld, make, wait_until
 from tests.scripted import ScriptedBody
-from viewer.scene import MAPS_STEPS, Scene, Timeline, layer_cells, maps_interval
 
 # A filled site (B: a brick on a site) at (2.5, 2.5), an empty one at (4.5, 2.5), a brick, a
 # food disc, a wall cell and an agent start.
@@ -242,7 +242,7 @@ def test_the_shown_agents_decision_is_asked_for_at_the_display_rate_not_taken_ev
 def test_an_agent_answers_a_query_with_its_newest_decision(bus, start_world):
     import threading
 
-    from nodes.agent import AgentOptions, AgentReport, run_agent
+    from agent_runtime.node import AgentOptions, AgentReport, run_agent
     from protocol import decode, keys
     from protocol.messages import Decision
 
@@ -363,7 +363,7 @@ def test_a_map_snapshot_holds_the_esms_both_nms_and_the_matching_grid():
 
 
 def test_agents_publish_their_maps_only_while_someone_asks(bus):
-    from nodes.agent_feeds import AgentFeeds
+    from agent_runtime.feeds import AgentFeeds
     from protocol import keys
     from protocol.messages import AgentMap
 
@@ -409,8 +409,8 @@ def test_the_timeline_gives_an_agents_maps_at_a_tick():
 
 
 def test_a_live_viewer_decodes_only_the_newest_snapshot_of_an_agents_maps():
+    from conag.viewer.scene import decode_newest_maps, maps_picture
     from protocol.messages import AgentMap
-    from viewer.scene import decode_newest_maps, maps_picture
 
     def layer(tick: int, name: str, value: int) -> bytes:
         return encode(AgentMap("a1", tick, name, 3, (value,) * 9))

@@ -19,12 +19,12 @@ import sys
 
 import pytest
 
-from nodes.viewer import LiveFeed, ViewerServer
+from conag.recording.mcap_log import McapRecorder
+from conag.viewer.scene import layer_cells
+from conag.viewer.server import LiveFeed, ViewerServer
 from protocol import encode
-from recording.mcap_log import McapRecorder
 from tests.conftest import ROOT, SCENARIOS, RunningWorld, make, wait_until
 from tests.test_viewer import LAYOUT, view
-from viewer.scene import layer_cells
 
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 CHROMEDRIVER = shutil.which("chromedriver") or "/usr/bin/chromedriver"
@@ -150,7 +150,7 @@ def test_the_recording_page_scrubs_the_timeline(tmp_path, browser):
     with McapRecorder(out) as rec:
         for v in views:
             rec.add("conag/v4/world/w0/view", encode(v), v.tick)
-    from conag.view import load_timeline
+    from conag.viewer.command import load_timeline
 
     with ViewerServer(load_timeline(str(out))).serve_in_thread() as server:
         browser.get(server.url)
@@ -199,8 +199,8 @@ def test_a_recorded_fig19_build_opens_and_plays(tmp_path, browser):
                    what="the recording's first picture")
         browser.execute_script(f"window.viewer.seek({timeline['last']})")
         wait_until(lambda: picture(browser)["tick"] == timeline["last"], what="the last picture")
+        from conag.recording.mcap_log import read_recording
         from protocol import decode
-        from recording.mcap_log import read_recording
 
         last = [e for e in read_recording(rec).entries if e.key.endswith("/view")][-1]
         v = decode(last.data)

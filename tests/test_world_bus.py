@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 import zenoh
 
+from agent_runtime.world_link import WorldLink
 from conag.cli import is_newer_status
-from nodes.world_link import WorldLink
 from protocol import keys
 from protocol.codec import decode, encode
 from protocol.messages import (

@@ -10,15 +10,14 @@ import threading
 
 import pytest
 
-from nodes import agent as agent_node
-from nodes import world_server as server_node
-from nodes.agent import AgentOptions, AgentReport, run_agent
-from nodes.world_server import WorldServer
+from agent_runtime import node as agent_node
+from agent_runtime.node import AgentOptions, AgentReport, run_agent
+from conag.sim.loop import start
 from protocol import keys
 from protocol.codec import encode
 from protocol.messages import CHANNELS, SensorFrame
-from sim.loop import start
 from tests.conftest import SCENARIOS, Process, RunningWorld, wait_until
+from world_server import server as server_node
 from world_server.checkpoint import (
     CheckpointError,
     CheckpointPlan,
@@ -30,6 +29,7 @@ from world_server.checkpoint import (
     write_checkpoint,
 )
 from world_server.scenario import parse_scenario
+from world_server.server import WorldServer
 
 ONE_AGENT = '''
 name = "one"

@@ -3,5 +3,5 @@
 Pure core (no bus): `world.World` (physics, sensors, gripper, perturbation), the
 scenario files, the layout generator and buildability check, pictures (`render`), and
 what a run reports (`stall`, `summary`). Its process shell, the zenoh server around
-`World`, is `nodes.world_server.WorldServer` (`conag world`).
+`World`, is `world_server.server.WorldServer` (`conag world`).
 """

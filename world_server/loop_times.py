@@ -1,6 +1,6 @@
 """Where a world loop's wall time goes (issue 15): stepping, publishing, waiting for commands.
 
-`LoopTimes` is filled in by the world server's loop (`nodes/world_server.py`) and written
+`LoopTimes` is filled in by the world server's loop (`world_server/server.py`) and written
 by `conag world --profile PATH` (also `conag run --profile PATH`) when the world stops; the
 scale benchmark (`bench/bench_scale.py`) reads it. Only ticks after the first are counted,
 so waiting for agents to start and attach is not mistaken for waiting for their commands;

@@ -1,7 +1,7 @@
 """Telling a stalled build from a slow one, and saying why it stalled.
 
 `StallClock` counts the ticks since a drop site was last filled; `conag run` (through a
-`StallWatch` on the world's statuses) and `sim.SimRun.run` (every tick) both stop a run
+`StallWatch` on the world's statuses) and `conag.sim.SimRun.run` (every tick) both stop a run
 once that reaches the limit. `stall_report` is the text both print then: one line for
 the run, one per agent from the world's view of its body and the agent's own last
 `AgentState`. No bus and no agent code here, so both sides import it freely.

@@ -1,0 +1,114 @@
+"""The agent process's side traffic: blueprint changes in, state reports out.
+
+`AgentFeeds` subscribes to the world's Blueprint key through a FIFO inbox (reliable and
+never "latest wins": a blueprint change must not be lost), and must be created before
+the agent attaches: a change published after the Welcome was made is then certain to
+arrive, and the Welcome itself carries the sites and version as of attaching. Before each
+decision step the newest Blueprint that has arrived goes to the brain, which ignores
+versions it already has.
+
+Every `every` ticks, and once more on the way out, the agent publishes the brain's
+AgentState (what it is doing, what blocks it): `conag run` prints the last one per agent
+when a build stalls, and the world keeps it for the run summary's behaviour counts.
+
+While some liveliness token `keys.maps_request_token(world, requester, N, agent)` for this
+agent or for all is up (a recorder with `--maps-every N` asks all agents, a viewer the one
+its page shows), the agent also publishes its maps
+(`agent_runtime.snapshot`: the ESMs, both NMs, the Matching grid; one AgentMap per layer)
+at every tick that is a multiple of the smallest such N; with none up it publishes nothing.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections import Counter
+
+import zenoh
+
+from agent_runtime.snapshot import map_snapshot
+from protocol import keys
+from protocol.bus import Declarations, Inbox, watch_tokens
+from protocol.codec import ProtocolError, decode, encode
+from protocol.messages import Blueprint
+
+log = logging.getLogger("conag.agent")
+
+STATE_EVERY = 100  # ticks between AgentState reports
+
+
+class AgentFeeds:
+    """Blueprint changes in (a FIFO inbox), the brain's AgentState reports out (see the module)."""
+
+    def __init__(self, session: zenoh.Session, world_id: str, agent_id: str, every: int = STATE_EVERY):
+        self.world_id, self.agent_id, self.every = world_id, agent_id, every
+        self.bad = 0
+        self._last_report: int | None = None
+        self._declared = Declarations()
+        self._blueprints = self._declared.add(Inbox(256).subscribe(session, keys.blueprint(world_id)))
+        self._states = self._declared.add(session.declare_publisher(keys.agent_state(world_id, agent_id),
+                                                                    reliability=zenoh.Reliability.RELIABLE))
+        # Map snapshots: only while a maps request token is up (its last segment is the period).
+        self._maps_lock = threading.Lock()
+        self._maps_requests: Counter[int] = Counter()
+        self._maps = self._declared.add(session.declare_publisher(
+            keys.agent_maps(world_id, agent_id), congestion_control=zenoh.CongestionControl.DROP))
+        for key in keys.maps_requests_for(world_id, agent_id):
+            self._declared.add(watch_tokens(session, key, self._on_maps_request))
+
+    def _on_maps_request(self, every: str, up: bool) -> None:
+        if not every.isdigit() or int(every) < 1:
+            return
+        with self._maps_lock:
+            self._maps_requests[int(every)] += 1 if up else -1
+            self._maps_requests = +self._maps_requests  # drop the zeros
+
+    @property
+    def maps_every(self) -> int:
+        """Ticks between map snapshots: the smallest asked for; 0 when nobody asks."""
+        with self._maps_lock:
+            return min(self._maps_requests, default=0)
+
+    def newest_blueprint(self) -> Blueprint | None:
+        """The highest-version Blueprint among those that arrived since the last call."""
+        best = None
+        while (sample := self._blueprints.get(0)) is not None:
+            try:
+                bp = decode(sample.payload.to_bytes(), Blueprint)
+            except ProtocolError as exc:
+                self.bad += 1
+                log.debug("agent %s ignored a bad blueprint: %s", self.agent_id, exc)
+                continue
+            if bp.world_id == self.world_id and (best is None or bp.version > best.version):
+                best = bp
+        return best
+
+    def before_step(self, brain) -> None:
+        """Hand the brain the newest blueprint, if one came (it keeps only newer versions)."""
+        bp = self.newest_blueprint()
+        if bp is not None and brain.set_blueprint(bp.version, bp.site_xs, bp.site_ys):
+            log.info("agent %s: blueprint version %d, %d sites", self.agent_id, bp.version, len(bp.site_xs))
+
+    def after_step(self, brain, tick: int) -> None:
+        """Publish the brain's state report if `every` ticks have passed since the last one."""
+        # A lower tick: a world resumed from a checkpoint, counting from there again.
+        if self._last_report is None or not 0 <= tick - self._last_report < self.every:
+            self.report(brain, tick)
+        every = self.maps_every
+        if every and tick % every == 0:
+            for layer in map_snapshot(brain, tick):
+                self._maps.put(encode(layer))
+
+    def report(self, brain, tick: int) -> None:
+        """Publish the brain's AgentState as of `tick`."""
+        self._states.put(encode(brain.state_report(tick)))
+        self._last_report = tick
+
+    def close(self, brain=None, tick: int = 0) -> None:
+        """A last state report (if there is a brain), then undeclare everything."""
+        try:
+            if brain is not None:
+                self.report(brain, tick)
+        except Exception as exc:  # noqa: BLE001 -- on the way out (a signal mid-step, a closing session): never fatal
+            log.debug("agent %s: no final state report: %s", self.agent_id, exc)
+        self._declared.close()

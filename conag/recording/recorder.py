@@ -1,0 +1,134 @@
+"""The recorder process (`conag record OUT.mcap`): the zenoh shell around `conag.recording.mcap_log.McapRecorder`.
+
+It subscribes to everything published under one world's root (`<root>/world/<id>/**`:
+frames, commands, decisions, reinforcements, statuses, blueprints, agent states, the
+world's welcomes and perturbations). zenoh queues them in a FIFO channel; the loop
+thread takes each, stamps it with the clock and writes it, ends a chunk every `flush_every`
+seconds (what a SIGKILL can lose) and, once stopped, writes on until the bus has been
+quiet for `QUIET` seconds (what was still on its way), then the summary and the footer,
+and renames the file into place.
+
+Once the world's first status arrives (the world then routes its publications here too)
+the recorder declares its liveliness token: `conag run --record` starts the agents only
+then, so the recording holds the run from its first tick. The newest status goes into
+the file's closing metadata (scenario name, seed, tick mode, ticks, completed).
+With `maps_every` N, it asks the agents for their map snapshots every N ticks (a maps
+request token, see agent_runtime/feeds.py), so they are recorded too.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import zenoh
+
+from conag.recording.mcap_log import DEFAULT_TICK_NS, McapRecorder
+from protocol import keys
+from protocol.bus import Declarations
+from protocol.codec import ProtocolError, decode
+from protocol.messages import WorldStatus
+
+log = logging.getLogger("conag.record")
+
+QUEUE_DEPTH = 65_536   # samples zenoh may hold for the writer; when full, zenoh's receiving thread waits
+IDLE_SLEEP = 0.002     # seconds the writer sleeps when nothing is waiting
+QUIET = 0.5            # once stopped, the recorder writes on until nothing has come for this long ...
+QUIET_LIMIT = 10.0     # ... or for at most this long
+
+
+@dataclass
+class RecordReport:
+    """What a recorder wrote (filled in as it goes)."""
+
+    path: Path | None = None
+    messages: int = 0
+    last_tick: int = 0
+    status: WorldStatus | None = None   # the newest status heard
+    heard_world: threading.Event = field(default_factory=threading.Event)
+
+
+def run_recorder(session: zenoh.Session, world_id: str, out: str | Path, stop: threading.Event, *,
+                 metadata: Mapping[str, str] | None = None, tick_ns: int = DEFAULT_TICK_NS,
+                 recorder_id: str = "recorder", flush_every: float = 1.0, maps_every: int = 0,
+                 clock: Callable[[], int] = time.time_ns, report: RecordReport | None = None) -> RecordReport:
+    """Record world `world_id` into `out` until `stop` is set; returns (and fills in) `report`."""
+    report = report if report is not None else RecordReport()
+    status_key = keys.status(world_id)
+    recorder = McapRecorder(out, metadata, tick_ns=tick_ns)
+    try:
+        with Declarations() as declared:
+            # A FIFO channel drained by this thread, not a Python callback: the callback's
+            # hand-off from zenoh's thread (and a queue) cost more than writing the message.
+            sub = declared.add(session.declare_subscriber(f"{keys.world_root(world_id)}/**",
+                                                          zenoh.handlers.FifoChannel(QUEUE_DEPTH)))
+            inbox = sub.handler
+            if maps_every:  # the agents' map snapshots, every `maps_every` ticks
+                declared.add(session.liveliness().declare_token(keys.maps_request_token(world_id, recorder_id,
+                                                                                         maps_every)))
+            last_flush = time.monotonic()
+            while not stop.is_set():
+                if not _drain(inbox, recorder, status_key, report, clock):
+                    time.sleep(IDLE_SLEEP)
+                if not report.heard_world.is_set() and report.status is not None:
+                    report.heard_world.set()
+                    declared.add(session.liveliness().declare_token(keys.recorder_token(world_id, recorder_id)))
+                    log.info("recorder %s: heard world %s", recorder_id, world_id)
+                if time.monotonic() - last_flush >= flush_every:
+                    recorder.flush()
+                    last_flush = time.monotonic()
+            # Stopped: the last messages may still be on their way (an idle recorder on a busy
+            # machine reads its sockets late; the world's last frames came, an agent's last
+            # commands had not): write on until the bus has been quiet for a while.
+            drain_until_quiet(lambda: _drain(inbox, recorder, status_key, report, clock))
+        # Undeclared: nothing more arrives; write what is still in the channel.
+        _drain(inbox, recorder, status_key, report, clock)
+    finally:
+        st = report.status
+        end = {} if st is None else {"scenario_name": st.scenario, "seed": st.seed, "mode": st.mode,
+                                     "ticks": st.tick, "completed": st.completed}
+        report.path = recorder.close(end)
+        report.messages, report.last_tick = recorder.messages, recorder.tick
+    return report
+
+
+def drain_until_quiet(drain: Callable[[], int], quiet: float = QUIET, limit: float = QUIET_LIMIT, *,
+                      clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep) -> None:
+    """Call `drain` (it writes what is waiting, returns how many) until it has found nothing
+    for `quiet` seconds, or for `limit` seconds in all."""
+    start = last = clock()
+    while clock() - last < quiet and clock() - start < limit:
+        if drain():
+            last = clock()
+        else:
+            sleep(IDLE_SLEEP)
+
+
+def _drain(inbox, recorder: McapRecorder, status_key: str, report: RecordReport,
+           clock: Callable[[], int]) -> int:
+    """Write every sample waiting in `inbox`; returns how many (the channel, once closed
+    by the undeclare and emptied, says so with an error: nothing is left then)."""
+    n = 0
+    while True:
+        try:
+            sample = inbox.try_recv()
+        except zenoh.ZError:
+            return n
+        if sample is None:
+            return n
+        _write(recorder, str(sample.key_expr), sample.payload.to_bytes(), clock(), status_key, report)
+        n += 1
+
+
+def _write(recorder: McapRecorder, key: str, data: bytes, t: int, status_key: str, report: RecordReport) -> None:
+    recorder.add(key, data, t)
+    if key == status_key:
+        try:
+            report.status = decode(data, WorldStatus)
+        except ProtocolError:
+            pass  # recorded as it came; it just says nothing about the world
+    report.messages = recorder.messages
