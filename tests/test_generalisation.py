@@ -40,7 +40,7 @@ def test_the_stall_limit_grows_with_the_world_per_agent():
 
 @pytest.mark.slow
 def test_the_quick_run_builds_small_layouts_with_both_agents_and_writes_its_table(tmp_path):
-    r = subprocess.run([sys.executable, "experiments/generalisation.py", "--quick", "--jobs", "1",
+    r = subprocess.run([sys.executable, "-m", "experiments.generalisation", "--quick", "--jobs", "1",
                         "--out", str(tmp_path)], cwd=ROOT, capture_output=True, text=True, timeout=900)
     assert r.returncode == 0, r.stderr[-2000:]
     runs = json.loads((tmp_path / "generalisation.json").read_text())
@@ -53,7 +53,7 @@ def test_the_quick_run_builds_small_layouts_with_both_agents_and_writes_its_tabl
 
 @pytest.mark.slow
 def test_the_quick_run_refuses_to_overwrite_the_committed_results():
-    r = subprocess.run([sys.executable, "experiments/generalisation.py", "--quick"], cwd=ROOT,
+    r = subprocess.run([sys.executable, "-m", "experiments.generalisation", "--quick"], cwd=ROOT,
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "--out" in r.stderr
 
@@ -80,7 +80,7 @@ def test_an_interrupted_run_resumes_without_running_again_what_it_finished(tmp_p
     layout = "000-gen-wall-20260000.toml"
 
     def run(out, *extra):
-        return subprocess.run([sys.executable, "experiments/generalisation.py", "--only", layout, "--jobs", "1",
+        return subprocess.run([sys.executable, "-m", "experiments.generalisation", "--only", layout, "--jobs", "1",
                                "--out", str(out), *extra], cwd=ROOT, capture_output=True, text=True, timeout=600)
 
     whole = run(tmp_path / "whole")

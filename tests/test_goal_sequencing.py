@@ -107,7 +107,7 @@ def test_the_fig13_experiment_quick_run_writes_its_table_chart_and_section(tmp_p
     from tests.conftest import ROOT
 
     doc = tmp_path / "EXPERIMENTS.md"
-    r = subprocess.run([sys.executable, "experiments/goal_sequencing.py", "--quick", "--out", str(tmp_path),
+    r = subprocess.run([sys.executable, "-m", "experiments.goal_sequencing", "--quick", "--out", str(tmp_path),
                         "--doc", str(doc)], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     assert "[4/4]" in r.stderr                                   # progress per run

@@ -176,7 +176,7 @@ def test_the_scale_benchmark_quick_run_prints_both_tables(tmp_path):
     from tests.conftest import ROOT, free_port
 
     out = tmp_path / "scale.json"
-    r = subprocess.run([sys.executable, "bench/bench_scale.py", "--quick", "--port", str(free_port()),
+    r = subprocess.run([sys.executable, "-m", "bench.bench_scale", "--quick", "--port", str(free_port()),
                         "--json", str(out)], cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-3000:]
     rows = json.loads(out.read_text())
