@@ -17,6 +17,7 @@ import io
 import logging
 import os
 import re
+import sys
 from contextlib import redirect_stdout
 from pathlib import Path
 
@@ -152,8 +153,10 @@ def _expand_includes(text: str, real_dir: Path, page_dir: str, config) -> str:
     return INCLUDE.sub(sub, text)
 
 
-def _cli_reference() -> str:
+def _cli_reference(root: Path) -> str:
     os.environ.setdefault("COLUMNS", "100")
+    if str(root) not in sys.path:  # this checkout's conag, whichever one pip installed
+        sys.path.insert(0, str(root))
     from conag.cli import build_parser
 
     parser = build_parser()
@@ -204,6 +207,6 @@ def on_page_markdown(markdown, page, config, **_):
     real = _real.get(src_uri, Path(page.file.abs_src_path))
     page_dir = os.path.dirname(src_uri)
     if CLI_MARKER in markdown:
-        markdown = markdown.replace(CLI_MARKER, _cli_reference())
+        markdown = markdown.replace(CLI_MARKER, _cli_reference(_root(config)))
     markdown = _rewrite(markdown, real.parent, page_dir, config)
     return _expand_includes(markdown, real.parent, page_dir, config)
