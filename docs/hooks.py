@@ -89,7 +89,7 @@ def _local(target: str) -> bool:
     return not (re.match(r"^[a-zA-Z][a-zA-Z0-9+.-]*:", target) or target.startswith(("#", "/")))
 
 
-def _resolve(target: str, real_dir: Path, config) -> tuple[str | None, str]:
+def _resolve(target: str, real_dir: Path, config, warn=log.warning) -> tuple[str | None, str]:
     """The site URI (relative to docs/) a local link target stands for, and its #fragment."""
     path, _, frag = target.partition("#")
     frag = "#" + frag if frag else ""
@@ -101,7 +101,7 @@ def _resolve(target: str, real_dir: Path, config) -> tuple[str | None, str]:
     if real.is_relative_to(docs):
         return real.relative_to(docs).as_posix(), frag
     if not real.is_relative_to(root):
-        log.warning("link %r points outside the repository", target)
+        warn("link %r points outside the repository", target)
         return None, frag
     rel = real.relative_to(root).as_posix()
     if rel in CARRIED:
@@ -109,15 +109,15 @@ def _resolve(target: str, real_dir: Path, config) -> tuple[str | None, str]:
     if real.is_dir():
         if (real / "README.md").is_file():
             return f"{REPO_DIR}/{rel}/README.md", frag
-        log.warning("link %r points to a directory without a README.md", target)
+        warn("link %r points to a directory without a README.md", target)
         return None, frag
     if not real.exists():
-        log.warning("link %r points to %s, which does not exist", target, rel)
+        warn("link %r points to %s, which does not exist", target, rel)
         return None, frag
     return f"{REPO_DIR}/{rel}", frag
 
 
-def _rewrite(text: str, real_dir: Path, page_dir: str, config) -> str:
+def _rewrite(text: str, real_dir: Path, page_dir: str, config, where: str = "") -> str:
     out = []
     for is_code, chunk in _outside_code(text):
         if is_code:
@@ -128,7 +128,7 @@ def _rewrite(text: str, real_dir: Path, page_dir: str, config) -> str:
             target = m.group(2)
             if not _local(target):
                 return m.group(0)
-            uri, frag = _resolve(target, real_dir, config)
+            uri, frag = _resolve(target, real_dir, config, warn=lambda msg, *a: log.warning("%s: %s", where, msg % a))
             if uri is None:
                 return m.group(0)
             new = os.path.relpath(uri, page_dir or ".").replace(os.sep, "/")
@@ -148,7 +148,7 @@ def _expand_includes(text: str, real_dir: Path, page_dir: str, config) -> str:
         if not path.is_file():
             log.warning("include %r: no such file", m.group(1))
             return m.group(0)
-        return _rewrite(path.read_text(encoding="utf-8"), path.parent, page_dir, config)
+        return _rewrite(path.read_text(encoding="utf-8"), path.parent, page_dir, config, where=m.group(1))
 
     return INCLUDE.sub(sub, text)
 
@@ -187,7 +187,7 @@ def on_files(files, config):
         for target in _targets(text):
             if not _local(target):
                 continue
-            uri, _ = _resolve(target, real.parent, config)
+            uri, _ = _resolve(target, real.parent, config, warn=log.debug)  # warned once, by the page
             if uri is None or not uri.startswith(REPO_DIR + "/") or uri in seen:
                 continue
             seen.add(uri)
@@ -208,5 +208,5 @@ def on_page_markdown(markdown, page, config, **_):
     page_dir = os.path.dirname(src_uri)
     if CLI_MARKER in markdown:
         markdown = markdown.replace(CLI_MARKER, _cli_reference(_root(config)))
-    markdown = _rewrite(markdown, real.parent, page_dir, config)
+    markdown = _rewrite(markdown, real.parent, page_dir, config, where=src_uri)
     return _expand_includes(markdown, real.parent, page_dir, config)
