@@ -1,1 +1,1 @@
-"""Benchmarks behind BENCHMARKS.md; run each from the repository root as `python3 -m bench.<name>`."""
+"""Benchmarks behind docs/results/benchmarks.md; run each from the repository root as `python3 -m bench.<name>`."""

@@ -1,7 +1,7 @@
 """Agent decision step on generated layouts: what the far memory, the border seeds, the
 wall layer and the Explore sweep cost (issue 10).
 
-    python3 -m bench.bench_agent_step            # the table of BENCHMARKS.md
+    python3 -m bench.bench_agent_step            # the table of docs/results/benchmarks.md
     python3 -m bench.bench_agent_step --quick    # a smoke run, not a measurement
 
 For each layout (scenarios/fig6.toml and three from the generalisation suite: a 21 x 21,

@@ -1,6 +1,6 @@
-"""What a world checkpoint costs (issue 12, point 2; the figures are in RELIABILITY.md).
+"""What a world checkpoint costs (issue 12, point 2; the figures are in docs/results/reliability.md).
 
-    python3 -m bench.bench_checkpoint            # the table of RELIABILITY.md
+    python3 -m bench.bench_checkpoint            # the table of docs/results/reliability.md
     python3 -m bench.bench_checkpoint --quick    # a smoke run, not a measurement
 
 For a small world (nested_squares with 4 agents, 200 ticks into its build) and a large one

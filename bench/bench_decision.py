@@ -1,6 +1,6 @@
 """Agent decision step benchmark: one `Brain.step(frame)` against scipy's Dijkstra.
 
-    python3 -m bench.bench_decision              # the table of BENCHMARKS.md
+    python3 -m bench.bench_decision              # the table of docs/results/benchmarks.md
     python3 -m bench.bench_decision --quick      # a smoke run, not a measurement
 
 For each map size, scenarios/fig6.toml runs in-process (`conag.sim.start`, one agent,

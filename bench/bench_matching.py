@@ -1,6 +1,6 @@
 """calculateMatching benchmark (paper §6.1, Fig. 16; issue 4 target: <= 10 ms at 101 x 101, 10 sites).
 
-    python3 -m bench.bench_matching            # the table of BENCHMARKS.md
+    python3 -m bench.bench_matching            # the table of docs/results/benchmarks.md
     python3 -m bench.bench_matching --quick    # a smoke run, not a measurement
 
 Maps like an agent's: a square map with scattered food and water discs (5% of the cells,

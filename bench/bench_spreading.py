@@ -1,6 +1,6 @@
 """Navigation-map benchmark: the compiled distance field against scipy's Dijkstra.
 
-    python3 -m bench.bench_spreading             # the table of BENCHMARKS.md (~10 s)
+    python3 -m bench.bench_spreading             # the table of docs/results/benchmarks.md (~10 s)
     python3 -m bench.bench_spreading --quick     # a smoke run, well under a second of timing
 
 Maps (fixed seeds): "open" is 5% random obstacle cells plus two walls with gaps and three

@@ -1,6 +1,6 @@
 """World benchmark: ticks per second of the world core, and the bus round trip.
 
-    python3 -m bench.bench_world                 # the full table of BENCHMARKS.md
+    python3 -m bench.bench_world                 # the full table of docs/results/benchmarks.md
     python3 -m bench.bench_world --quick         # a few hundred milliseconds, for CI
 
 Ticks: a 100 x 100 world with 2,000 discs (food, water, bricks at random cells) and N

@@ -99,7 +99,7 @@ def cmd_world(args) -> int:
             if (args.mode_tick or scenario.tick_mode) == "lockstep" and not args.resume:
                 print(f"lockstep: ticks start once {args.wait_agents} agent(s) have attached", flush=True)
             # Through a router, frames sent "latest wins" (DROP) were lost under load, each costing a
-            # lockstep timeout and the agent's odometry of that tick (RELIABILITY.md); lockstep waits
+            # lockstep timeout and the agent's odometry of that tick (docs/results/reliability.md); lockstep waits
             # for every agent anyway, so there frames are sent BLOCK.
             block = (args.mode_tick or scenario.tick_mode) == "lockstep" and is_client(_bus(args), serve=True)
             server = WorldServer(world, session, mode=args.mode_tick, max_ticks=args.ticks,

@@ -13,7 +13,7 @@ from protocol.bus import MODES, BusOptions
 
 # The recorder's priority (conag record --priority, conag run --record-priority): on a
 # machine the run keeps busy a recorder would otherwise take its share of the CPU from the
-# world and the agents (BENCHMARKS.md, recording overhead). It only has to keep up on
+# world and the agents (docs/results/benchmarks.md, recording overhead). It only has to keep up on
 # average: zenoh queues what it has not written yet (conag/recording/recorder.py).
 PRIORITIES = ("idle", "low", "normal")
 RECORDER_PRIORITY = "idle"

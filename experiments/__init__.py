@@ -1,4 +1,4 @@
-"""The experiment scripts behind EXPERIMENTS.md, and the analysis they share (`replay`).
+"""The experiment scripts behind docs/results/experiments.md, and the analysis they share (`replay`).
 
 Importable as `experiments.*`; run one from the repository root with `python3 -m
 experiments.NAME` (a script path works too, with the project installed).

@@ -1,4 +1,4 @@
-"""EXPERIMENTS.md is written by several experiment scripts; each owns one section.
+"""The experiments report (docs/results/experiments.md) is written by several experiment scripts; each owns one section.
 
 A section sits between `<!-- section:KEY -->` and `<!-- /section:KEY -->` lines. Writing
 it replaces only that span (or appends the section if the file lacks it), so re-running

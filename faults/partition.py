@@ -1,4 +1,4 @@
-"""`python3 -m conag.partition`: a build across three hosts, one of them cut off for a while.
+"""`python3 -m faults.partition`: a build across three hosts, one of them cut off for a while.
 
 The hosts are Linux network namespaces on one machine (`faults.netns.Hosts`): host 1 runs
 the zenoh router (`conag router`, deploy/multi-host/router.json5) and the world, hosts 2
@@ -18,7 +18,7 @@ are never restarted: `same_processes` says they all still ran when the world fin
 The world ticks in lockstep capped at `max_tick_rate` (100 a second): uncapped, the agent
 left alone ran at several hundred ticks a second and could finish the build within the
 cut, leaving nothing to come back to. (Realtime worlds do not build through a router under
-load: a frame an agent misses takes that tick's odometry with it; RELIABILITY.md.) Needs
+load: a frame an agent misses takes that tick's odometry with it; docs/results/reliability.md.) Needs
 root (see `faults.netns.unavailable`); the namespaces are deleted however a run ends, and
 `--logs DIR` keeps each process's log and the statuses read (`status.jsonl`).
 """

@@ -1,4 +1,4 @@
-"""The benchmark scripts keep working (smoke runs; the figures are in BENCHMARKS.md)."""
+"""The benchmark scripts keep working (smoke runs; the figures are in docs/results/benchmarks.md)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """bench_record's paired slowdown: each recorded build is judged against its own repetition's
 plain build, so a machine that speeds up during the run does not pass for a recorder that
-costs nothing (the figure in BENCHMARKS.md's recording section)."""
+costs nothing (the figure in docs/results/benchmarks.md, recording)."""
 
 import pytest
 

@@ -1,4 +1,4 @@
-"""EXPERIMENTS.md sections: each experiment script rewrites only its own section."""
+"""Experiment report sections: each experiment script rewrites only its own section."""
 
 from __future__ import annotations
 

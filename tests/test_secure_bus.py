@@ -7,7 +7,7 @@ no brick went, no frame or reinforcement arrived, the RunControl handler was not
 and next to it the rightful identity does the same thing and it works, so a test whose
 attack "failed" only because nothing reached anybody cannot pass.
 
-`INTRUSIONS` counts the attempts; RELIABILITY.md reports the figures.
+`INTRUSIONS` counts the attempts; docs/results/reliability.md reports the figures.
 """
 
 from __future__ import annotations
@@ -389,7 +389,7 @@ KINDS = 12  # the kinds of attempt above (joining the bus counts as one kind, tr
 
 
 def test_the_figures():
-    """The tally RELIABILITY.md reports (`pytest tests/test_secure_bus.py -s` prints it); only
+    """The tally docs/results/reliability.md reports (`pytest tests/test_secure_bus.py -s` prints it); only
     when the whole module ran."""
     if len(INTRUSIONS.attempts) < KINDS:
         pytest.skip(f"only part of the module ran: {sorted(INTRUSIONS.attempts)}")

@@ -37,12 +37,12 @@ STATE_NODES = ("holding_brick", "at_drop_site", "at_brick", "near_brick", "brick
 # Pictures a second sent to a live page. Each picture costs a browser a frame (style, layout,
 # raster, composite) whatever it redraws: a headless Chromium with software rendering took
 # 5.3-5.8% of a core at 10 a second and 3.7-4.2% at 5, following a 10-agent lockstep build
-# on the run's own two cores (bench/bench_view.py, BENCHMARKS.md). `conag view --display-hz`.
+# on the run's own two cores (bench/bench_view.py, docs/results/benchmarks.md). `conag view --display-hz`.
 DISPLAY_HZ = 5.0
 # The page asks for the shown agent's maps once a second (viewer.js), so a live viewer asks
 # that agent for about one snapshot a second, whatever the run's speed: at every 10 ticks, a
 # 10-agent lockstep run at 70 ticks/s made 7 a second, each about 1.2 ms on the run's serial
-# chain (asking less often measured no gain in bench_view, within its noise: BENCHMARKS.md).
+# chain (asking less often measured no gain in bench_view, within its noise: docs/results/benchmarks.md).
 MAPS_HZ = 1.0
 MAPS_STEPS = (10, 20, 50, 100, 200, 500, 1000, 2000, 5000)  # the intervals asked for (a token each)
 LEAVES = ("view", "status", "state", "decision", "maps")  # the keys a viewer listens to (their last part)

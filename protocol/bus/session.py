@@ -12,7 +12,7 @@ A router gets more receive workers than zenoh's 2 (`ROUTER_RUNTIME`, through zen
 its link is closed with bytes still unsent, the close blocks a receive worker for up to
 10 s (SO_LINGER, fixed when zenoh is compiled; zenoh issue #1101). With two agents on the
 cut host that took both workers, and the router routed nothing at all, the world's own
-traffic included, until the link came back (RELIABILITY.md, "Partition survived").
+traffic included, until the link came back (docs/results/reliability.md, "Partition survived").
 """
 
 from __future__ import annotations

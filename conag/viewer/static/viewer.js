@@ -32,7 +32,7 @@ function cell(g, x, y, fill, inset) {
 // The world is drawn in two layers. The scenery (border, walls, sites, discs) changes only when
 // a brick is grabbed or dropped, so it is painted on an offscreen canvas when it changes and
 // copied; each picture repaints only the bodies over it. Software-rendered in a browser on the
-// run's own cores, every arc counts (BENCHMARKS.md, viewer overhead).
+// run's own cores, every arc counts (docs/results/benchmarks.md, viewer overhead).
 const scenery = { canvas: document.createElement("canvas"), key: null };
 
 function sameRows(a, b) {  // two lists of [x, y, ...] rows, equal element for element
