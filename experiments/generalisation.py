@@ -21,7 +21,7 @@ stopped in (experiments/generalisation/failures/).
     python3 -m experiments.generalisation --resume     # go on with an interrupted run (same options)
 
 Writes experiments/generalisation.json (every run), experiments/generalisation.md and the
-generalisation section of EXPERIMENTS.md (not with --quick, which writes to --out).
+generalisation section of docs/results/experiments.md (not with --quick, which writes to --out).
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ import numpy as np
 from agent_runtime.config import AgentConfig
 from conag import sim
 from experiments.journal import Journal
-from experiments.report import write_section
+from experiments.report import RESULTS_DOC, write_section
 from experiments.workers import pool
 from world_server.scenario import Scenario, load_scenario
 
@@ -388,7 +388,7 @@ def quick_files(n: int) -> list[str]:
 
 
 def rewrite_report(args: argparse.Namespace) -> int:
-    """The markdown and the EXPERIMENTS.md section again, from experiments/generalisation.json."""
+    """The markdown and the docs/results/experiments.md section again, from experiments/generalisation.json."""
     out = ROOT / "experiments"
     rows = json.loads((out / "generalisation.json").read_text(encoding="utf-8"))
     outcomes = [Outcome(**(r | {"report": tuple(r["report"]),
@@ -397,7 +397,7 @@ def rewrite_report(args: argparse.Namespace) -> int:
     meta = json.loads((out / "generalisation.meta.json").read_text(encoding="utf-8"))
     args.jobs, args.stall = meta["jobs"], meta["stall"]
     (out / "generalisation.md").write_text(markdown(outcomes, args, meta["seconds"], out.resolve()), encoding="utf-8")
-    write_section(ROOT / "EXPERIMENTS.md", "generalisation", markdown(outcomes, args, meta["seconds"], ROOT))
+    write_section(RESULTS_DOC, "generalisation", markdown(outcomes, args, meta["seconds"], RESULTS_DOC.parent))
     print((out / "generalisation.md").read_text(encoding="utf-8"))
     return 0
 
@@ -454,7 +454,7 @@ def main(argv: list[str] | None = None) -> int:
                                                               "seconds": seconds}), encoding="utf-8")
     (out / "generalisation.md").write_text(text, encoding="utf-8")
     if not (args.quick or args.only or args.out):
-        write_section(ROOT / "EXPERIMENTS.md", "generalisation", markdown(outcomes, args, seconds, ROOT))
+        write_section(RESULTS_DOC, "generalisation", markdown(outcomes, args, seconds, RESULTS_DOC.parent))
     journal.remove()
     print(text)
     return 0

@@ -13,7 +13,7 @@ ideal order (experiments/replay.replay: goal sequencing on the fully known map, 
 agent). A run that fills no site for `--stall` ticks is stopped as stalled.
 
 Writes experiments/goal_sequencing.md and goal_sequencing.png and the G3 section of
-EXPERIMENTS.md; prints the table.
+docs/results/experiments.md; prints the table.
 
     python3 -m experiments.goal_sequencing            # full run (a few minutes)
     python3 -m experiments.goal_sequencing --quick    # smoke run (seconds)
@@ -36,7 +36,7 @@ import numpy as np
 from agent_runtime.config import AgentConfig
 from conag import sim
 from experiments.replay import lower_bound, replay
-from experiments.report import write_section
+from experiments.report import RESULTS_DOC, write_section
 from experiments.workers import pool
 from world_server.scenario import Scenario, load_scenario
 
@@ -236,7 +236,7 @@ def main(argv: list[str] | None = None) -> str:
     ap.add_argument("--stall", type=int, default=5000, help="stop a run after this many ticks without a new fill")
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="worker processes")
     ap.add_argument("--out", default=str(ROOT / "experiments"), help="directory for the table and chart")
-    ap.add_argument("--doc", default=str(ROOT / "EXPERIMENTS.md"), help="markdown report to update (G3 section)")
+    ap.add_argument("--doc", default=str(RESULTS_DOC), help="markdown report to update (G3 section)")
     args = ap.parse_args(argv)
     if args.seeds < 1 or args.stall < 1 or args.jobs < 1:
         ap.error("--seeds, --stall and --jobs must be >= 1")
@@ -286,7 +286,7 @@ Raw per-run results: experiments/goal_sequencing_runs.json.
 
 {tab}
 
-![goal sequencing](experiments/goal_sequencing.png)
+![goal sequencing](../../experiments/goal_sequencing.png)
 
 Completed: goal sequencing {sum(r['completed'] for r in ts)}/{sum(r['runs'] for r in ts)} runs,
 nearest-first {sum(r['completed'] for r in nf)}/{sum(r['runs'] for r in nf)}.

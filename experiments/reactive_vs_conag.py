@@ -14,7 +14,7 @@ scenarios built here from layout text: the ring is a ring of drop sites, the
 seeds are bricks already on their sites (`B`), free bricks stand around.
 
 Writes experiments/lattice_square.png, lattice_moved_brick.png,
-lattice_nested.png and EXPERIMENTS.md; prints the markdown table.
+lattice_nested.png and docs/results/experiments.md; prints the markdown table.
 
     python3 -m experiments.reactive_vs_conag           # full run (~1-2 min)
     python3 -m experiments.reactive_vs_conag --quick   # smoke run (seconds)
@@ -32,7 +32,7 @@ from conag import sim
 from conag.baselines.lattice import LATTICE_BRICK, Result, RuleSet, simulate
 from conag.baselines.perturb import NestedResult, nested_squares, run_perturbed
 from conag.baselines.rules import square_rules
-from experiments.report import write_section
+from experiments.report import RESULTS_DOC, write_section
 from protocol.messages import Perturbation
 from world_server.scenario import parse_scenario
 
@@ -411,7 +411,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="smoke run: fewer seeds and shorter budgets")
     ap.add_argument("--out", default=str(ROOT / "experiments"), help="directory for the PNGs")
-    ap.add_argument("--doc", default=str(ROOT / "EXPERIMENTS.md"), help="markdown report to write")
+    ap.add_argument("--doc", default=str(RESULTS_DOC), help="markdown report to write")
     args = ap.parse_args(argv)
     q = args.quick
     rseeds = [0, 1] if q else [0, 1, 2, 3, 4]
@@ -489,11 +489,11 @@ empty cells away from the outer ring).
 
 ### Pictures (reactive system, first rng seed)
 
-![square](experiments/{rel[0]})
+![square](../../experiments/{rel[0]})
 
-![moved brick](experiments/{rel[1]})
+![moved brick](../../experiments/{rel[1]})
 
-![nested squares](experiments/{rel[2]})
+![nested squares](../../experiments/{rel[2]})
 
 ### Discussion
 
@@ -528,9 +528,9 @@ empty cells away from the outer ring).
 
 `python3 -m experiments.lattice_learning` trains a feed-forward network to imitate the
 transition rule sets (corners and sides, n=6) and checks that the trained network builds the
-square. Results: [experiments/lattice_learning.md](experiments/lattice_learning.md), curve:
+square. Results: [experiments/lattice_learning.md](../../experiments/lattice_learning.md), curve:
 
-![learning](experiments/lattice_learning.png)
+![learning](../../experiments/lattice_learning.png)
 
 """
 

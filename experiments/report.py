@@ -9,6 +9,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+# The results page the experiment scripts write their sections into (the docs site's).
+RESULTS_DOC = Path(__file__).resolve().parent.parent / "docs" / "results" / "experiments.md"
+
 HEADER = "# Experiments\n"
 
 

@@ -295,7 +295,7 @@ def partition_run(opts: PartitionOptions, log_dir: Path, log=print) -> Partition
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python3 -m conag.partition", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog="python3 -m faults.partition", description=__doc__.split("\n\n")[0])
     p.add_argument("scenario", nargs="?", default=PartitionOptions.scenario_path)
     p.add_argument("--runs", type=int, default=1)
     p.add_argument("--agents-cut", type=int, default=2, help="agents on host 2, which is cut off (default 2)")

@@ -3,6 +3,7 @@ and the installed `conag` builds Fig. 6 from outside the source tree."""
 
 from __future__ import annotations
 
+import shutil
 import subprocess
 import sys
 import venv
@@ -18,9 +19,16 @@ SHIPPED = {"protocol", "world_server", "agent_runtime", "teacher", "conag"}
 @pytest.mark.slow
 @pytest.mark.timeout(600)
 def test_the_wheel_installs_only_the_card_packages_and_builds_fig6(tmp_path):
+    # Built from a copy of what git tracks: pip builds in the source tree (build/, egg-info).
+    src = tmp_path / "src"
+    files = subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, capture_output=True, check=True).stdout
+    for name in filter(None, files.decode().split("\0")):
+        if (ROOT / name).is_file():
+            (src / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(ROOT / name, src / name)
     dist = tmp_path / "dist"
     r = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w",
-                        str(dist), str(ROOT)], capture_output=True, text=True, timeout=300)
+                        str(dist), str(src)], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stdout + r.stderr
     (wheel,) = dist.glob("conag-*.whl")
     names = zipfile.ZipFile(wheel).namelist()

@@ -32,7 +32,8 @@ def add_commands(sub) -> None:
                         "shows them")
     v.add_argument("--display-hz", type=_display_hz, default=DISPLAY_HZ, metavar="HZ",
                    help=f"live: send the page at most HZ pictures a second (default {DISPLAY_HZ:g}; each costs the "
-                        "browser a frame, which a browser on the run's own cores takes from the run: BENCHMARKS.md)")
+                        "browser a frame, which a browser on the run's own cores takes from the run: "
+                        "docs/results/benchmarks.md)")
     v.add_argument("--priority", choices=PRIORITIES, default=VIEWER_PRIORITY,
                    help=f"live: the viewer's CPU priority, so a run on the same cores gets the CPU first "
                         f"(default {VIEWER_PRIORITY}: nice +10; idle: only when a core would idle; normal)")
