@@ -32,12 +32,13 @@ from agent_runtime import steering
 from agent_runtime.config import AgentConfig
 from agent_runtime.esm import AGENT, BRICK, CONFIG, FOOD, OBSTACLE, WATER, EgocentricMaps
 from agent_runtime.far_memory import FarMemory, on_border
+from agent_runtime.field_cache import FieldCache
 from agent_runtime.matching import Matching, calculate_matching, select_goals
 from agent_runtime.motivations import Motivations
 from agent_runtime.network import NONE, STATE_NODES, ActionNetwork, engineered
 from agent_runtime.seal_guard import SealGuard
 from agent_runtime.sealing import enclosed_sites, pocket_beside
-from agent_runtime.spreading import distance_field, gradient_step, seeded_distance_field
+from agent_runtime.spreading import gradient_step
 from protocol.messages import BEHAVIOURS, CHANNELS, NO_READING, AgentState, Decision, SensorFrame, Welcome
 
 _CH = {name: CHANNELS.index(name) for name in CHANNELS}
@@ -103,7 +104,10 @@ class Brain:
         self.far.config_layer(self.maps.maps[CONFIG])
         self.behaviour = NONE
         self.behaviour_ticks: Counter[str] = Counter()
-        self._trail: deque[tuple[float, float]] = deque(maxlen=self.cfg.stuck_ticks)
+        # The last `stuck_ticks` positions (a ring) and whether the agent meant to move.
+        self._trail = np.zeros((max(self.cfg.stuck_ticks, 1), 2))
+        self._trail_len = 0
+        self._trail_next = 0
         self._moving: deque[bool] = deque(maxlen=self.cfg.stuck_ticks)
         self._odo = np.zeros(2)            # dead-reckoned position in cells (for headway)
         self._unstick_left = 0             # ticks of backing off still to go
@@ -124,6 +128,8 @@ class Brain:
         self._recalled = np.zeros((self.cfg.map_size,) * 2, bool)
         self._attach_tick = welcome.tick
         self.plans: Plans | None = None
+        self.fields = FieldCache()   # navigation maps, computed again only when their inputs change
+        self._layers: np.ndarray | None = None  # the maps thresholded at 0.5, during a step
         self._matching: tuple[bytes, Matching] | None = None  # (inputs, result) of the last matching
         self._taken_from: np.ndarray | None = None  # (dx, dy) cells to where the held brick was taken
         self._dropped_at: np.ndarray | None = None  # odometry (cells) where it last dropped, until off it
@@ -169,6 +175,13 @@ class Brain:
             self.searched += new
         self.motivations.update(self.cfg, frame.ate, frame.drank)
         return ranges
+
+    def layers(self) -> np.ndarray:
+        """The maps as marks (> 0.5), one bool grid per layer: within `step`, worked out once
+        after perceiving (nothing changes the maps until the step ends); outside it, anew."""
+        if self._layers is not None:
+            return self._layers
+        return self.maps.maps > 0.5
 
     def _enclosed_sites(self) -> np.ndarray:
         """Open sites on the map that no way reaches (`sealing.enclosed_sites`): believed filled."""
@@ -252,7 +265,7 @@ class Brain:
         agent whose brick would seal another off (`sealing`) is no goal either. Other
         agents in sight are obstacles on both maps.
         """
-        m = self.maps.maps > 0.5
+        m = self.layers()
         # Fixed obstacles (walls, the world's edge) are in the way exactly as food and water are.
         food, water, brick, config = m[FOOD] | m[OBSTACLE] | self._recalled, m[WATER], m[BRICK], m[CONFIG]
         # Other agents in sight are in the way too: two agents heading opposite ways down a
@@ -280,7 +293,7 @@ class Brain:
             if held.any():
                 # Closed sites are passable for this: the depth of a site behind one must
                 # stay finite, or every site would count as "no deeper" than its neighbour.
-                depth = distance_field(supply_bricks, obstacles)
+                depth = self.fields.distance(supply_bricks, obstacles)
                 config_goals &= ~_mouth_side(held, config_goals, depth)
         if self.cfg.goal_sequencing:
             # Also when sequencing gives way (plan's fallback): no site that seals another.
@@ -312,11 +325,18 @@ class Brain:
         """
         fields = []
         far = (self.far.far_open_sites(), self.far.far_bricks())
+        m = self.layers()
+        # Sequencing applies only with an open site on the map (`nav_masks`); without one
+        # the plain masks are the very ones just made, so they are not made again.
+        sequenced = self.cfg.goal_sequencing and bool((m[CONFIG] & ~m[BRICK]).any())
+        plain = None
         for k, (goals, obstacles) in enumerate(self.nav_masks()):
             field = self._field(goals, obstacles, far[k])
             stuck = not (goals.any() or len(far[k])) if k == 0 else self._no_brick_here(goals, field)
-            if self.cfg.goal_sequencing and stuck:
-                goals, obstacles = self.nav_masks(sequenced=False)[k]
+            if sequenced and stuck:
+                if plain is None:
+                    plain = self.nav_masks(sequenced=False)
+                goals, obstacles = plain[k]
                 field = self._field(goals, obstacles, far[k])
             fields.append((field, goals, obstacles))
         (config, config_goals, config_obstacles), (brick, brick_goals, brick_obstacles) = fields
@@ -336,7 +356,7 @@ class Brain:
         side of the map's edge (gen-nested_rings 11260025). Any free brick blocks nothing."""
         if not np.isfinite(field[self.centre, self.centre]):
             return True
-        m = self.maps.maps > 0.5
+        m = self.layers()
         return not goals.any() and bool((m[BRICK] & ~m[CONFIG]).any())
 
     def _field(self, goals: np.ndarray, obstacles: np.ndarray, beyond: np.ndarray) -> np.ndarray:
@@ -344,9 +364,9 @@ class Brain:
         enter at the border carrying the distance that remains."""
         seed = self.far.border_costs(beyond, obstacles)
         if seed is None:
-            return distance_field(goals, obstacles)
+            return self.fields.distance(goals, obstacles)
         seed[goals & ~obstacles] = 0.0
-        return seeded_distance_field(seed, obstacles)
+        return self.fields.seeded(seed, obstacles)
 
     def _nearest(self, cells: np.ndarray) -> tuple[float, float, float] | None:
         """Offset and straight-line distance (cells) to the nearest marked cell, or None."""
@@ -389,6 +409,14 @@ class Brain:
     def step(self, frame: SensorFrame) -> Step:
         """One decision: perceive the frame, plan, choose, and the command that carries it out."""
         ranges = self.perceive(frame)
+        self._layers = self.maps.maps > 0.5
+        self._layers.setflags(write=False)  # shared by every reader this step
+        try:
+            return self._decide(frame, ranges)
+        finally:
+            self._layers = None
+
+    def _decide(self, frame: SensorFrame, ranges: np.ndarray) -> Step:
         plans = self.plan()
         state = self.state_nodes(frame, plans)
         choice = self.network.choose(state)
@@ -428,7 +456,7 @@ class Brain:
         cell = self.maps.cell_of(dx, dy)
         if not self.maps.contains(*cell):
             return speed, turn
-        m = self.maps.maps > 0.5
+        m = self.layers()
         blocked = m[OBSTACLE] | m[FOOD] | m[WATER] | m[BRICK]
         if self._drop_unseen:
             # A brain that did not see the drop has not seen the ring either (the brick
@@ -441,7 +469,7 @@ class Brain:
         blocked[self.centre, self.centre] = False
         outside = ~blocked & ~pocket
         outside[cell] = False
-        field = distance_field(outside, blocked)
+        field = self.fields.distance(outside, blocked)
         if gradient_step(field) in (None, (0, 0)):
             return speed, turn
         return self._navigate(field, frame.heading)
@@ -472,15 +500,17 @@ class Brain:
         if self._unstick_left > 0:
             self._unstick_left -= 1
             if self._unstick_left == 0:
-                self._trail.clear()
+                self._trail_len = 0
                 self._moving.clear()
             return (*steering.steer_to(math.cos(self._unstick_heading), math.sin(self._unstick_heading),
                                        frame.heading, self.cfg.cruise_speed), NONE, "unstick")
-        self._trail.append((float(self._odo[0]), float(self._odo[1])))
+        self._trail[self._trail_next] = self._odo
+        self._trail_next = (self._trail_next + 1) % len(self._trail)
+        self._trail_len = min(self._trail_len + 1, self.cfg.stuck_ticks)
         self._moving.append(behaviour not in _STILL_IS_FINE)
-        full = len(self._trail) == self._trail.maxlen
+        full = self._trail_len == self.cfg.stuck_ticks
         if full and all(self._moving):
-            pts = np.asarray(self._trail)
+            pts = self._trail   # all of it is the trail once full; order does not matter to max - min
             if float(np.hypot(*(pts.max(axis=0) - pts.min(axis=0)))) < self.cfg.stuck_distance:
                 self.unsticks += 1
                 self._unstick_left = int(self.rng.integers(self.cfg.stuck_ticks // 4, self.cfg.stuck_ticks // 2 + 1))
@@ -543,9 +573,9 @@ class Brain:
         return (*self._construct(frame, ranges, plans, motor, arm), arm, motor if motor != NONE else "explore")
 
     def _need_field(self, layer: int) -> np.ndarray:
-        m = self.maps.maps > 0.5
+        m = self.layers()
         others = (m[FOOD] | m[WATER] | m[BRICK] | m[OBSTACLE]) & ~m[layer]
-        return distance_field(m[layer], self._free_centre(others))
+        return self.fields.distance(m[layer], self._free_centre(others))
 
     def _construct(self, frame, ranges, plans, motor, arm=NONE) -> tuple[float, float]:
         cruise = self.cfg.cruise_speed
@@ -596,12 +626,12 @@ class Brain:
         # a sweep would walk it away from where it is needed.
         target = self.far.unseen_target(self.rng) if self.searching() else None
         if target is not None:
-            m = self.maps.maps > 0.5
+            m = self.layers()
             obstacles = self._free_centre(m[FOOD] | m[WATER] | m[BRICK] | m[OBSTACLE] | m[AGENT])
             goals = np.zeros_like(obstacles)
             if self.maps.contains(*target):
                 goals[target[0], target[1]] = True
-                field = distance_field(goals, obstacles)
+                field = self.fields.distance(goals, obstacles)
             else:
                 field = self._field(goals, obstacles, target[None])
             if gradient_step(field) not in (None, (0, 0)):

@@ -164,70 +164,40 @@ class EgocentricMaps:
         centre plus `frac`). Cells beyond a reading keep what they had. The AGENT layer is
         rebuilt from this frame alone; CONFIG is never touched. `clear_age` counts the
         calls since each cell was last cleared of bricks.
+
+        Association (before the writing): each disc reading is attributed to one cell of its
+        band. A sector cannot tell the angle inside it, so the same disc seen from two
+        places lands in two cells and leaves a ghost beside the real one; a ghost brick is
+        then a goal the agent keeps driving to (and the gripper takes the real brick, from
+        the structure). So a reading is matched to the cells of its wedge at about its
+        distance (the band): a cell already holding that colour first, then, for bricks, a
+        blueprint cell (bricks are expected there), else the cell at the sector's centre
+        angle (the plain rule). Other brick marks in the band are ghosts of the one brick
+        the sector saw and are cleared, except on blueprint cells, where neighbouring
+        structure bricks really do stand at the same distance.
         """
-        r = np.asarray(ranges, np.float64).reshape(len(CHANNELS), -1) / cell_size
+        r = np.ascontiguousarray(np.asarray(ranges, np.float64).reshape(len(CHANNELS), -1) / cell_size)
         sectors = r.shape[1]
         reach = sensor_range / cell_size
         cells, dist, (k, sector, starts), vx, vy, (_, core_sector, core_starts) = self._geometry_for(sectors, reach)
-        disc = r[:_DISC_CHANNELS]
-        limit = np.where(disc >= 0.0, disc - CLEAR_MARGIN, reach - RANGE_MARGIN)
+        dirs = self._dirs(sectors)
+        # One compiled pass (`_sense_kernel`) does what the steps below say, in their order:
         # A cell is known empty when it is nearer than what every sector it overlaps saw;
         # of a site cell, only the sectors where a brick on it could lie. Else a site in a
         # pocket, beside structure bricks seen at about its distance, is never seen open
         # again once a ghost lands on it, and the pocket's mouth is filled over it.
-        cell_limit = np.minimum.reduceat(limit[:, sector], starts, axis=1)
-        site = self._all[cells[0] - FOOD * self.size ** 2 + CONFIG * self.size ** 2] > 0.5
-        core_limit = np.minimum.reduceat(limit[_BRICK_CH, core_sector], core_starts)
-        cell_limit[_BRICK_CH] = np.where(site, core_limit, cell_limit[_BRICK_CH])
-        clear = dist < cell_limit
-        self._all[cells[clear]] = 0.0
-        self.clear_age += 1.0
-        self.clear_age.reshape(-1)[cells[_BRICK_CH][clear[_BRICK_CH]] - BRICK * self.size ** 2] = 0.0
-        open_ground = clear[FOOD] & clear[WATER] & clear[_OBSTACLE_CH]
-        self.known.reshape(-1)[cells[FOOD][open_ground] - FOOD * self.size ** 2] = True
-        self.known[self.centre, self.centre] = True  # the agent stands there
-        # Each reading may be explained by any cell its wedge overlaps: the (cell, sector) pairs.
-        explained = self._associate(r, cells[:, k], dist[k], sector, vx[k], vy[k])
-        self.maps[AGENT].fill(0.0)
-        unexplained = np.where(explained, NO_READING, r)
+        # Each reading may then be explained by any cell its wedge overlaps (see below).
         # A fixed obstacle is written only where the sector's centre angle lands in its own
         # cell: farther off, the mark may fall in the cell beside it, and a one-cell gap in
         # a wall (which every sector along the wall keeps reporting at about the same
         # distance, so nothing ever clears it) would be sealed for good. Farther readings
         # still clear the cells in front of them, and the wall is mapped as it comes near.
-        trust = obstacle_trust(sectors)
-        unexplained[_OBSTACLE_CH][unexplained[_OBSTACLE_CH] > trust] = NO_READING
-        self._write_readings(unexplained, sectors, trust)
-
-    def _associate(self, r, cells, dist, sector, vx, vy) -> np.ndarray:
-        """Attribute each disc reading to one cell of its band; True where that was done.
-
-        A sector cannot tell the angle inside it, so the same disc seen from two places
-        lands in two cells and leaves a ghost beside the real one; a ghost brick is then a
-        goal the agent keeps driving to (and the gripper takes the real brick, from the
-        structure). So a reading is matched to the cells of its wedge at about its distance
-        (the band): a cell already holding that colour first, then, for bricks, a blueprint
-        cell (bricks are expected there), else the cell at the sector's centre angle
-        (the plain rule, left to `_write_readings`). Other brick marks in the band are
-        ghosts of the one brick the sector saw and are cleared, except on blueprint cells,
-        where neighbouring structure bricks really do stand at the same distance.
-        """
-        dirs = self._dirs(r.shape[1])
-        return _associate_kernel(self._all, cells, dist, sector, vx, vy, np.ascontiguousarray(r[:_DISC_CHANNELS]),
-                                 dirs[0], dirs[1], self.size * self.size * CONFIG, BRICK, BAND, r.shape[0])
-
-    def _write_readings(self, r: np.ndarray, sectors: int, trust: float) -> None:
-        """Mark each reading's cell in its channel's layer (all channels and sectors at once),
-        except food and water read from farther than `trust` whose cell is a blueprint site."""
-        dirs = self._dirs(sectors)
-        n = self.size
-        col = np.floor(self.frac[0] + r * dirs[0] + 0.5) + self.centre
-        row = self.centre - np.floor(self.frac[1] + r * dirs[1] + 0.5)
-        hit = (r >= 0.0) & (row >= 0) & (row < n) & (col >= 0) & (col < n)
-        cell = np.where(hit, row * n + col, 0).astype(np.int64)
-        guessed = _FOOD_OR_WATER & (r > trust)
-        hit &= ~(guessed & (self._all[CONFIG * n * n + cell] > 0.5))
-        self._all[(_LAYER_BASE * (n * n) + cell)[hit].astype(np.int64)] = 1.0
+        # The rest is marked at its cell, except food and water read from farther than the
+        # obstacle trust whose cell is a blueprint site.
+        _sense_kernel(self._all, self.clear_age.reshape(-1), self.known.reshape(-1), cells, dist, k, sector, starts,
+                      core_sector, core_starts, vx, vy, r, float(reach), self.size, self.centre,
+                      float(self.frac[0]), float(self.frac[1]), dirs[0], dirs[1], obstacle_trust(sectors),
+                      _CHANNEL_LAYER_I64, _FOOD_OR_WATER_FLAT)
 
     def _set_cells(self, layer: int, row: np.ndarray, col: np.ndarray) -> None:
         inside = (row >= 0) & (row < self.size) & (col >= 0) & (col < self.size)
@@ -288,14 +258,33 @@ class EgocentricMaps:
 def _sector_pairs(angle: np.ndarray, dist: np.ndarray, radius: float, sectors: int):
     """(cell of pair, sector, starts): every (cell, sector) pair where the sector comes
     within `radius` cells of the cell's centre, grouped by cell in window order."""
+    # arcsin stays numpy's: numba's libm may differ by an ulp and move a sector edge.
     half = np.arcsin(np.minimum(radius / np.maximum(dist, 1e-9), 1.0))
-    per = sectors / (2.0 * np.pi)
-    lo = np.floor((angle - half) * per).astype(np.int64)
-    span = np.minimum(np.floor((angle + half) * per).astype(np.int64) - lo + 1, sectors)
-    cell_of_pair = np.repeat(np.arange(dist.size), span)
-    starts = np.cumsum(span) - span
-    step = np.arange(cell_of_pair.size) - np.repeat(starts, span)
-    return cell_of_pair, (np.repeat(lo, span) + step) % sectors, starts
+    return _pairs_kernel(angle, half, sectors / (2.0 * np.pi), sectors)
+
+
+@njit(cache=True)
+def _pairs_kernel(angle, half, per, sectors):
+    """`_sector_pairs` after the arcsin: each cell's run of sectors, in window order."""
+    n = angle.shape[0]
+    lo = np.empty(n, np.int64)
+    span = np.empty(n, np.int64)
+    total = 0
+    for i in range(n):
+        lo[i] = np.int64(math.floor((angle[i] - half[i]) * per))
+        span[i] = min(np.int64(math.floor((angle[i] + half[i]) * per)) - lo[i] + 1, sectors)
+        total += span[i]
+    cell_of_pair = np.empty(total, np.int64)
+    sector = np.empty(total, np.int64)
+    starts = np.empty(n, np.int64)
+    p = 0
+    for i in range(n):
+        starts[i] = p
+        for j in range(span[i]):
+            cell_of_pair[p] = i
+            sector[p] = (lo[i] + j) % sectors
+            p += 1
+    return cell_of_pair, sector, starts
 
 
 def obstacle_trust(sectors: int) -> float:
@@ -348,7 +337,7 @@ def _span(shift: int, n: int) -> tuple[slice, slice]:
 @njit(cache=True)
 def _associate_kernel(flat, cells, dist, sector, vx, vy, disc, cos_s, sin_s, config_base, brick, band_width,
                       channels):
-    """The rule of EgocentricMaps._associate over (cell, sector) pairs; returns `explained`.
+    """The association of `EgocentricMaps.sense` over (cell, sector) pairs; returns `explained`.
 
     One compiled pass finds each reading's best cell; a second collects winners and
     ghosts from the same (pre-update) map, which are then applied: ghosts cleared first,
@@ -394,3 +383,87 @@ def _associate_kernel(flat, cells, dist, sector, vx, vy, disc, cos_s, sin_s, con
     for i in range(n_win):
         flat[winners[i]] = 1.0
     return explained
+
+
+_CHANNEL_LAYER_I64 = np.ascontiguousarray(_CHANNEL_LAYER.astype(np.int64))
+_FOOD_OR_WATER_FLAT = np.ascontiguousarray(_FOOD_OR_WATER[:, 0])
+
+
+@njit(cache=True)
+def _min_limit(limit, ch, sector, first, end):
+    m = limit[ch, sector[first]]
+    for p in range(first + 1, end):
+        if limit[ch, sector[p]] < m:
+            m = limit[ch, sector[p]]
+    return m
+
+
+@njit(cache=True)
+def _sense_kernel(flat, clear_age, known, cells, dist, k, sector, starts, core_sector, core_starts, vx, vy, r,
+                  reach, size, centre, f0, f1, cos_s, sin_s, trust, layer_of_channel, food_or_water):
+    """`EgocentricMaps.sense` on the flat maps: clear, age, associate, write (see there)."""
+    nn = size * size
+    n_ch, sectors = r.shape
+    ncell = dist.shape[0]
+    limit = np.empty((_DISC_CHANNELS, sectors))
+    for ch in range(_DISC_CHANNELS):
+        for s in range(sectors):
+            d = r[ch, s]
+            limit[ch, s] = d - CLEAR_MARGIN if d >= 0.0 else reach - RANGE_MARGIN
+    clear = np.zeros((_DISC_CHANNELS, ncell), np.bool_)
+    for i in range(ncell):
+        end = starts[i + 1] if i + 1 < ncell else sector.shape[0]
+        core_end = core_starts[i + 1] if i + 1 < ncell else core_sector.shape[0]
+        site = flat[cells[0, i] - FOOD * nn + CONFIG * nn] > 0.5
+        for ch in range(_DISC_CHANNELS):
+            if ch == _BRICK_CH and site:
+                m = _min_limit(limit, ch, core_sector, core_starts[i], core_end)
+            else:
+                m = _min_limit(limit, ch, sector, starts[i], end)
+            clear[ch, i] = dist[i] < m
+    for ch in range(_DISC_CHANNELS):
+        for i in range(ncell):
+            if clear[ch, i]:
+                flat[cells[ch, i]] = 0.0
+    for i in range(clear_age.shape[0]):
+        clear_age[i] += 1.0
+    for i in range(ncell):
+        if clear[_BRICK_CH, i]:
+            clear_age[cells[_BRICK_CH, i] - BRICK * nn] = 0.0
+        if clear[FOOD, i] and clear[WATER, i] and clear[_OBSTACLE_CH, i]:
+            known[cells[FOOD, i] - FOOD * nn] = True
+    known[centre * size + centre] = True  # the agent stands there
+    pairs = k.shape[0]
+    cells_k = np.empty((_DISC_CHANNELS, pairs), np.int64)
+    dist_k = np.empty(pairs)
+    vx_k = np.empty(pairs)
+    vy_k = np.empty(pairs)
+    for p in range(pairs):
+        for ch in range(_DISC_CHANNELS):
+            cells_k[ch, p] = cells[ch, k[p]]
+        dist_k[p] = dist[k[p]]
+        vx_k[p] = vx[k[p]]
+        vy_k[p] = vy[k[p]]
+    explained = _associate_kernel(flat, cells_k, dist_k, sector, vx_k, vy_k, np.ascontiguousarray(r[:_DISC_CHANNELS]),
+                                  cos_s, sin_s, nn * CONFIG, BRICK, BAND, n_ch)
+    for i in range(AGENT * nn, (AGENT + 1) * nn):
+        flat[i] = 0.0
+    hit = np.zeros((n_ch, sectors), np.bool_)
+    at = np.zeros((n_ch, sectors), np.int64)
+    for ch in range(n_ch):
+        for s in range(sectors):
+            d = NO_READING if explained[ch, s] else r[ch, s]
+            if ch == _OBSTACLE_CH and d > trust:
+                d = NO_READING
+            col = math.floor(f0 + d * cos_s[s] + 0.5) + centre
+            row = centre - math.floor(f1 + d * sin_s[s] + 0.5)
+            inside = d >= 0.0 and row >= 0 and row < size and col >= 0 and col < size
+            cell = np.int64(row * size + col) if inside else 0
+            if inside and food_or_water[ch] and d > trust and flat[CONFIG * nn + cell] > 0.5:
+                inside = False
+            hit[ch, s] = inside
+            at[ch, s] = cell
+    for ch in range(n_ch):
+        for s in range(sectors):
+            if hit[ch, s]:
+                flat[layer_of_channel[ch] * nn + at[ch, s]] = 1.0

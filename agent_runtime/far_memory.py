@@ -73,6 +73,11 @@ class FarMemory:
         self.ground: np.ndarray | None = None
         self._memory_version = 0          # bumped when walls or discs change (for the cache)
         self._costs_cache: dict[tuple[int, bytes], np.ndarray] = {}
+        # What depends only on where the agent is (and the blueprint): most steps it stays
+        # in its cell, so each is worked out again only when `pos` or the sites change.
+        self._by_pos: dict[str, tuple[tuple, object, object]] = {}
+        self._centres: np.ndarray | None = None          # the BLOCK squares' centres, fixed
+        self._border_cache: dict[tuple, np.ndarray | None] = {}
         if bounds is not None:
             x0, y0, x1, y1 = bounds
             self.seen = np.zeros((-(-(x1 - x0) // BLOCK), -(-(y1 - y0) // BLOCK)), bool)
@@ -96,6 +101,25 @@ class FarMemory:
     def _on_map(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
         n = self.size
         return (rows >= 0) & (rows < n) & (cols >= 0) & (cols < n)
+
+    def _cached(self, name: str, key: tuple, array: np.ndarray, compute):
+        """`compute()`, kept until `key` (with the agent's cell) changes or `array` is
+        replaced (compared by identity: the cache holds it, so its id is never reused)."""
+        key = (int(self.pos[0]), int(self.pos[1]), *key)
+        hit = self._by_pos.get(name)
+        if hit is not None and hit[0] == key and hit[1] is array:
+            return hit[2]
+        value = compute()
+        self._by_pos[name] = (key, array, value)
+        return value
+
+    def _sites_on_map(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(indices into `sites`, rows, cols) of the sites that lie on the map."""
+        def compute():
+            rows, cols = self.to_map(self.sites)
+            on = np.flatnonzero(self._on_map(rows, cols))
+            return on, rows[on], cols[on]
+        return self._cached("sites_on_map", (), self.sites, compute)
 
     # ------------------------------------------------------------------ blueprint
 
@@ -124,19 +148,17 @@ class FarMemory:
     def observe_sites(self, brick_layer: np.ndarray, clear_age: np.ndarray) -> None:
         """Update beliefs from the maps: a brick on a site's cell fills it; a cell seen empty of
         bricks this step opens it again (a repair, a perturbation)."""
-        rows, cols = self.to_map(self.sites)
-        on = np.flatnonzero(self._on_map(rows, cols))
-        r, c = rows[on], cols[on]
-        self.site_open[on[brick_layer[r, c] > 0.5]] = False
-        self.site_open[on[(clear_age[r, c] == 0) & (brick_layer[r, c] <= 0.5)]] = True
+        on, r, c = self._sites_on_map()
+        bricks = brick_layer[r, c]
+        self.site_open[on[bricks > 0.5]] = False
+        self.site_open[on[(clear_age[r, c] == 0) & (bricks <= 0.5)]] = True
 
     def age_sites(self, clear_age: np.ndarray) -> None:
         """One step older: each site's steps since it was last seen empty of bricks, from
         the map's `clear_age` for the sites on the map (once per step)."""
         self.site_clear_age += 1.0
-        rows, cols = self.to_map(self.sites)
-        on = np.flatnonzero(self._on_map(rows, cols))
-        self.site_clear_age[on] = np.minimum(self.site_clear_age[on], clear_age[rows[on], cols[on]])
+        on, r, c = self._sites_on_map()
+        self.site_clear_age[on] = np.minimum(self.site_clear_age[on], clear_age[r, c])
 
     def fresh_sites(self, within: float) -> np.ndarray:
         """(k, 2) cells of the sites believed open and seen empty in the last `within` steps."""
@@ -270,8 +292,16 @@ class FarMemory:
         returns how many had never been seen before."""
         if self.seen is None or self.ever_seen is None:
             return 0
+        hit = self._by_pos.get("near")
+        key = (int(self.pos[0]), int(self.pos[1]), radius)
+        if hit is not None and hit[0] == key:
+            # The same squares as last step: `ever_seen` holds them already (it only grows),
+            # so none is new; `seen` may have been reset by a new sweep since.
+            self.seen |= hit[2]
+            return 0
         centres = self._block_centres()
         near = np.hypot(centres[..., 0] - self.pos[0], centres[..., 1] - self.pos[1]) <= radius
+        self._by_pos["near"] = (key, None, near)
         new = int(np.count_nonzero(near & ~self.ever_seen))
         self.seen |= near
         self.ever_seen |= near
@@ -279,10 +309,13 @@ class FarMemory:
 
     def _block_centres(self) -> np.ndarray:
         assert self.seen is not None and self.bounds is not None  # asked only when the world's extent is known
-        x0, y0, x1, y1 = self.bounds
-        bx = x0 + np.minimum(np.arange(self.seen.shape[0]) * BLOCK + BLOCK // 2, x1 - x0 - 1)
-        by = y0 + np.minimum(np.arange(self.seen.shape[1]) * BLOCK + BLOCK // 2, y1 - y0 - 1)
-        return np.stack(np.meshgrid(bx, by, indexing="ij"), axis=-1)
+        if self._centres is None:
+            x0, y0, x1, y1 = self.bounds
+            bx = x0 + np.minimum(np.arange(self.seen.shape[0]) * BLOCK + BLOCK // 2, x1 - x0 - 1)
+            by = y0 + np.minimum(np.arange(self.seen.shape[1]) * BLOCK + BLOCK // 2, y1 - y0 - 1)
+            self._centres = np.stack(np.meshgrid(bx, by, indexing="ij"), axis=-1)
+            self._centres.setflags(write=False)
+        return self._centres
 
     def unseen_target(self, rng: np.random.Generator) -> np.ndarray | None:
         """(row, col) on the map (possibly beyond it) of the nearest square not yet seen, a
@@ -317,24 +350,39 @@ class FarMemory:
         """Mask of the map cells beyond the world's edge (None if its extent is unknown)."""
         if self.bounds is None:
             return None
-        x0, y0, x1, y1 = self.bounds
-        offs = np.arange(self.size) - self.centre
-        xs = self.pos[0] + offs                 # per column
-        ys = self.pos[1] - offs                 # per row (row 0 is the north)
-        return ((xs < x0) | (xs >= x1))[None, :] | ((ys < y0) | (ys >= y1))[:, None]
+        bounds = self.bounds
+
+        def compute():
+            x0, y0, x1, y1 = bounds
+            offs = np.arange(self.size) - self.centre
+            xs = self.pos[0] + offs                 # per column
+            ys = self.pos[1] - offs                 # per row (row 0 is the north)
+            outside = ((xs < x0) | (xs >= x1))[None, :] | ((ys < y0) | (ys >= y1))[:, None]
+            outside.setflags(write=False)
+            return outside
+        return self._cached("outside", (), None, compute)
 
     # ------------------------------------------------------------------ beyond the border
 
     def far_open_sites(self) -> np.ndarray:
-        """(rows, cols) as a (k, 2) array of open sites that are beyond the map."""
-        rows, cols = self.to_map(self.sites[self.site_open])
-        off = ~self._on_map(rows, cols)
-        return np.column_stack([rows[off], cols[off]])
+        """(rows, cols) as a (k, 2) array of open sites that are beyond the map (read-only)."""
+        def compute():
+            rows, cols = self.to_map(self.sites[self.site_open])
+            off = ~self._on_map(rows, cols)
+            far = np.column_stack([rows[off], cols[off]])
+            far.setflags(write=False)
+            return far
+        return self._cached("far_open_sites", (self.site_open.tobytes(),), self.sites, compute)
 
     def far_bricks(self) -> np.ndarray:
-        """(rows, cols) as a (k, 2) array of the remembered free bricks, on the map or beyond it."""
-        rows, cols = self.to_map(self.bricks)
-        return np.column_stack([rows, cols])
+        """(rows, cols) as a (k, 2) array of the remembered free bricks, on the map or beyond it
+        (read-only)."""
+        def compute():
+            rows, cols = self.to_map(self.bricks)
+            far = np.column_stack([rows, cols])
+            far.setflags(write=False)
+            return far
+        return self._cached("far_bricks", (), self.bricks, compute)
 
 
     def border_costs(self, targets: np.ndarray, obstacles: np.ndarray) -> np.ndarray | None:
@@ -349,6 +397,19 @@ class FarMemory:
         scrolled off (generated worlds with long walls and food fields)."""
         if len(targets) == 0:
             return None
+        # Kept for the few (targets, border obstacles, memory, cell) asked lately: the
+        # config and brick NMs ask in turn, and most steps nothing of that changed.
+        edge = np.concatenate([obstacles[0], obstacles[-1], obstacles[:, 0], obstacles[:, -1]])
+        key = (np.asarray(targets, np.int64).tobytes(), np.packbits(edge).tobytes(), self._memory_version,
+               int(self.pos[0]), int(self.pos[1]))
+        if key not in self._border_cache:
+            if len(self._border_cache) >= 4:
+                self._border_cache.pop(next(iter(self._border_cache)))
+            self._border_cache[key] = self._border_costs(targets, obstacles)
+        seed = self._border_cache[key]
+        return None if seed is None else seed.copy()   # the caller writes its goals into it
+
+    def _border_costs(self, targets: np.ndarray, obstacles: np.ndarray) -> np.ndarray | None:
         if self.bounds is None or self.walls is None or self.discs is None:
             return border_seed(targets, self.size, obstacles)
         t = np.asarray(targets, np.int64).reshape(-1, 2)

@@ -48,6 +48,8 @@ class SealGuard:
         Why: the check runs only near the agent. A site it found sealing became a goal
         again one cell farther off, and the agent turned back at that cell's edge, to and
         fro, for ever (a one-cell slot of water whose far end it had not seen)."""
+        if not self._found and not unsafe.any():
+            return unsafe   # nothing remembered, nothing new: the rest would change nothing
         judged = goals & around((self.centre, self.centre), SEAL_RADIUS, goals.shape)
         for cell in map(tuple, self.far.from_map(*np.nonzero(judged)).tolist()):
             self._found.pop(cell, None)

@@ -21,7 +21,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from agent_runtime.spreading import _shift, distance_field
+from agent_runtime.spreading import _shift, reachable
 
 SEAL_RADIUS = 2     # goal sites within this many cells (on each axis) of the agent are checked
 SEAL_MEMORY = 300   # ticks a site found sealing stays no goal once the agent is farther off
@@ -67,9 +67,9 @@ def cut_off(candidates: np.ndarray, passable: np.ndarray, reference: np.ndarray,
 
 def _cuts(i: int, j: int, passable: np.ndarray, reference: np.ndarray, reachable_sites: np.ndarray) -> bool:
     """Does a brick on (i, j) disconnect one of `reachable_sites` (other than itself) from `reference`?"""
-    wall = ~passable
-    wall[i, j] = True
-    cut = reachable_sites & ~_reached(np.isfinite(distance_field(reference, wall)))
+    way = passable.copy()
+    way[i, j] = False
+    cut = reachable_sites & ~_reached(reachable(reference, way))
     cut[i, j] = False
     return bool(cut.any())
 
@@ -86,7 +86,7 @@ def _reached(reachable: np.ndarray) -> np.ndarray:
 
 def connected(reference: np.ndarray, passable: np.ndarray) -> np.ndarray:
     """The cells that reach `reference` through `passable` cells."""
-    return np.isfinite(distance_field(reference & passable, ~passable))
+    return reachable(reference, passable)
 
 
 def walling_in(enclosed: np.ndarray, structure: np.ndarray, local: np.ndarray) -> np.ndarray:

@@ -16,7 +16,8 @@ never radiate; a diagonal step from (r, c) to (r+dr, c+dc) needs both (r+dr, c) 
 touch diagonally. A goal cell that is also an obstacle is an obstacle. Arrays are
 indexed [row, col].
 
-API: `distance_field`, `seeded_distance_field`, `activation`, `gradient_step`, `spread_iterative`. Pure numpy and
+API: `distance_field`, `seeded_distance_field`, `reachable`, `activation`, `gradient_step`,
+`spread_iterative`. Pure numpy and
 numba: no bus, no world.
 """
 
@@ -191,6 +192,32 @@ def _seeded_kernel(seed, obstacles):
     return dist.reshape((n + 2, w))[1:n + 1, 1:m + 1].copy()
 
 
+@njit(cache=True)
+def _reach_kernel(sources, passable):
+    """Flood fill through 4-neighbours (see `reachable`); a stack of flat indices."""
+    n, m = sources.shape
+    out = np.zeros((n, m), np.bool_)
+    stack = np.empty(n * m, np.int64)
+    top = 0
+    for r in range(n):
+        for c in range(m):
+            if sources[r, c] and passable[r, c]:
+                out[r, c] = True
+                stack[top] = r * m + c
+                top += 1
+    while top > 0:
+        top -= 1
+        u = stack[top]
+        r, c = u // m, u % m
+        for j in range(4):
+            rr, cc = r + _DR[j], c + _DC[j]
+            if 0 <= rr < n and 0 <= cc < m and passable[rr, cc] and not out[rr, cc]:
+                out[rr, cc] = True
+                stack[top] = rr * m + cc
+                top += 1
+    return out
+
+
 # --- public API -----------------------------------------------------------------------
 
 
@@ -208,6 +235,16 @@ def distance_field(goals: np.ndarray, obstacles: np.ndarray) -> np.ndarray:
     nearest goal; np.inf on obstacles and on cells that cannot reach a goal."""
     goals, obstacles = _bool_grids(goals, obstacles)
     return _field_kernel(goals, obstacles)
+
+
+def reachable(sources: np.ndarray, passable: np.ndarray) -> np.ndarray:
+    """The cells from which a goal in `sources` can be reached through `passable` cells:
+    exactly `np.isfinite(distance_field(sources, ~passable))`, without the distances.
+
+    A diagonal step needs both flanking cells free, so it can always be made as two
+    orthogonal steps: reachability is 4-connectivity, a flood fill (no bucket queue)."""
+    sources, passable = _bool_grids(sources, passable)
+    return _reach_kernel(sources, passable)
 
 
 def seeded_distance_field(seed: np.ndarray, obstacles: np.ndarray) -> np.ndarray:

@@ -1,54 +1,103 @@
-"""Agent decision step on generated layouts: what the far memory, the border seeds, the
-wall layer and the Explore sweep cost (issue 10).
+"""The agent's decision step, side by side with a reference commit (issue 31).
 
-    python3 -m bench.bench_agent_step            # the table of docs/results/benchmarks.md
-    python3 -m bench.bench_agent_step --quick    # a smoke run, not a measurement
+    python3 -m bench.bench_agent_step                      # the table of docs/results/benchmarks.md
+    python3 -m bench.bench_agent_step --maps 41,81,121     # also at larger maps
+    python3 -m bench.bench_agent_step --quick              # a smoke run, not a measurement
 
-For each layout (scenarios/fig6.toml and three from the generalisation suite: a 21 x 21,
-a 51 x 50 and a 117 x 116 world, the large ones with the blueprint or the supply beyond
-the 41 x 41 maps), the in-process sim (conag/sim/loop.py, default AgentConfig: 41 x 41 maps,
-goal sequencing on) warms up for `--warmup` ticks, then every agent's `Brain.step(frame)`
-is timed on every tick for `--ticks` ticks (the world's step is not timed). Reported: the
-median and 90th percentile of one step, the share of steps that planned with goals
-beyond the map (border seeds), and the world ticks per second of the whole sim.
+For each layout (scenarios/fig6.toml and three of the generalisation suite: a 21 x 21, a
+51 x 50 and a 117 x 116 world) and map size, the in-process sim (default AgentConfig but
+for the map size) warms up for `--warmup` ticks, then every agent's `Brain.step(frame)` is
+timed on every tick for `--ticks` ticks (the world's step is not timed). The same worker
+runs on this checkout and on a git worktree of `--reference` (default f7f6a27, the code
+before the cheaper step), one after the other for each row and `--repeats` times in
+alternation, so both sides share the machine's load; the table gives both medians and
+their ratio. Both sides also hash every decision (speed, turn, action, behaviour, state
+nodes, outputs): "same decisions" says whether the two codes chose alike, step for step.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import os
 import statistics
-import time
+import subprocess
+import sys
+import tempfile
 from pathlib import Path
-
-from conag import sim
-from world_server.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
 SUITE = ROOT / "experiments" / "generalisation" / "layouts"
 LAYOUTS = (ROOT / "scenarios" / "fig6.toml", SUITE / "001-gen-nested_rings-20260001.toml",
            SUITE / "021-gen-wall-20260021.toml", SUITE / "028-gen-nested_rings-20260028.toml")
+REFERENCE = "f7f6a27"
+
+# Runs in a fresh interpreter with the tree under test first on sys.path; it must import
+# both this layout of the packages and the one before the move (`sim` at the top level).
+WORKER = r"""
+import hashlib, json, statistics, sys, time
+try:
+    from conag import sim
+except ImportError:
+    import sim
+from agent_runtime.config import AgentConfig
+from world_server.scenario import load_scenario
+
+path, map_size, warmup, ticks = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4])
+sc = load_scenario(path)
+run = sim.start(sc, cfg=AgentConfig(map_size=map_size))
+run.run(warmup, until_complete=False)
+steps, digest = [], hashlib.sha256()
+for _ in range(ticks):
+    for frame in run.world.frames():
+        brain = run.brains[frame.agent_id]
+        t = time.perf_counter()
+        s = brain.step(frame)
+        steps.append(time.perf_counter() - t)
+        d = s.decision
+        digest.update(repr((frame.agent_id, frame.tick, s.speed, s.turn, s.action, s.behaviour, d.state,
+                            d.outputs, d.arm, d.motor)).encode())
+        run.world.set_command(frame.agent_id, s.speed, s.turn, s.action)
+    run.world.step()
+steps.sort()
+print(json.dumps(dict(size=f"{sc.cols} x {sc.rows}", agents=len(run.brains), median_ms=1e3 * statistics.median(steps),
+                      p90_ms=1e3 * steps[int(0.9 * (len(steps) - 1))], digest=digest.hexdigest())))
+"""
 
 
-def measure(path: Path, warmup: int, ticks: int) -> dict:
-    sc = load_scenario(path)
-    run = sim.start(sc)
-    run.run(warmup, until_complete=False)
-    steps, beyond = [], 0
-    began = time.perf_counter()
-    for _ in range(ticks):
-        for frame in run.world.frames():
-            brain = run.brains[frame.agent_id]
-            t = time.perf_counter()
-            s = brain.step(frame)
-            steps.append(time.perf_counter() - t)
-            beyond += bool(len(brain.far.far_open_sites()) or len(brain.far.bricks))
-            run.world.set_command(frame.agent_id, s.speed, s.turn, s.action)
-        run.world.step()
-    wall = time.perf_counter() - began
-    steps.sort()
-    return dict(layout=path.stem, size=f"{sc.cols} x {sc.rows}", agents=len(run.brains),
-                median_ms=1e3 * statistics.median(steps), p90_ms=1e3 * steps[int(0.9 * (len(steps) - 1))],
-                beyond=beyond / max(len(steps), 1), ticks_per_s=ticks / wall)
+def measure(tree: Path, layout: Path, map_size: int, warmup: int, ticks: int) -> dict:
+    """One worker run of `tree` on `layout`: its step median, p90 and decision digest."""
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    out = subprocess.run([sys.executable, "-c", WORKER, str(layout), str(map_size), str(warmup), str(ticks)],
+                         cwd=tree, env=env, capture_output=True, text=True, timeout=3600, check=False)
+    if out.returncode != 0:
+        raise SystemExit(f"bench_agent_step: the worker failed in {tree}:\n{out.stderr[-3000:]}")
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def reference_tree(rev: str, where: Path) -> Path:
+    """A detached git worktree of `rev` under `where` (removed by the caller's tempdir)."""
+    tree = where / f"ref-{rev}"
+    r = subprocess.run(["git", "worktree", "add", "--detach", "-f", str(tree), rev], cwd=ROOT,
+                       capture_output=True, text=True, check=False)
+    if r.returncode != 0:
+        raise SystemExit(f"bench_agent_step: cannot make a worktree of {rev}: {r.stderr.strip()}")
+    return tree
+
+
+def compare(trees: dict[str, Path], layouts, maps, warmup: int, ticks: int, repeats: int):
+    """Rows of both sides' medians per (layout, map size), runs alternating between sides."""
+    for layout in layouts:
+        for map_size in maps:
+            runs: dict[str, list[dict]] = {side: [] for side in trees}
+            for _ in range(repeats):
+                for side, tree in trees.items():
+                    runs[side].append(measure(tree, layout, map_size, warmup, ticks))
+            new, ref = runs["this"], runs["reference"]
+            yield dict(layout=layout.stem, map=map_size, size=new[0]["size"], agents=new[0]["agents"],
+                       this_ms=statistics.median(r["median_ms"] for r in new),
+                       ref_ms=statistics.median(r["median_ms"] for r in ref),
+                       same=all(a["digest"] == b["digest"] for a, b in zip(new, ref)))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -56,15 +105,32 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true", help="a few ticks: a smoke run, not a measurement")
     ap.add_argument("--warmup", type=int, default=500, help="sim ticks before timing starts")
     ap.add_argument("--ticks", type=int, default=1000, help="timed ticks per layout")
+    ap.add_argument("--maps", default="41", help="map sizes, comma separated (default 41)")
+    ap.add_argument("--repeats", type=int, default=1, help="runs per side, alternating (default 1)")
+    ap.add_argument("--reference", default=REFERENCE, help=f"the commit to compare with (default {REFERENCE})")
+    ap.add_argument("--reference-dir", type=Path, help="an existing checkout of the reference, instead of a worktree")
+    ap.add_argument("--json", type=Path, help="also write the rows as JSON")
     args = ap.parse_args(argv)
     warmup, ticks = (20, 20) if args.quick else (args.warmup, args.ticks)
-    print("| layout | world | agents | decision step median ms (p90) | steps with goals beyond the map "
-          "| sim ticks/s |")
-    print("|---|---|---:|---:|---:|---:|")
-    for path in LAYOUTS:
-        r = measure(path, warmup, ticks)
-        print(f"| {r['layout']} | {r['size']} | {r['agents']} | {r['median_ms']:.3f} ({r['p90_ms']:.3f}) | "
-              f"{100 * r['beyond']:.0f}% | {r['ticks_per_s']:.0f} |", flush=True)
+    maps = [int(m) for m in args.maps.split(",")]
+    with tempfile.TemporaryDirectory(prefix="bench-agent-step-") as tmp:
+        ref = args.reference_dir or reference_tree(args.reference, Path(tmp))
+        try:
+            print(f"| layout | world | agents | map | step median ms, this | at {args.reference} | ratio "
+                  "| same decisions |")
+            print("|---|---|---:|---:|---:|---:|---:|---|")
+            rows = []
+            for r in compare({"this": ROOT, "reference": ref}, LAYOUTS, maps, warmup, ticks, args.repeats):
+                rows.append(r)
+                print(f"| {r['layout']} | {r['size']} | {r['agents']} | {r['map']} | {r['this_ms']:.3f} | "
+                      f"{r['ref_ms']:.3f} | {r['ref_ms'] / r['this_ms']:.2f}x | {'yes' if r['same'] else 'no'} |",
+                      flush=True)
+            if args.json:
+                args.json.write_text(json.dumps(rows, indent=1) + "\n", encoding="utf-8")
+        finally:
+            if args.reference_dir is None:
+                subprocess.run(["git", "worktree", "remove", "--force", str(ref)], cwd=ROOT, capture_output=True,
+                               check=False)
     return 0
 
 
