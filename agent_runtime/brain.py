@@ -27,6 +27,7 @@ from collections import Counter, deque
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from agent_runtime import steering
 from agent_runtime.config import AgentConfig
@@ -130,6 +131,7 @@ class Brain:
         self.plans: Plans | None = None
         self.fields = FieldCache()   # navigation maps, computed again only when their inputs change
         self._layers: np.ndarray | None = None  # the maps thresholded at 0.5, during a step
+        self._enclosed: tuple[bytes, np.ndarray] | None = None  # (inputs, result) of the last check
         self._matching: tuple[bytes, Matching] | None = None  # (inputs, result) of the last matching
         self._taken_from: np.ndarray | None = None  # (dx, dy) cells to where the held brick was taken
         self._dropped_at: np.ndarray | None = None  # odometry (cells) where it last dropped, until off it
@@ -146,10 +148,11 @@ class Brain:
         if frame.tick > self._attach_tick:  # the attach pose already includes the last move
             self._odo += (frame.odom_dx / self.cell, frame.odom_dy / self.cell)
             layers = self.maps.maps
-            free = (layers[BRICK] > 0.5) & (layers[CONFIG] <= 0.5)
-            walls = layers[OBSTACLE] > 0.5
-            discs = (layers[FOOD] > 0.5) | (layers[WATER] > 0.5)
-            ground = self.maps.known & ~walls & ~discs      # before the maps shift
+            if any(self.maps.crossing(frame.odom_dx, frame.odom_dy, self.cell)):  # 1 step in 7 or so
+                free = (layers[BRICK] > 0.5) & (layers[CONFIG] <= 0.5)
+                walls = layers[OBSTACLE] > 0.5
+                discs = (layers[FOOD] > 0.5) | (layers[WATER] > 0.5)
+                ground = self.maps.known & ~walls & ~discs      # before the maps shift
             kx, ky = self.maps.move(frame.odom_dx, frame.odom_dy, self.cell)
             if kx or ky:
                 self.far.save_walls(walls, discs | self._recalled, ground)
@@ -184,10 +187,17 @@ class Brain:
         return self.maps.maps > 0.5
 
     def _enclosed_sites(self) -> np.ndarray:
-        """Open sites on the map that no way reaches (`sealing.enclosed_sites`): believed filled."""
+        """Open sites on the map that no way reaches (`sealing.enclosed_sites`): believed filled.
+        Worked out again only when the open sites or the walls changed (read-only)."""
         m = self.maps.maps > 0.5
         walls = m[OBSTACLE] | m[FOOD] | m[WATER] | (m[BRICK] & m[CONFIG])
-        return enclosed_sites(m[CONFIG] & ~m[BRICK], walls, (self.centre, self.centre))
+        open_sites = m[CONFIG] & ~m[BRICK]
+        key = np.packbits(open_sites).tobytes() + np.packbits(walls).tobytes()
+        if self._enclosed is None or self._enclosed[0] != key:
+            found = enclosed_sites(open_sites, walls, (self.centre, self.centre))
+            found.setflags(write=False)
+            self._enclosed = (key, found)
+        return self._enclosed[1]
 
     # the blueprint ------------------------------------------------------------------------
     def _site_cells(self, xs, ys) -> np.ndarray:
@@ -690,15 +700,24 @@ def _mouth_side(held: np.ndarray, sites: np.ndarray, depth: np.ndarray) -> np.nd
     seal the far end (docs/design.md, Measurements). Sites
     deeper than the held one (Fig. 18's D2 beside D1) stay goals: they are what the path
     is kept open for."""
-    out = np.zeros_like(sites)
+    return _mouth_side_kernel(np.ascontiguousarray(held), np.ascontiguousarray(sites), np.ascontiguousarray(depth))
+
+
+@njit(cache=True)
+def _mouth_side_kernel(held, sites, depth):
+    """A site beside (4-neighbour) a held site, reachable and no deeper than it (+1e-9)."""
     n, m = sites.shape
-    for dr, dc in ((1, 0), (-1, 0), (0, 1), (0, -1)):
-        src = (slice(max(-dr, 0), n - max(dr, 0)), slice(max(-dc, 0), m - max(dc, 0)))
-        dst = (slice(max(dr, 0), n - max(-dr, 0)), slice(max(dc, 0), m - max(-dc, 0)))
-        # A cell at dst has the held neighbour at src: (r, c) = (r' + dr, c' + dc).
-        # A site no path reaches (depth inf) is on no side of a mouth.
-        out[dst] |= held[src] & (depth[dst] <= depth[src] + 1e-9) & np.isfinite(depth[dst])
-    return out & sites
+    out = np.zeros((n, m), np.bool_)
+    for r in range(n):
+        for c in range(m):
+            if not sites[r, c] or not np.isfinite(depth[r, c]):
+                continue   # a site no path reaches (depth inf) is on no side of a mouth
+            for dr, dc in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+                rr, cc = r - dr, c - dc
+                if 0 <= rr < n and 0 <= cc < m and held[rr, cc] and depth[r, c] <= depth[rr, cc] + 1e-9:
+                    out[r, c] = True
+                    break
+    return out
 
 
 def _nearest_reading(readings: np.ndarray) -> float:

@@ -132,6 +132,10 @@ class EgocentricMaps:
 
     # ------------------------------------------------------------------ odometry
 
+    def crossing(self, dx: float, dy: float, cell_size: float = 1.0) -> tuple[int, int]:
+        """The whole cells (east, north) that `move(dx, dy, cell_size)` will shift by; no change."""
+        return _wrap(float(self.frac[0]) + dx / cell_size)[1], _wrap(float(self.frac[1]) + dy / cell_size)[1]
+
     def move(self, dx: float, dy: float, cell_size: float = 1.0) -> tuple[int, int]:
         """Dead reckoning: the agent moved (dx, dy) world units (x east, y north) this tick.
         Returns the whole cells (east, north) it crossed, by which the maps shifted."""

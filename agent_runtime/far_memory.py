@@ -199,15 +199,21 @@ class FarMemory:
             self.bricks = self.bricks[~on]
         return back
 
-    def _wall_window(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(map rows, map cols, grid x, grid y) of the map cells that lie in the world."""
+    def _wall_window(self) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
+        """The map cells that lie in the world and their world-grid cells, as open meshes:
+        `layer[map_ix].T` is the map's window in world-grid order, `grid[world_ix]` the same
+        cells of a world grid. Kept until the agent moves a cell."""
         assert self.bounds is not None  # asked only when there are walls, i.e. a known extent
-        x0, y0, x1, y1 = self.bounds
-        idx = np.arange(self.size)
-        gx = self.pos[0] + idx - self.centre - x0       # per map column
-        gy = self.pos[1] + self.centre - idx - y0       # per map row
-        cols, rows = np.flatnonzero((gx >= 0) & (gx < x1 - x0)), np.flatnonzero((gy >= 0) & (gy < y1 - y0))
-        return rows, cols, gx[cols], gy[rows]
+        bounds = self.bounds
+
+        def compute():
+            x0, y0, x1, y1 = bounds
+            idx = np.arange(self.size)
+            gx = self.pos[0] + idx - self.centre - x0       # per map column
+            gy = self.pos[1] + self.centre - idx - y0       # per map row
+            cols, rows = np.flatnonzero((gx >= 0) & (gx < x1 - x0)), np.flatnonzero((gy >= 0) & (gy < y1 - y0))
+            return np.ix_(rows, cols), np.ix_(gx[cols], gy[rows])
+        return self._cached("wall_window", (), None, compute)
 
     def save_walls(self, obstacles: np.ndarray, discs: np.ndarray | None = None,
                    ground: np.ndarray | None = None) -> None:
@@ -216,18 +222,17 @@ class FarMemory:
         before the map shifts. Cells on the map overwrite what was remembered of them."""
         if self.walls is None or self.discs is None:
             return
-        rows, cols, gx, gy = self._wall_window()
-        window = np.ix_(gx, gy)
+        map_ix, window = self._wall_window()
         if ground is not None and self.ground is not None:
             # Ground once seen free stays so (walls do not grow; a disc put there later is on
             # the map as blocked, which wins). The maps forget what shifted off them and see
             # little beside a wall: the mouth of a corridor by the world's edge, walked
             # through on the way in, was unknown again when the agent came back to it.
-            self.ground[window] |= ground[np.ix_(rows, cols)].T    # not in the costs' cache key
+            self.ground[window] |= ground[map_ix].T    # not in the costs' cache key
         for memory, layer in ((self.walls, obstacles), (self.discs, discs)):
             if layer is None:
                 continue
-            now = layer[np.ix_(rows, cols)].T
+            now = layer[map_ix].T
             if not np.array_equal(memory[window], now):
                 memory[window] = now
                 self._memory_version += 1
@@ -248,15 +253,15 @@ class FarMemory:
         """A world grid [x - x0, y - y0]: `memory` (a world grid) with the map's window
         replaced by the map mask `layer`, what the agent sees now."""
         out = memory.copy()
-        rows, cols, gx, gy = self._wall_window()
-        out[np.ix_(gx, gy)] = layer[np.ix_(rows, cols)].T
+        map_ix, world_ix = self._wall_window()
+        out[world_ix] = layer[map_ix].T
         return out
 
     def on_map(self, world: np.ndarray) -> np.ndarray:
         """The map's window of a world grid, as a map mask (False beyond the world)."""
         out = np.zeros((self.size, self.size), world.dtype)
-        rows, cols, gx, gy = self._wall_window()
-        out[np.ix_(rows, cols)] = world[np.ix_(gx, gy)].T
+        map_ix, world_ix = self._wall_window()
+        out[map_ix] = world[world_ix].T
         return out
 
     def cells_grid(self, cells: np.ndarray) -> np.ndarray:

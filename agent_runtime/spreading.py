@@ -300,11 +300,6 @@ def activation(dist: np.ndarray, decay: float | None = None, *,
     return act
 
 
-def _passable(dist: np.ndarray, r: int, c: int) -> bool:
-    n, m = dist.shape
-    return 0 <= r < n and 0 <= c < m and math.isfinite(dist[r, c])
-
-
 def gradient_step(dist: np.ndarray, centre: tuple[int, int] | None = None) -> tuple[int, int] | None:
     """The move (drow, dcol) of steepest ascent of activation at `centre` (default the
     map's centre (N//2, M//2)): the neighbour minimising step length + dist. Ties go to
@@ -321,17 +316,29 @@ def gradient_step(dist: np.ndarray, centre: tuple[int, int] | None = None) -> tu
         return None
     if here == 0.0:
         return (0, 0)
+    return MOVES[_gradient_kernel(dist, r, c)]
+
+
+@njit(cache=True)
+def _gradient_kernel(dist, r, c):
+    """Index into MOVES of `gradient_step`'s move from a reachable, non-goal (r, c)."""
+    n, m = dist.shape
     # From a reachable centre an orthogonal neighbour is inf only if it is an obstacle
     # (a free cell orthogonally beside a reachable one is reachable), so `dist` alone
     # carries the no-corner-cutting rule.
-    costs = []
-    for (dr, dc), step in zip(MOVES, _STEP.tolist()):
-        ok = _passable(dist, r + dr, c + dc) and (
-            dr == 0 or dc == 0 or (_passable(dist, r + dr, c) and _passable(dist, r, c + dc)))
-        costs.append(step + float(dist[r + dr, c + dc]) if ok else math.inf)
-    best = min(costs)
+    costs = np.empty(8)
+    for j in range(8):
+        rr, cc = r + _DR[j], c + _DC[j]
+        ok = 0 <= rr < n and 0 <= cc < m and math.isfinite(dist[rr, cc])
+        if ok and j >= 4:
+            ok = (0 <= rr < n and math.isfinite(dist[rr, c])) and (0 <= cc < m and math.isfinite(dist[r, cc]))
+        costs[j] = _STEP[j] + dist[rr, cc] if ok else math.inf
+    best = costs.min()
     # Two passes (minimum, then first within _TIE of it) so the tie-break is by order only.
-    return next(move for move, cost in zip(MOVES, costs) if cost <= best + _TIE)
+    for j in range(8):
+        if costs[j] <= best + _TIE:
+            return j
+    return 0  # cannot happen: the centre is reachable, so some neighbour is
 
 
 # --- the paper's rule, literally iterated (test reference) ---------------------------
