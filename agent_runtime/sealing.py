@@ -20,8 +20,9 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+from numba import njit
 
-from agent_runtime.spreading import _shift, reachable
+from agent_runtime.spreading import reachable
 
 SEAL_RADIUS = 2     # goal sites within this many cells (on each axis) of the agent are checked
 SEAL_MEMORY = 300   # ticks a site found sealing stays no goal once the agent is farther off
@@ -78,9 +79,24 @@ def _reached(reachable: np.ndarray) -> np.ndarray:
     """The cells a brick can be put on from `reachable` ones: those and their 4 neighbours.
     A site that is not passable itself (believed open, not seen lately) is still reached
     when an agent can stand beside it."""
+    return _reached_kernel(np.ascontiguousarray(reachable, dtype=np.bool_))
+
+
+@njit(cache=True)
+def _reached_kernel(reachable):
+    n, m = reachable.shape
     out = reachable.copy()
-    for dr, dc in ((1, 0), (-1, 0), (0, 1), (0, -1)):
-        out |= _shift(reachable, dr, dc, False)
+    for r in range(n):
+        for c in range(m):
+            if reachable[r, c]:
+                if r > 0:
+                    out[r - 1, c] = True
+                if r < n - 1:
+                    out[r + 1, c] = True
+                if c > 0:
+                    out[r, c - 1] = True
+                if c < m - 1:
+                    out[r, c + 1] = True
     return out
 
 
