@@ -110,6 +110,7 @@ class Brain:
         self._trail_len = 0
         self._trail_next = 0
         self._moving: deque[bool] = deque(maxlen=self.cfg.stuck_ticks)
+        self._still = 0   # how many of `_moving` are False (so `all` needs no pass over it)
         self._odo = np.zeros(2)            # dead-reckoned position in cells (for headway)
         self._unstick_left = 0             # ticks of backing off still to go
         self._unstick_heading = 0.0
@@ -192,7 +193,7 @@ class Brain:
         m = self.maps.maps > 0.5
         walls = m[OBSTACLE] | m[FOOD] | m[WATER] | (m[BRICK] & m[CONFIG])
         open_sites = m[CONFIG] & ~m[BRICK]
-        key = np.packbits(open_sites).tobytes() + np.packbits(walls).tobytes()
+        key = open_sites.tobytes() + walls.tobytes()
         if self._enclosed is None or self._enclosed[0] != key:
             found = enclosed_sites(open_sites, walls, (self.centre, self.centre))
             found.setflags(write=False)
@@ -318,7 +319,7 @@ class Brain:
         """calculateMatching on the current maps, recomputed only when its inputs change
         (a brick moved, a site filled or went out of sight, the maps shifted by a cell)."""
         closed = np.zeros_like(sites) if closed is None else closed
-        key = np.packbits(np.stack([bricks, sites, obstacles, closed])).tobytes()
+        key = b"".join(np.ascontiguousarray(g, dtype=np.bool_).tobytes() for g in (bricks, sites, obstacles, closed))
         if self._matching is None or self._matching[0] != key:
             self._matching = (key, calculate_matching(bricks, sites, obstacles, closed))
         return self._matching[1]
@@ -512,14 +513,19 @@ class Brain:
             if self._unstick_left == 0:
                 self._trail_len = 0
                 self._moving.clear()
+                self._still = 0
             return (*steering.steer_to(math.cos(self._unstick_heading), math.sin(self._unstick_heading),
                                        frame.heading, self.cfg.cruise_speed), NONE, "unstick")
         self._trail[self._trail_next] = self._odo
         self._trail_next = (self._trail_next + 1) % len(self._trail)
         self._trail_len = min(self._trail_len + 1, self.cfg.stuck_ticks)
-        self._moving.append(behaviour not in _STILL_IS_FINE)
+        moving = behaviour not in _STILL_IS_FINE
+        if len(self._moving) == self._moving.maxlen and not self._moving[0]:
+            self._still -= 1   # the oldest drops out
+        self._moving.append(moving)
+        self._still += not moving
         full = self._trail_len == self.cfg.stuck_ticks
-        if full and all(self._moving):
+        if full and self._still == 0:
             pts = self._trail   # all of it is the trail once full; order does not matter to max - min
             if float(np.hypot(*(pts.max(axis=0) - pts.min(axis=0)))) < self.cfg.stuck_distance:
                 self.unsticks += 1

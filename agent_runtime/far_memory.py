@@ -102,7 +102,7 @@ class FarMemory:
         n = self.size
         return (rows >= 0) & (rows < n) & (cols >= 0) & (cols < n)
 
-    def _cached(self, name: str, key: tuple, array: np.ndarray, compute):
+    def _cached(self, name: str, key: tuple, array: np.ndarray | None, compute):
         """`compute()`, kept until `key` (with the agent's cell) changes or `array` is
         replaced (compared by identity: the cache holds it, so its id is never reused)."""
         key = (int(self.pos[0]), int(self.pos[1]), *key)

@@ -6,6 +6,7 @@ navigation maps it asks for are the ones it asked for a tick before (41-89% of c
 by call site, on the generated layouts of `bench.bench_agent_step`). A distance field is
 a pure function of its inputs, so a field looked up by the packed bytes of those inputs
 is the field the kernel would compute again, bit for bit: the cache changes no decision.
+(The key is the raw bytes: packing bits would take longer than comparing them.)
 
 Fields handed out are read-only: one array may be returned to several callers. A field
 with no goal is all inf and needs no kernel (the kernel's answer too).
@@ -45,7 +46,7 @@ class FieldCache:
             return distance_field(goals, obstacles)
         if not goals.any():
             return self._all_inf(goals.shape)
-        key = b"d" + _shape_bytes(goals.shape) + np.packbits(goals).tobytes() + np.packbits(obstacles).tobytes()
+        key = b"d" + _shape_bytes(goals.shape) + goals.tobytes() + obstacles.tobytes()
         return self._lookup(key, lambda: distance_field(goals, obstacles))
 
     def seeded(self, seed: np.ndarray, obstacles: np.ndarray) -> np.ndarray:
@@ -54,7 +55,7 @@ class FieldCache:
         obstacles = np.ascontiguousarray(obstacles, dtype=np.bool_)
         if seed.shape != obstacles.shape:
             return seeded_distance_field(seed, obstacles)
-        key = b"s" + _shape_bytes(seed.shape) + seed.tobytes() + np.packbits(obstacles).tobytes()
+        key = b"s" + _shape_bytes(seed.shape) + seed.tobytes() + obstacles.tobytes()
         return self._lookup(key, lambda: seeded_distance_field(seed, obstacles))
 
     def _lookup(self, key: bytes, compute) -> np.ndarray:

@@ -14,7 +14,9 @@ known, else explore), grab it, navigate to a missing part of the structure, drop
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -23,6 +25,8 @@ STATE_NODES = ("holding_brick", "at_drop_site", "at_brick", "near_brick", "brick
 OUTPUTS = ("grab", "drop", "config_nav", "brick_nav", "explore", "avoid_red", "approach_red")
 ARM_OUTPUTS = OUTPUTS[:2]
 MOTOR_OUTPUTS = OUTPUTS[2:]
+_ARM_INDEX = tuple((name, OUTPUTS.index(name)) for name in ARM_OUTPUTS)
+_MOTOR_INDEX = tuple((name, OUTPUTS.index(name)) for name in MOTOR_OUTPUTS)
 THRESHOLD = 0.7
 NONE = "none"
 
@@ -74,7 +78,12 @@ class ActionNetwork:
 
     def inputs(self, state: np.ndarray) -> np.ndarray:
         """Summed input of every output for the state node activations `state` (6,)."""
-        return np.asarray(state, dtype=np.float64) @ (self.excite + self.inhibit)
+        return np.asarray(state, dtype=np.float64) @ self._weights
+
+    @cached_property
+    def _weights(self) -> np.ndarray:
+        # The network is frozen (a learning student hands out copies), so the sum is too.
+        return self.excite + self.inhibit
 
     def choose(self, state: np.ndarray) -> Choice:
         """The (arm, motor) outputs this network fires for the state node activations `state`."""
@@ -86,16 +95,16 @@ def select(net: np.ndarray, threshold: float = THRESHOLD) -> Choice:
 
     Shared by the engineered network and the learning student (agent_runtime/learning.py).
     """
-    fired = net >= threshold - 1e-12
-    return Choice(arm=_winner(net, fired, ARM_OUTPUTS), motor=_winner(net, fired, MOTOR_OUTPUTS),
-                  outputs=tuple(float(v) for v in net))
+    values = np.asarray(net, dtype=np.float64).tolist()
+    fired = [v >= threshold - 1e-12 for v in values]
+    return Choice(arm=_winner(values, fired, _ARM_INDEX), motor=_winner(values, fired, _MOTOR_INDEX),
+                  outputs=tuple(values))
 
 
-def _winner(net: np.ndarray, fired: np.ndarray, group: tuple[str, ...]) -> str:
-    """The firing output of `group` with the largest input (first in order on a tie)."""
-    best, best_net = NONE, -np.inf
-    for name in group:
-        j = OUTPUTS.index(name)
+def _winner(net: list[float], fired: list[bool], group: tuple[tuple[str, int], ...]) -> str:
+    """The firing output of `group` ((name, index) pairs) with the largest input (first on a tie)."""
+    best, best_net = NONE, -math.inf
+    for name, j in group:
         if fired[j] and net[j] > best_net:
             best, best_net = name, net[j]
     return best
