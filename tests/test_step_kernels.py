@@ -1,0 +1,121 @@
+"""The cheaper decision step's pieces give what the plain code gave: the field cache, the
+flood-fill reachability, and the compiled gradient and mouth-side rules, each against a
+plain reference on random maps (issue 31: decisions may not change)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from agent_runtime.brain import _mouth_side
+from agent_runtime.field_cache import FieldCache
+from agent_runtime.spreading import _STEP, MOVES, distance_field, gradient_step, reachable, seeded_distance_field
+from tests.test_spreading import grids
+
+
+def _plain_gradient_step(dist: np.ndarray) -> tuple[int, int] | None:
+    """gradient_step as it was written before it was compiled (the reference)."""
+    n, m = dist.shape
+    r, c = n // 2, m // 2
+    here = float(dist[r, c])
+    if not math.isfinite(here):
+        return None
+    if here == 0.0:
+        return (0, 0)
+
+    def passable(i, j):
+        return 0 <= i < n and 0 <= j < m and math.isfinite(dist[i, j])
+
+    costs = []
+    for (dr, dc), step in zip(MOVES, _STEP.tolist()):
+        ok = passable(r + dr, c + dc) and (dr == 0 or dc == 0 or (passable(r + dr, c) and passable(r, c + dc)))
+        costs.append(step + float(dist[r + dr, c + dc]) if ok else math.inf)
+    best = min(costs)
+    return next(move for move, cost in zip(MOVES, costs) if cost <= best + 1e-9)
+
+
+def _plain_mouth_side(held, sites, depth):
+    """_mouth_side as it was written with numpy slices (the reference)."""
+    out = np.zeros_like(sites)
+    n, m = sites.shape
+    for dr, dc in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+        src = (slice(max(-dr, 0), n - max(dr, 0)), slice(max(-dc, 0), m - max(dc, 0)))
+        dst = (slice(max(dr, 0), n - max(-dr, 0)), slice(max(dc, 0), m - max(-dc, 0)))
+        out[dst] |= held[src] & (depth[dst] <= depth[src] + 1e-9) & np.isfinite(depth[dst])
+    return out & sites
+
+
+@settings(max_examples=150, deadline=None)
+@given(grids())
+def test_reachable_is_exactly_where_a_distance_field_is_finite(grid):
+    goals, obstacles = grid
+    assert np.array_equal(reachable(goals, ~obstacles), np.isfinite(distance_field(goals, obstacles)))
+
+
+@settings(max_examples=150, deadline=None)
+@given(grids(min_size=3))
+def test_the_compiled_gradient_step_moves_as_the_plain_one(grid):
+    goals, obstacles = grid
+    dist = distance_field(goals, obstacles)
+    assert gradient_step(dist) == _plain_gradient_step(dist)
+
+
+@settings(max_examples=100, deadline=None)
+@given(grids(), st.integers(0, 2**32 - 1))
+def test_the_compiled_mouth_side_marks_what_the_plain_one_marks(grid, seed):
+    goals, obstacles = grid
+    rng = np.random.default_rng(seed)
+    depth = distance_field(goals, obstacles)
+    sites = rng.random(goals.shape) < 0.4
+    held = sites & (rng.random(goals.shape) < 0.3)
+    assert np.array_equal(_mouth_side(held, sites, depth), _plain_mouth_side(held, sites, depth))
+
+
+def test_a_cached_field_is_the_kernels_read_only_and_computed_once_per_input():
+    goals = np.zeros((9, 9), bool)
+    goals[1, 1] = True
+    obstacles = np.zeros((9, 9), bool)
+    obstacles[4, :7] = True
+    cache = FieldCache(capacity=4)
+    first = cache.distance(goals, obstacles)
+    assert np.array_equal(first, distance_field(goals, obstacles))
+    assert cache.distance(goals.copy(), obstacles.copy()) is first and (cache.hits, cache.misses) == (1, 1)
+    with pytest.raises(ValueError):
+        first[0, 0] = 0.0   # shared: nobody may write into it
+    obstacles[4, 7] = True  # another input, another field
+    assert not np.array_equal(cache.distance(goals, obstacles), first) and cache.misses == 2
+
+
+def test_a_field_with_no_goal_is_all_inf_without_the_kernel():
+    cache = FieldCache()
+    field = cache.distance(np.zeros((5, 5), bool), np.zeros((5, 5), bool))
+    assert np.isinf(field).all() and cache.misses == 0
+
+
+def test_the_cache_keeps_at_most_its_capacity_oldest_out_first():
+    cache = FieldCache(capacity=2)
+    grids_ = []
+    for k in range(3):
+        goals = np.zeros((5, 5), bool)
+        goals[k, k] = True
+        grids_.append(goals)
+        cache.distance(goals, np.zeros((5, 5), bool))
+    assert len(cache._fields) == 2
+    cache.distance(grids_[0], np.zeros((5, 5), bool))   # evicted: computed again
+    assert cache.misses == 4
+    with pytest.raises(ValueError):
+        FieldCache(capacity=0)
+
+
+def test_a_cached_seeded_field_is_the_seeded_kernels():
+    seed = np.full((7, 7), np.inf)
+    seed[0, 3], seed[6, 0] = 2.5, 0.0
+    obstacles = np.zeros((7, 7), bool)
+    obstacles[3, 1:6] = True
+    cache = FieldCache()
+    assert np.array_equal(cache.seeded(seed, obstacles), seeded_distance_field(seed, obstacles))
+    assert cache.seeded(seed, obstacles) is cache.seeded(seed, obstacles) and cache.misses == 1
