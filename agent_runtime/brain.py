@@ -170,8 +170,8 @@ class Brain:
         self._recalled &= ~self.maps.known     # seen free since: gone (eaten, moved)
         self.far.observe_sites(self.maps.maps[BRICK], self.maps.clear_age)
         self.far.age_sites(self.maps.clear_age)
-        enclosed = self._enclosed_sites()
-        if enclosed.any():
+        enclosed = self._enclosed_sites() if self.cfg.enclosed_sites else None
+        if enclosed is not None and enclosed.any():
             self.maps.maps[BRICK][enclosed] = 1.0
             self.far.observe_sites(self.maps.maps[BRICK], self.maps.clear_age)
         new = self.far.mark_seen(self.sensor_range - 1.0)
@@ -281,32 +281,37 @@ class Brain:
         food, water, brick, config = m[FOOD] | m[OBSTACLE] | self._recalled, m[WATER], m[BRICK], m[CONFIG]
         # Other agents in sight are in the way too: two agents heading opposite ways down a
         # one-cell corridor would otherwise meet, back off and meet again for ever.
-        agents = m[AGENT]
+        agents = m[AGENT] if self.cfg.agents_as_obstacles else np.zeros_like(m[AGENT])
         config_goals = config & ~brick          # sites still missing a brick
         brick_goals = brick & ~config           # bricks not part of the structure
         obstacles = food | water | (brick & config)
         open_sites = config_goals
         if self.cfg.goal_sequencing:
-            supply = (self._source_cell() | self._supply_beyond()) & ~obstacles & ~config
-            supply_bricks = brick_goals | supply
+            if self.cfg.supply_beyond:
+                supply = (self._source_cell() | self._supply_beyond()) & ~obstacles & ~config
+                supply_bricks = brick_goals | supply
+            else:
+                supply_bricks = brick_goals
         # With no open site on the map the Matching grid pairs nothing and would leave no
         # brick goal at all: the brick NM then followed a remembered brick beyond the border
         # and turned back each time the sites came onto the map, for ever, a cell's step
         # either side of the map's edge (gen-polyomino 134). Any free brick blocks nothing then.
         if sequenced and self.cfg.goal_sequencing and open_sites.any():
             closed = config_goals & (self.maps.clear_age > self.cfg.site_memory)
+            if not self.cfg.closed_sites:
+                closed[:] = False
             # The cells around the agent are never in doubt: it would be touching a brick there.
             c = self.centre
             closed[c - 1:c + 2, c - 1:c + 2] = False
             matching = self.matching(supply_bricks, config_goals, obstacles, closed)
             config_goals, brick_goals = select_goals(matching, brick_goals, config_goals)
             held = open_sites & ~config_goals
-            if held.any():
+            if self.cfg.mouth_side and held.any():
                 # Closed sites are passable for this: the depth of a site behind one must
                 # stay finite, or every site would count as "no deeper" than its neighbour.
                 depth = self.fields.distance(supply_bricks, obstacles)
                 config_goals &= ~_mouth_side(held, config_goals, depth)
-        if self.cfg.goal_sequencing:
+        if self.cfg.goal_sequencing and self.cfg.seal_guard:
             # Also when sequencing gives way (plan's fallback): no site that seals another.
             config_goals &= ~self.seals.unsafe(config_goals, open_sites, obstacles, supply_bricks, self._tick)
         # Bricks that are not goals (the structure's, and with sequencing the unmatched free
@@ -339,7 +344,8 @@ class Brain:
         m = self.layers()
         # Sequencing applies only with an open site on the map (`nav_masks`); without one
         # the plain masks are the very ones just made, so they are not made again.
-        sequenced = self.cfg.goal_sequencing and bool((m[CONFIG] & ~m[BRICK]).any())
+        sequenced = (self.cfg.goal_sequencing and self.cfg.sequencing_fallback
+                     and bool((m[CONFIG] & ~m[BRICK]).any()))
         plain = None
         for k, (goals, obstacles) in enumerate(self.nav_masks()):
             field = self._field(goals, obstacles, far[k])
@@ -433,7 +439,8 @@ class Brain:
         choice = self.network.choose(state)
         speed, turn, action, behaviour = self._select(frame, ranges, plans, choice.arm, choice.motor)
         speed, turn, action, behaviour = self._unstick(frame, speed, turn, action, behaviour)
-        speed, turn = self._off_own_brick(frame, ranges[_CH["brick"]], speed, turn)
+        if self.cfg.off_own_brick:
+            speed, turn = self._off_own_brick(frame, ranges[_CH["brick"]], speed, turn)
         self.behaviour = behaviour
         self.behaviour_ticks[behaviour] += 1
         decision = Decision(self.agent_id, frame.tick, tuple(state.tolist()), choice.outputs,
@@ -508,6 +515,8 @@ class Brain:
         moves for ever; the random heading and length (the injected generator) break the
         symmetry, so such a deadlock lasts a bounded number of ticks.
         """
+        if not self.cfg.unstick:
+            return speed, turn, action, behaviour
         if self._unstick_left > 0:
             self._unstick_left -= 1
             if self._unstick_left == 0:
@@ -574,7 +583,7 @@ class Brain:
         # A loaded agent gives way to an unloaded one (most likely on its way out of the
         # structure): it backs off from farther away, so in a corridor one body wide the
         # two do not back off and meet again for ever.
-        give_way = self.cfg.avoid_distance * (1.0 if frame.holding else 0.5)
+        give_way = self.cfg.avoid_distance * (1.0 if frame.holding or not self.cfg.give_way else 0.5)
         if agent_near < give_way:
             dx, dy = self._reading_offset(ranges[_CH["agent"]])
             return (*steering.away_from(dx, dy, frame.heading, cruise), NONE, "avoid")
@@ -608,7 +617,8 @@ class Brain:
             target = self._brick_within(plans, self.cfg.near_brick)
             return steering.steer_to(*target, frame.heading, cruise) if target else (0.0, 0.0)
         if motor == "avoid_red":
-            if _nearest_reading(ranges[_CH["agent"]]) < self.sensor_range and self._agents_in_the_way(plans):
+            if (self.cfg.agents_in_the_way and _nearest_reading(ranges[_CH["agent"]]) < self.sensor_range
+                    and self._agents_in_the_way(plans)):
                 # Only other agents stand between the held brick and a site (a corridor one
                 # body wide): back away from the nearest, so it can come out. Four agents
                 # queued in a 31-cell corridor otherwise held it shut for good, the one
@@ -640,6 +650,9 @@ class Brain:
         # Sweep only while searching for the supply: an agent that holds a brick, or knows
         # of one, is waiting for a way to open (a site held open by the Matching grid), and
         # a sweep would walk it away from where it is needed.
+        if not self.cfg.explore_sweep:
+            # The paper's Explore (§4.1): a random walk.
+            return steering.explore(self.rng, self.cfg.explore_turn, self.cfg.cruise_speed)
         target = self.far.unseen_target(self.rng) if self.searching() else None
         if target is not None:
             m = self.layers()

@@ -35,10 +35,27 @@ class AgentConfig:
                                     # filled by another agent: no planned path may cross it
     stuck_ticks: int = 120          # no headway for this many ticks (net < stuck_distance cells)
     stuck_distance: float = 1.5     # ... makes the agent back off for stuck_ticks/4 to /2 ticks
+    # Additions beyond paper §4 and §6, each switchable by name (docs/design.md, "The paper's
+    # agent and what we added"); `preset("paper")` switches every one of them off.
+    agents_as_obstacles: bool = True  # other agents in sight are obstacles on both NMs
+    explore_sweep: bool = True      # Explore heads for unseen squares, else straight legs (paper: random)
+    unstick: bool = True            # back off at random after stuck_ticks without headway
+    give_way: bool = True           # an agent without a brick avoids others from half as far
+    agents_in_the_way: bool = True  # back away from agents that alone keep a site out of reach
+    closed_sites: bool = True       # goal sequencing: no path across a site not seen for site_memory ticks
+    supply_beyond: bool = True      # goal sequencing: the held brick's source and far bricks are supply
+    mouth_side: bool = True         # goal sequencing: no site beside a site held open, no deeper than it
+    seal_guard: bool = True         # no goal site whose brick would cut another open site off
+    enclosed_sites: bool = True     # open sites no way reaches are believed filled
+    off_own_brick: bool = True      # leave a brick just dropped on the side away from a pocket
+    sequencing_fallback: bool = True  # plain goals when sequencing leaves none reachable
 
     def __post_init__(self) -> None:
         if not (isinstance(self.map_size, int) and self.map_size >= 5 and self.map_size % 2 == 1):
             raise ValueError("agent.map_size must be an odd integer >= 5")
+        for name in ADDITIONS:
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"agent.{name} must be true or false")
         for f in dataclasses.fields(self):
             v = getattr(self, f.name)
             if isinstance(v, float) and not (math.isfinite(v) and v >= 0):
@@ -47,6 +64,17 @@ class AgentConfig:
             raise ValueError("agent.stuck_ticks must be an integer >= 8")
         if not isinstance(self.goal_sequencing, bool):
             raise ValueError("agent.goal_sequencing must be true or false")
+
+    @classmethod
+    def preset(cls, name: str, **overrides: Any) -> AgentConfig:
+        """The named set of additions (PRESETS), with `overrides` on top."""
+        if name not in PRESETS:
+            raise ValueError(f"unknown agent preset {name!r}; known: {', '.join(PRESETS)}")
+        return cls(**{**PRESETS[name], **overrides})
+
+    def additions(self) -> dict[str, bool]:
+        """Each addition beyond the paper by name, and whether it is on."""
+        return {name: getattr(self, name) for name in ADDITIONS}
 
     @classmethod
     def from_mapping(cls, table: dict) -> AgentConfig:
@@ -58,3 +86,15 @@ class AgentConfig:
         values: dict[str, Any] = {k: (float(v) if isinstance(getattr(cls, k), float) and isinstance(v, int) else v)
                                   for k, v in table.items()}
         return cls(**values)
+
+
+# The additions beyond the paper, in the order AgentConfig declares them.
+ADDITIONS = ("agents_as_obstacles", "explore_sweep", "unstick", "give_way", "agents_in_the_way", "closed_sites",
+             "supply_beyond", "mouth_side", "seal_guard", "enclosed_sites", "off_own_brick", "sequencing_fallback")
+# Named agents: "default" is the best agent, "paper" the agent as the paper describes it
+# (as far as its additions can be switched off; far memory, the obstacle layer, the
+# sensing refinements and needs that last until they are met cannot be yet).
+PRESETS: dict[str, dict[str, Any]] = {
+    "default": {},
+    "paper": dict.fromkeys(ADDITIONS, False),
+}

@@ -318,7 +318,6 @@ def _stopped_by_signal():
 
 def _agent_options(args):
     """The AgentOptions `conag agent` asks for (ValueError for learning flags without --learn)."""
-    from agent_runtime.config import AgentConfig
     from agent_runtime.learning import Student
     from agent_runtime.node import AgentOptions, Learning
 
@@ -330,7 +329,7 @@ def _agent_options(args):
                             weights_out=args.weights_out, save_every=args.save_every or 500)
     elif args.weights_in:
         network = Student.load(args.weights_in)  # a trained student, acting without learning
-    cfg = AgentConfig(map_size=args.map_size, goal_sequencing=not args.nearest_first)
+    cfg = _agent_config(args)
     return AgentOptions(args.world_id, args.id, cfg, args.seed, attach_timeout=args.attach_timeout,
                         recorded=args.recorded, learning=learning, network=network)
 
@@ -361,15 +360,13 @@ def cmd_agent(args) -> int:
 
 
 def cmd_agents(args) -> int:
-    from agent_runtime.config import AgentConfig
     from agent_runtime.host import AgentHost, host_options, parse_ids, read_stop_requests
     from agent_runtime.node import AgentOptions
     from agent_runtime.world_link import AttachError
 
     ids = parse_ids(args.ids)
-    base = AgentOptions(args.world_id, ids[0], AgentConfig(map_size=args.map_size,
-                                                           goal_sequencing=not args.nearest_first),
-                        args.seed, attach_timeout=args.attach_timeout, recorded=args.recorded)
+    base = AgentOptions(args.world_id, ids[0], _agent_config(args), args.seed,
+                        attach_timeout=args.attach_timeout, recorded=args.recorded)
 
     with _stopped_by_signal():
         session = open_session(_bus(args))
@@ -417,13 +414,12 @@ def cmd_teacher(args) -> int:
 
 
 def cmd_run(args) -> int:
-    from agent_runtime.config import AgentConfig
     from conag.layouts import warn_if_unbuildable
     from conag.run import RunOptions, run
     from protocol.bus import DEFAULT_ENDPOINT
     from world_server.scenario import load_scenario
 
-    AgentConfig(map_size=args.map_size)  # a bad size is a usage error here, not in every agent
+    _agent_config(args)  # a bad size, preset or addition is a usage error here, not in every agent
     if not args.learn and (args.eta is not None or args.weights_dir):
         raise ValueError("--eta and --weights-dir need --learn")
     if args.per_process < 1 or (args.per_process > 1 and (args.learn or args.secure is not None)):
@@ -437,7 +433,8 @@ def cmd_run(args) -> int:
                       agents=args.agents, seed=args.seed, max_ticks=args.max_ticks, summary=args.summary,
                       headless=args.headless, quiet=args.quiet,
                       extra_agent_args=("--map-size", str(args.map_size), *learn_args,
-                                        *(("--nearest-first",) if args.nearest_first else ())),
+                                        *(("--nearest-first",) if args.nearest_first else ()),
+                                        "--agent", args.agent, *(("--without", args.without) if args.without else ())),
                       teacher=args.teacher, weights_dir=args.weights_dir, stall_ticks=args.stall_ticks,
                       record=args.record, record_priority=args.record_priority, view=args.view,
                       maps_every=args.maps_every, secure=args.secure,
@@ -506,6 +503,27 @@ def cmd_control(args) -> int:
         session.close()
     print(result.message, file=sys.stdout if result.ok else sys.stderr)
     return 0 if result.ok else 1
+
+
+def _agent_kind_args(p) -> None:
+    p.add_argument("--agent", default="default", metavar="PRESET",
+                   help="which agent: default (the best agent) or paper (the agent as the paper describes it, "
+                        "every switchable addition off); see docs/design.md")
+    p.add_argument("--without", metavar="NAMES",
+                   help="switch these additions off, comma separated (e.g. unstick,seal_guard; "
+                        "agent_runtime.config.ADDITIONS names them all)")
+
+
+def _agent_config(args):
+    """The AgentConfig the agent flags ask for (ValueError names what is wrong)."""
+    from agent_runtime.config import ADDITIONS, AgentConfig
+
+    off = [n.strip() for n in (args.without or "").split(",") if n.strip()]
+    unknown = [n for n in off if n not in ADDITIONS]
+    if unknown:
+        raise ValueError(f"--without: unknown addition(s) {', '.join(unknown)}; known: {', '.join(ADDITIONS)}")
+    return AgentConfig.preset(args.agent, map_size=args.map_size, goal_sequencing=not args.nearest_first,
+                              **dict.fromkeys(off, False))
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -595,6 +613,7 @@ def _add_agent(sub) -> None:
                    help=f"cells per side of the agent's maps, odd (default {AGENT_MAP_SIZE})")
     a.add_argument("--nearest-first", action="store_true",
                    help="no goal sequencing: always the nearest brick and site (the plain agent of paper §4)")
+    _agent_kind_args(a)
     g = a.add_argument_group("learning (paper §5.1)")
     g.add_argument("--learn", action="store_true",
                    help="be a student: random construction weights (from --seed) learned from the teacher")
@@ -619,6 +638,7 @@ def _add_agents(sub) -> None:
     a.add_argument("--map-size", type=int, default=AGENT_MAP_SIZE, metavar="N",
                    help=f"cells per side of the agents' maps, odd (default {AGENT_MAP_SIZE})")
     a.add_argument("--nearest-first", action="store_true", help="no goal sequencing (as conag agent)")
+    _agent_kind_args(a)
     a.add_argument("--stdin-control", action="store_true",
                    help="read `stop ID` lines on stdin: stop that agent alone (conag run uses it for conag kill)")
     _bus_args(a)
@@ -680,6 +700,7 @@ def _add_run(sub) -> None:
                                                      "--profile)")
     u.add_argument("--nearest-first", action="store_true",
                    help="agents without goal sequencing (paper §4), for comparison with ConAg-TS (§6)")
+    _agent_kind_args(u)
     g = u.add_argument_group("learning (paper §5.1)")
     g.add_argument("--teacher", action="store_true", help="start a teacher process too")
     g.add_argument("--learn", action="store_true", help="agents are students with random weights (conag agent --learn)")

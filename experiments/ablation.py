@@ -1,0 +1,113 @@
+"""Issue 33: what each addition beyond the paper buys. The ablation table.
+
+    python3 -m experiments.ablation --quick             # a few small layouts: a smoke table
+    python3 -m experiments.ablation --sample 60 --jobs 2  # the committed table (docs/results)
+
+Each layout of a sample of the generated suite (every `--every`-th file, so every family
+and size comes in) is built in process (`conag.sim`, goal sequencing on) by several
+agents, named by `AgentConfig`:
+
+* `default`: the best agent, every addition on;
+* `-NAME`: the default with one addition switched off, for each of ADDITIONS;
+* `paper`: every switchable addition off (`AgentConfig.preset("paper")`).
+
+Per agent the table gives the layouts completed, the median ticks of the completed runs
+and the median distance over the lower bound (`experiments.replay.lower_bound`, as in the
+generalisation table). A run stops as stalled after `--stall` ticks with no site filled
+(or the cells per agent on a large world), as in `experiments.generalisation`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from agent_runtime.config import ADDITIONS, AgentConfig
+from experiments.generalisation import DEFAULT_STALL, LAYOUTS, _bound, family_of, stall_limit
+from experiments.workers import pool
+from world_server.scenario import load_scenario
+
+ROOT = Path(__file__).resolve().parent.parent
+QUICK = ("000-gen-wall-20260000.toml", "001-gen-nested_rings-20260001.toml", "002-gen-polyomino-20260002.toml")
+
+
+@dataclass(frozen=True)
+class Run:
+    layout: str
+    family: str
+    agent: str
+    completed: bool
+    ticks: int
+    distance: float
+    bound: float
+
+
+def variants() -> dict[str, AgentConfig]:
+    """default, each addition off in turn, and the paper's agent."""
+    out = {"default": AgentConfig.preset("default")}
+    out.update({f"-{name}": AgentConfig(**{name: False}) for name in ADDITIONS})
+    out["paper"] = AgentConfig.preset("paper")
+    return out
+
+
+def run_one(layout: str, agent: str, stall: int) -> Run:
+    from conag import sim
+
+    sc = load_scenario(LAYOUTS / layout)
+    run = sim.start(sc, cfg=variants()[agent])
+    starts = [tuple(int(v) for v in cell[::-1]) for cell in sc.to_cell(run.world.agent_poses()[:, :2])]
+    result = run.run(sc.max_ticks, stall_ticks=stall_limit(sc, stall))
+    status = run.world.status()
+    return Run(layout=layout, family=family_of(sc), agent=agent, completed=result.completed, ticks=result.ticks,
+               distance=float(sum(status.agent_distance)), bound=_bound(sc, starts))
+
+
+def table(runs: list[Run]) -> str:
+    """The markdown table: one row per agent, in `variants()` order."""
+    layouts = len({r.layout for r in runs})
+    lines = [f"| agent | completed (of {layouts}) | median ticks (completed) | median distance / bound |",
+             "|---|---:|---:|---:|"]
+    for agent in variants():
+        mine = [r for r in runs if r.agent == agent]
+        if not mine:
+            continue
+        done = [r for r in mine if r.completed]
+        ticks = f"{statistics.median(r.ticks for r in done):,.0f}" if done else "-"
+        ratio = f"{statistics.median(r.distance / r.bound for r in done if r.bound > 0):.2f}" if done else "-"
+        lines.append(f"| {agent} | {len(done)} | {ticks} | {ratio} |")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help=f"the layouts {', '.join(QUICK)} only")
+    ap.add_argument("--sample", type=int, default=60, help="layouts from the suite (default 60)")
+    ap.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
+    ap.add_argument("--stall", type=int, default=DEFAULT_STALL, help="ticks with no site filled that stop a run")
+    ap.add_argument("--out", type=Path, default=ROOT / "experiments", help="folder for ablation.json and .md")
+    args = ap.parse_args(argv)
+    names = sorted(p.name for p in LAYOUTS.glob("*.toml"))
+    layouts = list(QUICK) if args.quick else names[::max(len(names) // args.sample, 1)][:args.sample]
+    jobs = [(layout, agent) for layout in layouts for agent in variants()]
+    runs: list[Run] = []
+    with pool(args.jobs) as workers:
+        futures = [workers.submit(run_one, layout, agent, args.stall) for layout, agent in jobs]
+        for k, future in enumerate(futures, 1):
+            runs.append(future.result())
+            r = runs[-1]
+            print(f"[{k}/{len(jobs)}] {r.layout} {r.agent}: {'complete' if r.completed else 'not complete'} "
+                  f"in {r.ticks} ticks", file=sys.stderr, flush=True)
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "ablation.json").write_text(json.dumps([asdict(r) for r in runs], indent=1) + "\n", encoding="utf-8")
+    text = table(runs)
+    (args.out / "ablation.md").write_text(text + "\n", encoding="utf-8")
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
