@@ -22,9 +22,12 @@ from pathlib import Path
 
 from conag import sim
 from world_server.scenario import load_scenario
+from world_server.suite import materialise
 
 ROOT = Path(__file__).resolve().parent.parent
+# the generalisation suite's layouts, made from its manifest on first use (experiments/generalisation.py)
 SUITE = ROOT / "experiments" / "generalisation" / "layouts"
+MANIFEST = ROOT / "experiments" / "generalisation" / "layouts.json"
 LAYOUTS = (ROOT / "scenarios" / "fig6.toml", SUITE / "001-gen-nested_rings-20260001.toml",
            SUITE / "021-gen-wall-20260021.toml", SUITE / "028-gen-nested_rings-20260028.toml")
 
@@ -58,6 +61,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--ticks", type=int, default=1000, help="timed ticks per layout")
     args = ap.parse_args(argv)
     warmup, ticks = (20, 20) if args.quick else (args.warmup, args.ticks)
+    materialise(MANIFEST, SUITE)
     print("| layout | world | agents | decision step median ms (p90) | steps with goals beyond the map "
           "| sim ticks/s |")
     print("|---|---|---:|---:|---:|---:|")
