@@ -195,7 +195,7 @@ def _job_key(job: Job) -> list:
     return [job.layout, job.mode, job.stall, job.code]
 
 
-_CODE_DIRS = ("agent_runtime", "world_server", "sim")   # what a run's outcome depends on
+_CODE_DIRS = ("agent_runtime", "world_server", "conag/sim")   # what a run's outcome depends on
 
 
 def _code_version() -> str:
