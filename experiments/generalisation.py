@@ -425,14 +425,14 @@ def rewrite_report(args: argparse.Namespace) -> int:
 def draw_failures(args: argparse.Namespace) -> int:
     """The pictures of the committed table's failures: each run that did not complete in
     experiments/generalisation.json again (same layout, agent and stall limit), drawn where
-    the table links it; the results are not touched. Exit 1 if a run stops otherwise than
+    the table links it (or under --out); the results are not touched. Exit 1 if a run stops otherwise than
     recorded (the code changed since the table)."""
     out = ROOT / "experiments"
     rows = [r for r in json.loads((out / "generalisation.json").read_text(encoding="utf-8")) if r["picture"]]
     stall = json.loads((out / "generalisation.meta.json").read_text(encoding="utf-8"))["stall"]
     names = set(args.only or ())
     rows = [r for r in rows if (not names or r["layout"] in names) and args.mode in (None, r["mode"])]
-    pictures = SUITE / "failures"
+    pictures = args.out / "generalisation" / "failures" if args.out else SUITE / "failures"
     print(f"drawing {len(rows)} pictures into {pictures}", file=sys.stderr, flush=True)
     outcomes = run_all([Job(r["layout"], r["mode"], stall) for r in rows], args.jobs, pictures)
     recorded = {(r["layout"], r["mode"]): r for r in rows}

@@ -103,6 +103,18 @@ def test_the_quick_run_refuses_to_overwrite_the_committed_results():
     assert r.returncode == 2 and "--out" in r.stderr
 
 
+@pytest.mark.slow
+def test_the_pictures_of_the_tables_failures_are_drawn_again_as_recorded(tmp_path):
+    layout = "167-gen-pocket-20260167.toml"       # a nearest-first failure of the table, 15 x 15
+    r = subprocess.run([sys.executable, "-m", "experiments.generalisation", "--pictures", "--only", layout,
+                        "--jobs", "1", "--out", str(tmp_path)], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "1 of 1 runs stopped as recorded" in r.stderr
+    row = next(r for r in json.loads((ROOT / "experiments" / "generalisation.json").read_text())
+               if r["layout"] == layout and r["picture"])
+    assert (tmp_path / row["picture"]).stat().st_size > 1000   # where the table links it, under --out
+
+
 def test_a_resumed_run_links_the_pictures_in_its_own_folder(tmp_path):
     # A journal carried on in another --out folder, its pictures copied along, linked 54
     # failures of the committed table to the folder they were first drawn in.
