@@ -26,8 +26,12 @@ import sys
 import tempfile
 from pathlib import Path
 
+from world_server.suite import materialise
+
 ROOT = Path(__file__).resolve().parent.parent
+# the generalisation suite's layouts, made from its manifest on first use (experiments/generalisation.py)
 SUITE = ROOT / "experiments" / "generalisation" / "layouts"
+MANIFEST = ROOT / "experiments" / "generalisation" / "layouts.json"
 LAYOUTS = (ROOT / "scenarios" / "fig6.toml", SUITE / "001-gen-nested_rings-20260001.toml",
            SUITE / "021-gen-wall-20260021.toml", SUITE / "028-gen-nested_rings-20260028.toml")
 REFERENCE = "f7f6a27"
@@ -113,6 +117,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     warmup, ticks = (20, 20) if args.quick else (args.warmup, args.ticks)
     maps = [int(m) for m in args.maps.split(",")]
+    materialise(MANIFEST, SUITE)
     with tempfile.TemporaryDirectory(prefix="bench-agent-step-") as tmp:
         ref = args.reference_dir or reference_tree(args.reference, Path(tmp))
         try:

@@ -29,7 +29,6 @@ this process's session is the operator's.
 
 from __future__ import annotations
 
-import json
 import signal
 import subprocess
 import sys
@@ -38,7 +37,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from conag.common import RECORDER_PRIORITY
@@ -51,6 +50,7 @@ from protocol.messages import AgentState, RunControl, RunControlResult, WorldSta
 from world_server.checkpoint import DEFAULT_EVERY, CheckpointError, newest_good, read_checkpoint
 from world_server.scenario import Scenario
 from world_server.stall import DEFAULT_STALL_TICKS, StallWatch
+from world_server.summary import RunSummary
 
 MAX_QUICK_DEATHS = 3  # a world dying this many times in a row soon after starting is not restarted again
 QUICK_DEATH = 10.0    # wall seconds: a death sooner than this after starting counts as quick
@@ -302,7 +302,8 @@ def _progress(st: WorldStatus, started: float, rate: float | None = None, world_
 
 
 def run(opts: RunOptions, stop: threading.Event) -> dict:
-    """Run the scenario; returns the run summary (also written to opts.summary)."""
+    """Run the scenario; returns the run summary's JSON object (`RunSummary.as_dict`, also
+    written to opts.summary)."""
     with tempfile.TemporaryDirectory(prefix="conag-run-") as tmp:  # gone however the run ends
         n_agents = opts.scenario.agents if opts.agents is None else opts.agents
         with secure_bus(opts, n_agents, Path(tmp)) as bus_opts:
@@ -411,12 +412,10 @@ def _run(opts: RunOptions, stop: threading.Event, tmp: Path) -> dict:
                 _stop(recorder, grace=60.0)  # last: it writes what is queued, the summary and the footer
     if tty and not watch.stalled:
         print()
-    summary = _final_summary(final_path, world.proc)
-    summary["stalled"] = watch.stalled
-    summary["world_restarts"] = world.restarts
+    summary = replace(_final_summary(final_path, world.proc), stalled=watch.stalled, world_restarts=world.restarts)
     if opts.summary and opts.summary != "-":
-        Path(opts.summary).write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
-    return summary
+        Path(opts.summary).write_text(summary.to_json(), encoding="utf-8")
+    return summary.as_dict()
 
 
 def _lost_before_start(fleet: Fleet, run_bus: RunBus) -> tuple[str, int] | None:
@@ -477,10 +476,10 @@ def _start_world(opts: RunOptions, n_agents: int, final_path: Path, checkpoint: 
     return subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
 
 
-def _final_summary(final_path: Path, world: subprocess.Popen) -> dict:
+def _final_summary(final_path: Path, world: subprocess.Popen) -> RunSummary:
     if not final_path.exists():
         raise RuntimeError(f"the world exited ({world.returncode}) without a final status")
-    return json.loads(final_path.read_text(encoding="utf-8"))
+    return RunSummary.from_json(final_path.read_text(encoding="utf-8"))
 
 
 def _on_control(fleet: Fleet):

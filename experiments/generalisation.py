@@ -1,8 +1,9 @@
 """Issue 10: does the agent build layouts nobody tuned it for? The generated suite.
 
-A suite of generated layouts (`world_server/generator.py`, committed as files under
-experiments/generalisation/layouts/, so a change to the generator cannot silently change
-the benchmark) is built in-process (conag/sim/loop.py: the real World and Brain code, lockstep,
+A suite of generated layouts (`world_server/generator.py`; made on first use into
+experiments/generalisation/layouts/ from the committed manifest layouts.json, which holds
+each file's sha256, so a change to the generator cannot silently change the benchmark:
+world_server/suite.py) is built in-process (conag/sim/loop.py: the real World and Brain code, lockstep,
 headless), each layout once with goal sequencing (ConAg-TS, the default agent) and once
 nearest-first (the plain agent of §4), in the same run. Every layout passed the
 buildability check when it was generated. A run stops when the structure is complete, when
@@ -12,11 +13,13 @@ its cells per agent), or at the scenario's `max_ticks`.
 Reported: completion rate per family and per size band for both agents; ticks to complete;
 the distance walked against a lower bound (experiments/replay.lower_bound, on the initial
 map); every failure by its layout file, with its stall report and a picture of the state it
-stopped in (experiments/generalisation/failures/).
+stopped in (experiments/generalisation/failures/, drawn by the run or by --pictures; not committed).
 
     python3 -m experiments.generalisation              # the whole suite (about an hour on 2 cores)
     python3 -m experiments.generalisation --quick      # a smoke run of a few small layouts
-    python3 -m experiments.generalisation --generate   # rewrite the suite's layout files
+    python3 -m experiments.generalisation --layouts    # make the layout files, print where they are
+    python3 -m experiments.generalisation --generate   # a new manifest, after a deliberate generator change
+    python3 -m experiments.generalisation --pictures   # draw the failures of generalisation.json again
     python3 -m experiments.generalisation --report-only   # the tables again from generalisation.json
     python3 -m experiments.generalisation --resume     # go on with an interrupted run (same options)
 
@@ -44,13 +47,20 @@ from conag import sim
 from experiments.journal import Journal
 from experiments.report import RESULTS_DOC, write_section
 from experiments.workers import pool
+from world_server import suite
 from world_server.scenario import Scenario, load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
 SUITE = ROOT / "experiments" / "generalisation"
-LAYOUTS = SUITE / "layouts"
+LAYOUTS = SUITE / "layouts"              # made from MANIFEST (gitignored)
+MANIFEST = SUITE / "layouts.json"
 SUITE_SEED = 2026
 SUITE_SIZE = 200
+# Layouts of other suites kept for the record (EXPERIMENTS.md: unseen sets that found a bug):
+# (suite size, suite seed, indices), made from UNSEEN_MANIFEST into UNSEEN (gitignored).
+UNSEEN_LAYOUTS = ((30, 1125, (24,)), (30, 1126, (25,)))
+UNSEEN = SUITE / "unseen"
+UNSEEN_MANIFEST = SUITE / "unseen.json"
 MODES = (("goal sequencing", True), ("nearest-first", False))
 BANDS = ((15, 30), (31, 60), (61, 120))
 DEFAULT_STALL = 3000
@@ -185,7 +195,7 @@ def _job_key(job: Job) -> list:
     return [job.layout, job.mode, job.stall, job.code]
 
 
-_CODE_DIRS = ("agent_runtime", "world_server", "sim")   # what a run's outcome depends on
+_CODE_DIRS = ("agent_runtime", "world_server", "conag/sim")   # what a run's outcome depends on
 
 
 def _code_version() -> str:
@@ -323,9 +333,10 @@ def markdown(outcomes: list[Outcome], args: argparse.Namespace, seconds: float, 
     layouts = len({o.layout for o in outcomes})
     return f"""## Generalisation: generated layouts (issue 10)
 
-`python3 -m experiments.generalisation` builds {layouts} generated layouts (committed under
-`experiments/generalisation/layouts/`, made by `python3 -m experiments.generalisation --generate`:
-`world_server/generator.py` suite seed {SUITE_SEED}, every layout passing the buildability check), each
+`python3 -m experiments.generalisation` builds {layouts} generated layouts (`world_server/generator.py`
+suite seed {SUITE_SEED}, every layout passing the buildability check; made into
+`experiments/generalisation/layouts/` on first use and checked against the sha256 of each in the committed
+`experiments/generalisation/layouts.json`), each
 with goal sequencing and nearest-first in the same run, in-process (conag/sim/loop.py, lockstep, the default
 `AgentConfig` but for goal sequencing, hunger and thirst on). A run stops when complete, after
 {args.stall} ticks with no site filled (stalled; on large worlds the world's cells per agent if
@@ -355,6 +366,8 @@ Wall time of this run: {seconds / 60:.0f} min on {args.jobs} worker processes.
 
 ### Every run that did not complete
 
+The pictures are not committed: `python3 -m experiments.generalisation --pictures` draws them again.
+
 {failures(outcomes, base)}
 """
 
@@ -362,21 +375,28 @@ Wall time of this run: {seconds / 60:.0f} min on {args.jobs} worker processes.
 # ------------------------------------------------------------------ the suite's files
 
 def generate_layouts(count: int, seed: int) -> None:
-    from world_server.generator import generate_suite
+    """New manifests from what the generator makes now (after a deliberate change to it,
+    with GENERATOR_VERSION bumped), and the layout files they name."""
+    for manifest, folder, suites in ((MANIFEST, LAYOUTS, [(count, seed, None)]),
+                                     (UNSEEN_MANIFEST, UNSEEN, UNSEEN_LAYOUTS)):
+        m, _ = suite.manifest_of(suites)
+        manifest.write_text(m.to_json(), encoding="utf-8")
+        for path in suite.materialise(m, folder):
+            sc = load_scenario(path)
+            print(f"{path.name}: {sc.cols}x{sc.rows}, {len(sc.cells_col_row('+'))} open sites, {sc.agents} agents",
+                  file=sys.stderr)
 
-    LAYOUTS.mkdir(parents=True, exist_ok=True)
-    for old in LAYOUTS.glob("*.toml"):
-        old.unlink()
-    for k, g in enumerate(generate_suite(count, seed)):
-        sc = g.scenario()
-        path = LAYOUTS / f"{k:03d}-{sc.name}.toml"
-        path.write_text(g.text, encoding="utf-8")
-        print(f"{path.name}: {sc.cols}x{sc.rows}, {len(sc.cells_col_row('+'))} open sites, {sc.agents} agents",
-              file=sys.stderr)
+
+def materialise() -> list[Path]:
+    """The suite's layout files (made from MANIFEST where missing), in the suite's order;
+    the unseen layouts kept for the record too."""
+    suite.materialise(UNSEEN_MANIFEST, UNSEEN)
+    return suite.materialise(MANIFEST, LAYOUTS)
 
 
 def suite_files() -> list[str]:
-    return sorted(p.name for p in LAYOUTS.glob("*.toml"))
+    """The suite's layout file names (under LAYOUTS, made if missing)."""
+    return sorted(p.name for p in materialise())
 
 
 def quick_files(n: int) -> list[str]:
@@ -402,10 +422,41 @@ def rewrite_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def draw_failures(args: argparse.Namespace) -> int:
+    """The pictures of the committed table's failures: each run that did not complete in
+    experiments/generalisation.json again (same layout, agent and stall limit), drawn where
+    the table links it (or under --out); the results are not touched. Exit 1 if a run stops otherwise than
+    recorded (the code changed since the table)."""
+    out = ROOT / "experiments"
+    rows = [r for r in json.loads((out / "generalisation.json").read_text(encoding="utf-8")) if r["picture"]]
+    stall = json.loads((out / "generalisation.meta.json").read_text(encoding="utf-8"))["stall"]
+    names = set(args.only or ())
+    rows = [r for r in rows if (not names or r["layout"] in names) and args.mode in (None, r["mode"])]
+    pictures = args.out / "generalisation" / "failures" if args.out else SUITE / "failures"
+    print(f"drawing {len(rows)} pictures into {pictures}", file=sys.stderr, flush=True)
+    outcomes = run_all([Job(r["layout"], r["mode"], stall) for r in rows], args.jobs, pictures)
+    recorded = {(r["layout"], r["mode"]): r for r in rows}
+    same = ("completed", "stalled", "ticks", "sites_filled")
+    differ = [o for o in outcomes if any(getattr(o, k) != recorded[o.layout, o.mode][k] for k in same)]
+    for o in differ:
+        r = recorded[o.layout, o.mode]
+        print(f"{o.layout} {o.mode}: stopped at tick {o.ticks} with {o.sites_filled} sites "
+              f"(recorded: tick {r['ticks']}, {r['sites_filled']} sites)", file=sys.stderr)
+    print(f"{len(outcomes) - len(differ)} of {len(outcomes)} runs stopped as recorded", file=sys.stderr)
+    return 1 if differ else 0
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="a few small layouts; results go to --out only")
-    ap.add_argument("--generate", action="store_true", help=f"rewrite the suite's {SUITE_SIZE} layout files")
+    ap.add_argument("--layouts", action="store_true",
+                    help=f"make the suite's layout files from {MANIFEST.name} and print their folder")
+    ap.add_argument("--generate", action="store_true",
+                    help=f"a new {MANIFEST.name} (and unseen.json) from the generator as it is now, and the "
+                         f"{SUITE_SIZE} layout files: only after a deliberate change to the generator")
+    ap.add_argument("--pictures", action="store_true",
+                    help="run again the runs of generalisation.json that did not complete, drawing the "
+                         "state each stopped in (failures/), and check they stop as recorded")
     ap.add_argument("--only", nargs="+", metavar="LAYOUT", help="these layout files (names under the suite, or paths)")
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="worker processes")
     ap.add_argument("--stall", type=int, default=DEFAULT_STALL, help="ticks with no site filled that stop a run")
@@ -425,9 +476,17 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if args.report_only:
         return rewrite_report(args)
-    names = args.only or (quick_files(4) if args.quick else suite_files())
-    if not names:
-        ap.error(f"no layouts in {LAYOUTS}: run with --generate first")
+    try:
+        files = suite_files()
+    except suite.SuiteError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    if args.layouts:
+        print(LAYOUTS)
+        return 0
+    if args.pictures:
+        return draw_failures(args)
+    names = args.only or (quick_files(4) if args.quick else files)
     out = args.out or (None if args.quick else ROOT / "experiments")
     if out is None:
         ap.error("--quick needs --out (it must not overwrite the committed results)")

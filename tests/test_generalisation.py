@@ -1,33 +1,78 @@
-"""The generalisation benchmark (experiments/generalisation.py): the committed suite is what
-the generator makes, and the script's --quick run writes its table."""
+"""The generalisation benchmark (experiments/generalisation.py): the committed manifest is what
+the generator makes, the suite's files are made from it (world_server/suite.py), and the
+script's --quick run writes its table."""
 
 from __future__ import annotations
 
 import json
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
 
 from experiments import generalisation as gen
+from world_server import suite
 from world_server.buildability import check_buildable
-from world_server.generator import generate_suite
+from world_server.generator import GENERATOR_VERSION
 from world_server.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
 
 
 @pytest.mark.slow
-def test_the_committed_suite_is_the_generators_and_every_layout_is_buildable():
+def test_the_manifest_is_what_the_generator_makes_and_every_layout_is_buildable(tmp_path):
+    manifest = suite.read_manifest(gen.MANIFEST)
+    assert manifest.generator == GENERATOR_VERSION
+    assert len(manifest.layouts) == gen.SUITE_SIZE
+    assert {(e.count, e.suite_seed) for e in manifest.layouts} == {(gen.SUITE_SIZE, gen.SUITE_SEED)}
+    # Made again from the suite's seed, the layouts have exactly the committed checksums.
+    again, texts = suite.manifest_of([(gen.SUITE_SIZE, gen.SUITE_SEED, None)])
+    assert again == manifest
+    assert again.to_json() == gen.MANIFEST.read_text(encoding="utf-8")
+    assert suite.manifest_of(gen.UNSEEN_LAYOUTS)[0].to_json() == gen.UNSEEN_MANIFEST.read_text(encoding="utf-8")
+    # ... and materialised in a fresh folder (a fresh clone), the files are those texts.
+    paths = suite.materialise(gen.MANIFEST, tmp_path)
+    assert [p.read_text(encoding="utf-8") for p in paths] == [texts[e.file] for e in manifest.layouts]
+    for path in paths[::10]:
+        assert check_buildable(load_scenario(path)).ok, path.name
+
+
+def test_the_suite_files_are_made_from_the_manifest():
     files = gen.suite_files()
-    assert len(files) == gen.SUITE_SIZE
-    # Made again from the suite's seed, the layouts are byte for byte the committed files.
-    for name, g in zip(files, generate_suite(gen.SUITE_SIZE, gen.SUITE_SEED)):
-        assert (gen.LAYOUTS / name).read_text(encoding="utf-8") == g.text, name
-    for name in files[::10]:
-        sc = load_scenario(gen.LAYOUTS / name)
-        assert check_buildable(sc).ok, name
+    assert files == sorted(suite.read_manifest(gen.MANIFEST).files())
+    assert all((gen.LAYOUTS / name).is_file() for name in files)
+
+
+def test_materialise_makes_missing_and_changed_files_and_removes_strays(tmp_path):
+    manifest, texts = suite.manifest_of([(30, 7, (2, 5))])
+    assert manifest.files() == [e.file for e in manifest.layouts] and len(texts) == 2
+    assert suite.Manifest.from_json(manifest.to_json()) == manifest
+    first, second = suite.materialise(manifest, tmp_path)
+    assert first.read_text(encoding="utf-8") == texts[first.name]
+    first.write_text("edited", encoding="utf-8")
+    second.unlink()
+    (tmp_path / "stray.toml").write_text("x", encoding="utf-8")
+    (tmp_path / "notes.txt").write_text("kept", encoding="utf-8")
+    assert suite.materialise(manifest, tmp_path) == [first, second]
+    assert [p.read_text(encoding="utf-8") for p in (first, second)] == [texts[first.name], texts[second.name]]
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([first.name, second.name, "notes.txt"])
+
+
+def test_materialise_refuses_a_layout_the_generator_no_longer_makes(tmp_path):
+    manifest, _ = suite.manifest_of([(30, 7, (2,))])
+    wrong = suite.Manifest(manifest.generator, (replace(manifest.layouts[0], sha256="0" * 64),))
+    with pytest.raises(suite.SuiteError, match="GENERATOR_VERSION"):
+        suite.materialise(wrong, tmp_path)
+    assert not list(tmp_path.glob("*.toml"))                  # nothing half made
+    old = suite.Manifest(GENERATOR_VERSION - 1, manifest.layouts)
+    with pytest.raises(suite.SuiteError, match="version"):
+        suite.materialise(old, tmp_path)
+    suite.materialise(manifest, tmp_path)                     # made by this version: the files are there...
+    assert suite.materialise(old, tmp_path)                   # ... so an older manifest with their checksums is fine
+    with pytest.raises(suite.SuiteError, match="not a suite manifest"):
+        suite.Manifest.from_json('{"layouts": []}')
 
 
 def test_the_stall_limit_grows_with_the_world_per_agent():
@@ -56,6 +101,18 @@ def test_the_quick_run_refuses_to_overwrite_the_committed_results():
     r = subprocess.run([sys.executable, "-m", "experiments.generalisation", "--quick"], cwd=ROOT,
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "--out" in r.stderr
+
+
+@pytest.mark.slow
+def test_the_pictures_of_the_tables_failures_are_drawn_again_as_recorded(tmp_path):
+    layout = "167-gen-pocket-20260167.toml"       # a nearest-first failure of the table, 15 x 15
+    r = subprocess.run([sys.executable, "-m", "experiments.generalisation", "--pictures", "--only", layout,
+                        "--jobs", "1", "--out", str(tmp_path)], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "1 of 1 runs stopped as recorded" in r.stderr
+    row = next(r for r in json.loads((ROOT / "experiments" / "generalisation.json").read_text())
+               if r["layout"] == layout and r["picture"])
+    assert (tmp_path / row["picture"]).stat().st_size > 1000   # where the table links it, under --out
 
 
 def test_a_resumed_run_links_the_pictures_in_its_own_folder(tmp_path):

@@ -33,6 +33,9 @@ from world_server.buildability import check_layout
 from world_server.layout_options import FAMILIES, MAX_AGENTS, MAX_SIZE, MIN_SIZE, SIZE_BANDS, SOURCES
 from world_server.scenario import Scenario, parse_scenario
 
+# The generator's version: bump it with any change that makes a different file for the same
+# arguments. A suite manifest (world_server/suite.py) records the version that made it.
+GENERATOR_VERSION = 1
 SUITE_SHARES = (0.50, 0.38, 0.12)     # of a suite's layouts per size band: most finish quickly
 SUITE_MAX_SITES = (32, 40, 40)        # open sites per layout in a suite, per size band (32: nested rings)
 # Agent counts a suite cycles through: every count from 1 to 12 is there, small teams

@@ -1,6 +1,7 @@
 """The world server: the zenoh shell around `world_server.world.World` (W7, S1, S2 in docs/design.md).
 
-Everything arriving on the bus (commands, liveliness changes, attach, perturb) is put on
+Everything arriving on the bus (commands, liveliness changes, attach, perturb) is put, as a
+small typed event (`CommandArrived`, `LivelinessChanged`, ...), on
 one queue by zenoh's callback threads and applied by the single loop thread, so the
 world itself is never touched concurrently. The loop:
 
@@ -61,6 +62,7 @@ import queue
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import zenoh
 
@@ -86,6 +88,55 @@ from world_server.world import World
 
 log = logging.getLogger("conag.world")
 RESUME_WAIT = 10.0  # wall seconds a resumed world waits for its live agents to attach again
+
+
+# What zenoh's threads hand the loop thread (`WorldServer._handle` dispatches on the type) ------
+@dataclass(frozen=True)
+class CommandArrived:
+    """A decoded AgentCommand whose agent_id matches its key."""
+
+    cmd: AgentCommand
+
+
+@dataclass(frozen=True)
+class LivelinessChanged:
+    """An agent's liveliness token appeared (`alive`) or disappeared."""
+
+    agent: str
+    alive: bool
+
+
+@dataclass(frozen=True)
+class AttachAsked:
+    """A query on an agent's attach key (a Hello)."""
+
+    query: zenoh.Query
+
+
+@dataclass(frozen=True)
+class PerturbAsked:
+    """A query on the world's perturb key (a Perturbation)."""
+
+    query: zenoh.Query
+
+
+@dataclass(frozen=True)
+class ViewAsked:
+    """A query on the world's view key."""
+
+    query: zenoh.Query
+
+
+@dataclass(frozen=True)
+class BadInput:
+    """Input that could not be decoded or did not match its key; a command's `agent` is
+    answered on its error key."""
+
+    detail: str
+    agent: str | None = None
+
+
+Event = CommandArrived | LivelinessChanged | AttachAsked | PerturbAsked | ViewAsked | BadInput
 
 
 class WorldServer:
@@ -122,7 +173,7 @@ class WorldServer:
         block = block_frames or self.mode == "lockstep"
         self._frame_congestion = zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
         self.cfg = world.cfg
-        self._events: queue.SimpleQueue = queue.SimpleQueue()
+        self._events: queue.SimpleQueue[Event] = queue.SimpleQueue()
         self._tokens: set[str] = set()
         self._answered: set[str] = set()
         self._publishers: dict[str, zenoh.Publisher] = {}  # sensor frames, per agent
@@ -153,12 +204,12 @@ class WorldServer:
             cmd = decode(sample.payload.to_bytes(), AgentCommand)
             if cmd.agent_id != keys.agent_of(key):
                 raise ProtocolError(f"command agent_id {cmd.agent_id!r} does not match its key")
-            self._events.put(("cmd", cmd))
+            self._events.put(CommandArrived(cmd))
         except ProtocolError as exc:
-            self._events.put(("bad", f"command on {key}: {exc}", keys.agent_of(key)))
+            self._events.put(BadInput(f"command on {key}: {exc}", keys.agent_of(key)))
 
     def _on_token(self, agent: str, alive: bool) -> None:
-        self._events.put(("live", agent, alive))
+        self._events.put(LivelinessChanged(agent, alive))
 
     def _on_status_query(self, query: zenoh.Query) -> None:
         query.reply(query.key_expr, self._status_bytes)  # the latest, swapped atomically
@@ -172,7 +223,7 @@ class WorldServer:
             if state.agent_id != keys.agent_of(str(sample.key_expr)):
                 raise ProtocolError("AgentState agent_id does not match its key")
         except ProtocolError as exc:
-            self._events.put(("bad", f"agent state on {sample.key_expr}: {exc}"))
+            self._events.put(BadInput(f"agent state on {sample.key_expr}: {exc}"))
             return
         self.agent_states[state.agent_id] = state  # one dict store: safe from zenoh's thread
 
@@ -182,9 +233,9 @@ class WorldServer:
         add(s.liveliness().declare_token(keys.world_token(w)))
         add(watch_tokens(s, keys.all_agent_tokens(w), self._on_token))
         add(s.declare_subscriber(keys.all_agents(w, "command"), self._on_command))
-        add(s.declare_queryable(keys.all_agents(w, "attach"), lambda q: self._events.put(("attach", q))))
-        add(s.declare_queryable(keys.perturb(w), lambda q: self._events.put(("perturb", q))))
-        add(s.declare_queryable(keys.view(w), lambda q: self._events.put(("view", q))))
+        add(s.declare_queryable(keys.all_agents(w, "attach"), lambda q: self._events.put(AttachAsked(q))))
+        add(s.declare_queryable(keys.perturb(w), lambda q: self._events.put(PerturbAsked(q))))
+        add(s.declare_queryable(keys.view(w), lambda q: self._events.put(ViewAsked(q))))
         # Views are "latest wins" like frames: a slow viewer is never queued behind.
         self._view_pub = add(s.declare_publisher(keys.view(w), congestion_control=zenoh.CongestionControl.DROP))
         add(s.declare_queryable(keys.status(w), self._on_status_query))
@@ -338,44 +389,50 @@ class WorldServer:
         if agents:
             self._timeout_pub.put(encode(LockstepTimeout(self.world.world_id, self.world.tick, tuple(agents))))
 
-    def _handle(self, event: tuple) -> None:
-        kind = event[0]
-        if kind == "cmd":
-            cmd: AgentCommand = event[1]
-            rec = self.world.agents.get(cmd.agent_id)
-            if cmd.agent_id not in self._tokens or rec is None or not rec.alive:
-                self._bad(f"command from agent {cmd.agent_id!r}, which is not attached (declare its liveliness "
-                          "token, then attach)", cmd.agent_id)
-                return
-            if self.lockstep.heard(cmd.agent_id):
-                log.info("tick %d: agent %s answers again: waiting for it", self.world.tick, cmd.agent_id)
-            if self.mode == "lockstep" and cmd.tick != self.world.tick:
-                # Not taken: lockstep applies a command to the tick it answers, and only to that one.
-                self._bad(f"command from {cmd.agent_id!r} for tick {cmd.tick}, but the world is at tick "
-                          f"{self.world.tick} (answer the newest frame's tick)", cmd.agent_id)
-            else:
-                self.world.set_command(cmd.agent_id, cmd.speed, cmd.turn, cmd.action)
-                self.times.command(self.world.tick - cmd.tick)
-                if cmd.tick == self.world.tick:
-                    self._answered.add(cmd.agent_id)
-        elif kind == "live":
-            _, agent, alive = event
-            if alive:
-                self._tokens.add(agent)
-            elif not self._token_exists(agent):
-                self._tokens.discard(agent)
-                if agent in self.world.agents and self.world.agents[agent].alive:
-                    log.info("agent %s is gone at tick %d; its body stops", agent, self.world.tick)
-                self.world.detach(agent)
-                self.lockstep.forget(agent)
-        elif kind == "attach":
-            self._attach(event[1])
-        elif kind == "perturb":
-            self._perturb(event[1])
-        elif kind == "view":
-            self._answer_view(event[1])
-        elif kind == "bad":
-            self._bad(*event[1:])
+    def _handle(self, event: Event) -> None:
+        match event:
+            case CommandArrived(cmd):
+                self._command(cmd)
+            case LivelinessChanged(agent, alive):
+                self._liveliness(agent, alive)
+            case AttachAsked(query):
+                self._attach(query)
+            case PerturbAsked(query):
+                self._perturb(query)
+            case ViewAsked(query):
+                self._answer_view(query)
+            case BadInput(detail, agent):
+                self._bad(detail, agent)
+            case _:
+                raise TypeError(f"not a world server event: {event!r}")
+
+    def _command(self, cmd: AgentCommand) -> None:
+        rec = self.world.agents.get(cmd.agent_id)
+        if cmd.agent_id not in self._tokens or rec is None or not rec.alive:
+            self._bad(f"command from agent {cmd.agent_id!r}, which is not attached (declare its liveliness "
+                      "token, then attach)", cmd.agent_id)
+            return
+        if self.lockstep.heard(cmd.agent_id):
+            log.info("tick %d: agent %s answers again: waiting for it", self.world.tick, cmd.agent_id)
+        if self.mode == "lockstep" and cmd.tick != self.world.tick:
+            # Not taken: lockstep applies a command to the tick it answers, and only to that one.
+            self._bad(f"command from {cmd.agent_id!r} for tick {cmd.tick}, but the world is at tick "
+                      f"{self.world.tick} (answer the newest frame's tick)", cmd.agent_id)
+        else:
+            self.world.set_command(cmd.agent_id, cmd.speed, cmd.turn, cmd.action)
+            self.times.command(self.world.tick - cmd.tick)
+            if cmd.tick == self.world.tick:
+                self._answered.add(cmd.agent_id)
+
+    def _liveliness(self, agent: str, alive: bool) -> None:
+        if alive:
+            self._tokens.add(agent)
+        elif not self._token_exists(agent):
+            self._tokens.discard(agent)
+            if agent in self.world.agents and self.world.agents[agent].alive:
+                log.info("agent %s is gone at tick %d; its body stops", agent, self.world.tick)
+            self.world.detach(agent)
+            self.lockstep.forget(agent)
 
     def _token_exists(self, agent: str) -> bool:
         """Whether some process still holds `agent`'s liveliness token.

@@ -20,6 +20,9 @@ JSON API; the picture itself is built by the pure `conag.viewer.scene`:
   viewer or recorder asks, `--maps-every`);
 * `POST /api/perturb` with `{"op", "x", "y", "to_x", "to_y", "kind"}`: the world's perturb
   query (remove or move a disc from the page), answered with the PerturbResult as JSON.
+
+Each route has one handler per source it serves, in the request handler's `GET_ROUTES` and
+`POST_ROUTES` tables; a route the source does not serve is a 404.
 """
 
 from __future__ import annotations
@@ -33,7 +36,7 @@ import time
 from collections.abc import Callable
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
-from typing import Any
+from typing import Any, ClassVar
 from urllib.parse import parse_qs, urlparse
 
 import zenoh
@@ -255,6 +258,17 @@ class ViewerServer:
         return {"mode": "live", "world_id": self.source.world_id, "display_hz": self.display_hz}
 
 
+Source = LiveFeed | Timeline
+Query = dict[str, list[str]]
+Routes = dict[tuple[str, type | None], Callable[..., None]]
+
+
+def _route(routes: Routes, path: str, source: Source) -> Callable[..., None] | None:
+    """The handler of `path` for this kind of source: the one for it, else the one for either."""
+    kind = LiveFeed if isinstance(source, LiveFeed) else Timeline
+    return routes.get((path, kind)) or routes.get((path, None))
+
+
 def _handler(server: ViewerServer) -> type[BaseHTTPRequestHandler]:
     static = static_dir()
 
@@ -276,48 +290,59 @@ def _handler(server: ViewerServer) -> type[BaseHTTPRequestHandler]:
         def _json(self, obj: Any, status: int = 200) -> None:
             self._send(json.dumps(obj), status=status)
 
+        # GET: one handler per route and source (`GET_ROUTES`); each takes the source and the query
+        def _index(self, _source: Source, _query: Query) -> None:
+            self._send((static / "index.html").read_bytes(), "text/html; charset=utf-8")
+
+        def _info(self, _source: Source, _query: Query) -> None:
+            self._json(server.info())
+
+        def _scene(self, feed: LiveFeed, _query: Query) -> None:
+            self._send(feed.picture()[1])
+
+        def _live_maps(self, feed: LiveFeed, query: Query) -> None:
+            try:
+                self._json(feed.maps(query.get("agent", [""])[0]))
+            except ValueError as exc:
+                self._json({"error": str(exc)}, HTTPStatus.BAD_REQUEST)
+
+        def _recorded_maps(self, timeline: Timeline, query: Query) -> None:
+            self._json(timeline.maps_at(query.get("agent", [""])[0], int(query.get("tick", ["0"])[0] or 0)))
+
+        def _timeline(self, timeline: Timeline, _query: Query) -> None:
+            self._json(timeline.summary())
+
+        def _frame(self, timeline: Timeline, query: Query) -> None:
+            try:
+                tick = int(query.get("tick", ["0"])[0])
+            except ValueError:
+                self._json({"error": "tick must be an integer"}, HTTPStatus.BAD_REQUEST)
+                return
+            picture = timeline.at(tick)
+            if picture is None:
+                self._json({"error": "the recording holds no WorldView"}, HTTPStatus.NOT_FOUND)
+            else:
+                self._send(picture)
+
+        def _static(self, path: str) -> bool:
+            """GET /static/NAME: a file of the page's folder (no subfolders); False if none."""
+            name = path[len("/static/"):]
+            f = static / name
+            if not path.startswith("/static/") or "/" in name or not f.is_file():
+                return False
+            self._send(f.read_bytes(), mimetypes.guess_type(f.name)[0] or "application/octet-stream")
+            return True
+
         def do_GET(self) -> None:
             url = urlparse(self.path)
             path, query = url.path, parse_qs(url.query)
-            source = server.source
-            if path in ("/", "/index.html"):
-                self._send((static / "index.html").read_bytes(), "text/html; charset=utf-8")
-            elif path.startswith("/static/") and (static / path[len("/static/"):]).is_file() \
-                    and "/" not in path[len("/static/"):]:
-                f = static / path[len("/static/"):]
-                self._send(f.read_bytes(), mimetypes.guess_type(f.name)[0] or "application/octet-stream")
-            elif path == "/api/info":
-                self._json(server.info())
-            elif path == "/api/scene" and isinstance(source, LiveFeed):
-                self._send(source.picture()[1])
-            elif path == "/api/events" and isinstance(source, LiveFeed):
-                self._events(source)
-            elif path == "/api/maps":
-                agent = query.get("agent", [""])[0]
-                if isinstance(source, LiveFeed):
-                    try:
-                        self._json(source.maps(agent))
-                    except ValueError as exc:
-                        self._json({"error": str(exc)}, HTTPStatus.BAD_REQUEST)
-                else:
-                    self._json(source.maps_at(agent, int(query.get("tick", ["0"])[0] or 0)))
-            elif path == "/api/timeline" and isinstance(source, Timeline):
-                self._json(source.summary())
-            elif path == "/api/frame" and isinstance(source, Timeline):
-                try:
-                    tick = int(query.get("tick", ["0"])[0])
-                except ValueError:
-                    self._json({"error": "tick must be an integer"}, HTTPStatus.BAD_REQUEST)
-                    return
-                picture = source.at(tick)
-                if picture is None:
-                    self._json({"error": "the recording holds no WorldView"}, HTTPStatus.NOT_FOUND)
-                else:
-                    self._send(picture)
-            else:
+            route = _route(self.GET_ROUTES, path, server.source)
+            if route is not None:
+                route(self, server.source, query)
+            elif not self._static(path):
                 self._json({"error": f"no {path}"}, HTTPStatus.NOT_FOUND)
 
-        def _events(self, feed: LiveFeed) -> None:
+        def _events(self, feed: LiveFeed, _query: Query) -> None:
             """Server-Sent Events: the picture at the display rate, when it changed, and the
             shown agent's maps (event `maps`) once a second, when they changed: pushed on the
             open stream, not asked for by the page (a request a second cost the page and the
@@ -354,13 +379,8 @@ def _handler(server: ViewerServer) -> type[BaseHTTPRequestHandler]:
                 pass  # the page went away
             self.close_connection = True
 
-        def do_POST(self) -> None:
-            if urlparse(self.path).path != "/api/perturb":
-                self._json({"error": "not found"}, HTTPStatus.NOT_FOUND)
-                return
-            if not isinstance(server.source, LiveFeed):
-                self._json({"ok": False, "message": "a recording cannot be changed"}, HTTPStatus.CONFLICT)
-                return
+        # POST: the same, in `POST_ROUTES`
+        def _perturb(self, feed: LiveFeed, _query: Query) -> None:
             try:
                 length = int(self.headers.get("Content-Length", "0"))
                 req = json.loads(self.rfile.read(min(length, 65536)) or b"{}")
@@ -370,8 +390,35 @@ def _handler(server: ViewerServer) -> type[BaseHTTPRequestHandler]:
             except (ValueError, KeyError, TypeError) as exc:
                 self._json({"ok": False, "message": f"bad perturbation: {exc}"}, HTTPStatus.BAD_REQUEST)
                 return
-            result = server.source.perturb(p)
+            result = feed.perturb(p)
             self._json({"ok": result.ok, "message": result.message, "tick": result.tick})
+
+        def _perturb_recording(self, _timeline: Timeline, _query: Query) -> None:
+            self._json({"ok": False, "message": "a recording cannot be changed"}, HTTPStatus.CONFLICT)
+
+        def do_POST(self) -> None:
+            url = urlparse(self.path)
+            route = _route(self.POST_ROUTES, url.path, server.source)
+            if route is None:
+                self._json({"error": "not found"}, HTTPStatus.NOT_FOUND)
+            else:
+                route(self, server.source, parse_qs(url.query))
+
+        # (path, the source it serves, or None for either) -> handler
+        GET_ROUTES: ClassVar[Routes] = {
+            ("/", None): _index, ("/index.html", None): _index,
+            ("/api/info", None): _info,
+            ("/api/scene", LiveFeed): _scene,
+            ("/api/events", LiveFeed): _events,
+            ("/api/maps", LiveFeed): _live_maps,
+            ("/api/maps", Timeline): _recorded_maps,
+            ("/api/timeline", Timeline): _timeline,
+            ("/api/frame", Timeline): _frame,
+        }
+        POST_ROUTES: ClassVar[Routes] = {
+            ("/api/perturb", LiveFeed): _perturb,
+            ("/api/perturb", Timeline): _perturb_recording,
+        }
 
     return Handler
 
