@@ -27,7 +27,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from agent_runtime.config import ADDITIONS, AgentConfig
-from experiments.generalisation import DEFAULT_STALL, LAYOUTS, _bound, family_of, stall_limit
+from experiments.generalisation import DEFAULT_STALL, LAYOUTS, _bound, family_of, materialise, stall_limit
 from experiments.workers import pool
 from world_server.scenario import load_scenario
 
@@ -90,7 +90,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--stall", type=int, default=DEFAULT_STALL, help="ticks with no site filled that stop a run")
     ap.add_argument("--out", type=Path, default=ROOT / "experiments", help="folder for ablation.json and .md")
     args = ap.parse_args(argv)
-    names = sorted(p.name for p in LAYOUTS.glob("*.toml"))
+    names = sorted(p.name for p in materialise())
     layouts = list(QUICK) if args.quick else names[::max(len(names) // args.sample, 1)][:args.sample]
     jobs = [(layout, agent) for layout in layouts for agent in variants()]
     runs: list[Run] = []
