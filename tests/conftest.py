@@ -4,6 +4,7 @@ subprocesses, and small worlds built from inline layouts."""
 
 from __future__ import annotations
 
+import os
 import signal
 import socket
 import subprocess
@@ -16,6 +17,7 @@ from typing import TypeVar
 
 import numpy as np
 import pytest
+from hypothesis import settings
 
 from protocol.bus import BusOptions, open_session
 from world_server.scenario import load_scenario, parse_scenario
@@ -24,6 +26,16 @@ from world_server.world import World
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENARIOS = ROOT / "scenarios"
+
+# Property tests draw the same examples on every run, everywhere (CI, a fresh clone, a
+# laptop): a failure is one anybody can reproduce with the same command, never a draw that
+# comes and goes, and no example database left in .hypothesis/ replays a failure after it
+# was fixed (or keeps one from a branch). The failing example's blob is printed.
+# HYPOTHESIS_PROFILE=explore draws new examples each run (and keeps the database), to look
+# for bugs on purpose.
+settings.register_profile("derandomized", derandomize=True, database=None, print_blob=True)
+settings.register_profile("explore", print_blob=True)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "derandomized"))
 
 
 def free_port() -> int:
