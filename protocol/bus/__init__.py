@@ -1,7 +1,7 @@
 """The bus layer: how ConAg processes open zenoh sessions and declare what they use on them.
 
-It sits on `protocol` and below everything that talks over zenoh (the process shells in `world_server`, `agent_runtime` and `teacher`, and `conag`);
-the pure cores never import it.
+It sits on `protocol` and below everything that talks over zenoh (the process shells in
+`world_server`, `agent_runtime` and `teacher`, and `conag`); the pure cores never import it.
 
 * `session`: a process's session (`BusOptions`, `open_session`);
 * `declarations`: what a process declared, undeclared in one place (`Declarations`, a
