@@ -431,7 +431,7 @@ def cmd_run(args) -> int:
                          "and on a secure bus (each agent has its own credential)")
     learn_args = ("--learn", "--eta", str(0.1 if args.eta is None else args.eta)) if args.learn else ()
     scenario = load_scenario(args.scenario)
-    warn_if_unbuildable(args.scenario, scenario, args.agents)  # still runs: a repair experiment may want it
+    unbuildable = warn_if_unbuildable(args.scenario, scenario, args.agents)  # a repair experiment may want it
     opts = RunOptions(scenario_path=args.scenario, scenario=scenario,
                       endpoint=(args.listen or [DEFAULT_ENDPOINT])[0], world_id=args.world_id,
                       agents=args.agents, seed=args.seed, max_ticks=args.max_ticks, summary=args.summary,
@@ -439,6 +439,7 @@ def cmd_run(args) -> int:
                       extra_agent_args=("--map-size", str(args.map_size), *learn_args,
                                         *(("--nearest-first",) if args.nearest_first else ())),
                       teacher=args.teacher, weights_dir=args.weights_dir, stall_ticks=args.stall_ticks,
+                      unbuildable=unbuildable,
                       record=args.record, record_priority=args.record_priority, view=args.view,
                       maps_every=args.maps_every, secure=args.secure,
                       checkpoint_every=args.checkpoint_every or CHECKPOINT_EVERY, profile=args.profile,

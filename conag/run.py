@@ -72,6 +72,7 @@ class RunOptions:
     teacher: bool = False             # also run a teacher process (`conag teacher`)
     weights_dir: str | None = None    # learning agents save their weights to weights_dir/<id>.json
     stall_ticks: int = DEFAULT_STALL_TICKS  # stop when no site is filled for this many ticks; 0: never
+    unbuildable: str = ""             # why the start-up check found the structure cannot be built (stall report)
     record: str | None = None         # record the run to this MCAP file (`conag record`)
     record_priority: str = RECORDER_PRIORITY  # the recorder's CPU priority (`conag record --priority`)
     view: int | None = None           # serve the browser viewer on this port (`conag view`)
@@ -366,7 +367,7 @@ def _run(opts: RunOptions, stop: threading.Event, tmp: Path) -> dict:
         Path(opts.weights_dir).mkdir(parents=True, exist_ok=True)
     teacher = _start_teacher(opts) if opts.teacher else None
     fleet = Fleet(opts)
-    watch = StallWatch(opts.stall_ticks)
+    watch = StallWatch(opts.stall_ticks, opts.unbuildable)
     tty = sys.stdout.isatty() and not opts.headless
     recorder = viewer = None
     with RunBus(opts, fleet, watch, tty) as run_bus:
