@@ -106,6 +106,10 @@ def cmd_world(args) -> int:
                                  stop_when_complete=args.stop_when_complete, wait_agents=args.wait_agents,
                                  on_status=on_status, block_frames=block, checkpoint=plan,
                                  resumed=bool(args.resume), max_tick_rate=args.max_tick_rate)
+            if args.stdin_control:
+                from world_server.server import read_go_without_requests
+
+                read_go_without_requests(server, sys.stdin)
             final = server.run(stop)
         finally:
             session.close()
@@ -539,6 +543,9 @@ def _add_world(sub) -> None:
     w.add_argument("--profile", metavar="PATH",
                    help="on exit, write where the loop's time went (JSON: seconds stepping, publishing frames, "
                         "waiting for commands, per tick from the second; when the first tick was out)")
+    w.add_argument("--stdin-control", action="store_true",
+                   help="read `without ID` lines on stdin: the first tick does not wait for agent ID (its process "
+                        "died before attaching; conag run uses it)")
     w.add_argument("--max-tick-rate", type=float, metavar="HZ",
                    help="lockstep: step at most HZ ticks per wall second (default: as fast as the agents answer)")
     c = w.add_argument_group("checkpoints (the world survives its own death)")

@@ -24,6 +24,11 @@ def check_id(value: str, what: str = "id") -> str:
     return value
 
 
+def valid_id(value: str) -> bool:
+    """Whether `value` is a valid world/agent id (`check_id` without the error)."""
+    return isinstance(value, str) and bool(_ID.match(value))
+
+
 def world_root(world: str) -> str:
     """The key prefix of everything about one world."""
     return f"{ROOT}/world/{check_id(world, 'world id')}"
