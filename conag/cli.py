@@ -424,7 +424,7 @@ def cmd_run(args) -> int:
     from agent_runtime.config import AgentConfig
     from conag.layouts import warn_if_unbuildable
     from conag.run import RunOptions, run
-    from protocol.bus import DEFAULT_ENDPOINT
+    from conag.runs import check_name, endpoint_in_use, free_endpoint, register, unregister
     from world_server.scenario import load_scenario
 
     AgentConfig(map_size=args.map_size)  # a bad size is a usage error here, not in every agent
@@ -435,9 +435,14 @@ def cmd_run(args) -> int:
                          "and on a secure bus (each agent has its own credential)")
     learn_args = ("--learn", "--eta", str(0.1 if args.eta is None else args.eta)) if args.learn else ()
     scenario = load_scenario(args.scenario)
+    if args.name is not None:
+        check_name(args.name)
+    if args.listen and endpoint_in_use(args.listen[0]):
+        raise ValueError(f"{args.listen[0]} is in use (another world or `conag run` listens there): choose "
+                         "another --listen, or leave it out for a free one")
+    endpoint = args.listen[0] if args.listen else free_endpoint()
     unbuildable = warn_if_unbuildable(args.scenario, scenario, args.agents)  # a repair experiment may want it
-    opts = RunOptions(scenario_path=args.scenario, scenario=scenario,
-                      endpoint=(args.listen or [DEFAULT_ENDPOINT])[0], world_id=args.world_id,
+    opts = RunOptions(scenario_path=args.scenario, scenario=scenario, endpoint=endpoint, world_id=args.world_id,
                       agents=args.agents, seed=args.seed, max_ticks=args.max_ticks, summary=args.summary,
                       headless=args.headless, quiet=args.quiet,
                       extra_agent_args=("--map-size", str(args.map_size), *learn_args,
@@ -448,6 +453,9 @@ def cmd_run(args) -> int:
                       maps_every=args.maps_every, secure=args.secure,
                       checkpoint_every=args.checkpoint_every or CHECKPOINT_EVERY, profile=args.profile,
                       per_process=args.per_process, agent_mode=args.agent_mode)
+    entry = register(args.name or scenario.name, endpoint, args.world_id, scenario.name, exact=args.name is not None)
+    if not args.quiet:
+        print(f"run {entry.name}: world {args.world_id} on {endpoint} (conag status --run {entry.name})", flush=True)
     with _stop_on_signals() as stop:
         _report_a_slow_stop(stop)
         try:
@@ -455,6 +463,8 @@ def cmd_run(args) -> int:
         except RuntimeError as exc:  # a process of the run failed (the world died, the recorder did)
             print(f"\nerror: {exc}", file=sys.stderr)
             return EXIT_INTERRUPTED if stop.is_set() else EXIT_ERROR
+        finally:
+            unregister(entry)
     interrupted = stop.is_set() and not summary["completed"]
     state = ("complete" if summary["completed"] else "STALLED" if summary["stalled"]
              else "INTERRUPTED" if interrupted else "NOT complete")
@@ -567,7 +577,7 @@ def _add_status(sub) -> None:
     s.add_argument("--watch", action="store_true", help="keep printing each status update")
     s.add_argument("--json", action="store_true", help="print the status as JSON")
     s.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the world")
-    _bus_args(s)
+    _bus_args(s, find_run=True)
     s.set_defaults(func=cmd_status)
 
 
@@ -582,7 +592,7 @@ def _add_perturb(sub) -> None:
     q.add_argument("--force", action="store_true",
                    help="add even in a drop site's cell (a brick there fills the site) or onto an agent's body")
     q.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the world")
-    _bus_args(q)
+    _bus_args(q, find_run=True)
     q.set_defaults(func=cmd_perturb)
 
 
@@ -657,7 +667,10 @@ def _add_run(sub) -> None:
     u.add_argument("--headless", action="store_true", help="plain progress lines, no terminal tricks")
     u.add_argument("--quiet", action="store_true", help="no progress lines")
     u.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
-                   help="where the world listens (default tcp/127.0.0.1:7447)")
+                   help="where the world listens (default: a free loopback port of its own, so that runs on one "
+                        "machine never meet; the other verbs find it by --name)")
+    u.add_argument("--name", help="the run's name, for --run of status, kill, restart, perturb, record, view and "
+                                  "echo (default: the scenario's name, with -2, -3... while a run going has it)")
     u.add_argument("--world-id", default="w0")
     u.add_argument("--secure", nargs="?", const="", metavar="DIR",
                    help="a secure bus: a zenoh router with access control on the --listen endpoint, every "
@@ -702,7 +715,7 @@ def _add_control(sub) -> None:
         k = sub.add_parser(name, help=text)
         k.add_argument("id", help="agent id, e.g. a2")
         k.add_argument("--timeout", type=float, default=5.0)
-        _bus_args(k)
+        _bus_args(k, find_run=True)
         k.set_defaults(func=cmd_control)
 
 
@@ -738,6 +751,10 @@ def main(argv: list[str] | None = None) -> int:
     from world_server.scenario import ScenarioError
 
     try:
+        if getattr(args, "find_run", False) and not getattr(args, "file", None):  # (conag view FILE: no bus)
+            from conag.runs import apply_run
+
+            apply_run(args)
         return args.func(args)
     except (ScenarioError, FileNotFoundError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)

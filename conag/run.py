@@ -22,6 +22,10 @@ recording holds every tick; it stops last, after the agents' final state reports
 at `record_priority` ("idle" by default: Linux SCHED_IDLE), so the world and the agents get
 the CPU first.
 
+The run's world listens on `endpoint`: `conag run` picks a free loopback port unless told
+(`--listen`), and registers the run by name while it runs (`conag/runs.py`), so two runs
+on one machine never exchange a message and the verbs find a run by `--run NAME`.
+
 With `secure` (`conag run --secure`, `conag/secure.py`), a zenoh router with access control
 listens on the run's endpoint, every process is a client of it with its own credential, and
 this process's session is the operator's.

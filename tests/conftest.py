@@ -4,11 +4,14 @@ subprocesses, and small worlds built from inline layouts."""
 
 from __future__ import annotations
 
+import atexit
 import os
+import shutil
 import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Callable
@@ -36,6 +39,13 @@ SCENARIOS = ROOT / "scenarios"
 settings.register_profile("derandomized", derandomize=True, database=None, print_blob=True)
 settings.register_profile("explore", print_blob=True)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "derandomized"))
+
+# `conag run` registers by name (conag/runs.py) and the verbs find runs there: the tests,
+# and every process they start, keep a runs directory of their own, so they never see
+# (nor are seen by) the runs of whoever else uses this machine.
+_RUNS_DIR = tempfile.mkdtemp(prefix="conag-test-runs-")
+os.environ["CONAG_RUNS_DIR"] = _RUNS_DIR
+atexit.register(shutil.rmtree, _RUNS_DIR, True)
 
 
 def free_port() -> int:

@@ -49,7 +49,7 @@ def add_commands(sub) -> None:
                    help="the recorder's CPU priority, so the run it records gets the CPU first: idle (the default) "
                         "runs it only when a core would otherwise idle (Linux SCHED_IDLE), low raises its nice "
                         "value by 10, normal leaves it as any process")
-    bus_args(r)
+    bus_args(r, find_run=True)
     r.set_defaults(func=cmd_record)
 
     p = sub.add_parser("replay", help="publish a recording again (or --verify it against a fresh world)")
@@ -77,7 +77,7 @@ def add_commands(sub) -> None:
     e.add_argument("--hz", action="store_true", help="print the rate of the messages instead, like ros2 topic hz")
     e.add_argument("--period", type=float, default=1.0, metavar="S", help="seconds between rate lines (default 1)")
     e.add_argument("--window", type=int, default=1000, metavar="N", help="messages the rate is taken over")
-    bus_args(e)
+    bus_args(e, find_run=True)
     e.set_defaults(func=cmd_echo)
 
 
