@@ -668,7 +668,7 @@ def _add_run(sub) -> None:
     u.add_argument("--quiet", action="store_true", help="no progress lines")
     u.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
                    help="where the world listens (default: a free loopback port of its own, so that runs on one "
-                        "machine never meet; the other verbs find it by --name)")
+                        "machine never meet; the other verbs find the run by --run NAME)")
     u.add_argument("--name", help="the run's name, for --run of status, kill, restart, perturb, record, view and "
                                   "echo (default: the scenario's name, with -2, -3... while a run going has it)")
     u.add_argument("--world-id", default="w0")
