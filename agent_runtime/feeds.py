@@ -28,7 +28,7 @@ import zenoh
 
 from agent_runtime.snapshot import map_snapshot
 from protocol import keys
-from protocol.bus import Declarations, Inbox, watch_tokens
+from protocol.bus import Declarations, Inbox, token_event
 from protocol.codec import ProtocolError, decode, encode
 from protocol.messages import Blueprint
 
@@ -54,13 +54,23 @@ class AgentFeeds:
         self._maps = self._declared.add(session.declare_publisher(
             keys.agent_maps(world_id, agent_id), congestion_control=zenoh.CongestionControl.DROP))
         for key in keys.maps_requests_for(world_id, agent_id):
-            self._declared.add(watch_tokens(session, key, self._on_maps_request))
+            self._declared.add(session.liveliness().declare_subscriber(key, self._on_maps_token, history=True))
 
-    def _on_maps_request(self, every: str, up: bool) -> None:
-        if not every.isdigit() or int(every) < 1:
+    def _on_maps_token(self, sample: zenoh.Sample) -> None:
+        key, (_, up) = str(sample.key_expr), token_event(sample)
+        self.on_maps_request(key, up)
+
+    def on_maps_request(self, key: str, up: bool) -> None:
+        """A maps request token `key` came up or went; one whose period is not a count of
+        ticks is ignored, with a warning as it comes up (it is no request of ours)."""
+        every = keys.maps_request_every(key)
+        if every is None:
+            if up:
+                log.warning("agent %s ignored the maps request token %r: its last segment is no period "
+                            "(1 to %d ticks, in ASCII digits)", self.agent_id, key, keys.MAPS_EVERY_MAX)
             return
         with self._maps_lock:
-            self._maps_requests[int(every)] += 1 if up else -1
+            self._maps_requests[every] += 1 if up else -1
             self._maps_requests = +self._maps_requests  # drop the zeros
 
     @property

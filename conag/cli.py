@@ -106,6 +106,10 @@ def cmd_world(args) -> int:
                                  stop_when_complete=args.stop_when_complete, wait_agents=args.wait_agents,
                                  on_status=on_status, block_frames=block, checkpoint=plan,
                                  resumed=bool(args.resume), max_tick_rate=args.max_tick_rate)
+            if args.stdin_control:
+                from world_server.server import read_go_without_requests
+
+                read_go_without_requests(server, sys.stdin)
             final = server.run(stop)
         finally:
             session.close()
@@ -416,7 +420,7 @@ def cmd_teacher(args) -> int:
 def cmd_run(args) -> int:
     from conag.layouts import warn_if_unbuildable
     from conag.run import RunOptions, run
-    from protocol.bus import DEFAULT_ENDPOINT
+    from conag.runs import check_name, endpoint_in_use, free_endpoint, register, unregister
     from world_server.scenario import load_scenario
 
     _agent_config(args)  # a bad size, preset or addition is a usage error here, not in every agent
@@ -427,19 +431,28 @@ def cmd_run(args) -> int:
                          "and on a secure bus (each agent has its own credential)")
     learn_args = ("--learn", "--eta", str(0.1 if args.eta is None else args.eta)) if args.learn else ()
     scenario = load_scenario(args.scenario)
-    warn_if_unbuildable(args.scenario, scenario, args.agents)  # still runs: a repair experiment may want it
-    opts = RunOptions(scenario_path=args.scenario, scenario=scenario,
-                      endpoint=(args.listen or [DEFAULT_ENDPOINT])[0], world_id=args.world_id,
+    if args.name is not None:
+        check_name(args.name)
+    if args.listen and endpoint_in_use(args.listen[0]):
+        raise ValueError(f"{args.listen[0]} is in use (another world or `conag run` listens there): choose "
+                         "another --listen, or leave it out for a free one")
+    endpoint = args.listen[0] if args.listen else free_endpoint()
+    unbuildable = warn_if_unbuildable(args.scenario, scenario, args.agents)  # a repair experiment may want it
+    opts = RunOptions(scenario_path=args.scenario, scenario=scenario, endpoint=endpoint, world_id=args.world_id,
                       agents=args.agents, seed=args.seed, max_ticks=args.max_ticks, summary=args.summary,
                       headless=args.headless, quiet=args.quiet,
                       extra_agent_args=("--map-size", str(args.map_size), *learn_args,
                                         *(("--nearest-first",) if args.nearest_first else ()),
                                         "--agent", args.agent, *(("--without", args.without) if args.without else ())),
                       teacher=args.teacher, weights_dir=args.weights_dir, stall_ticks=args.stall_ticks,
+                      unbuildable=unbuildable,
                       record=args.record, record_priority=args.record_priority, view=args.view,
                       maps_every=args.maps_every, secure=args.secure,
                       checkpoint_every=args.checkpoint_every or CHECKPOINT_EVERY, profile=args.profile,
                       per_process=args.per_process, agent_mode=args.agent_mode)
+    entry = register(args.name or scenario.name, endpoint, args.world_id, scenario.name, exact=args.name is not None)
+    if not args.quiet:
+        print(f"run {entry.name}: world {args.world_id} on {endpoint} (conag status --run {entry.name})", flush=True)
     with _stop_on_signals() as stop:
         _report_a_slow_stop(stop)
         try:
@@ -447,6 +460,8 @@ def cmd_run(args) -> int:
         except RuntimeError as exc:  # a process of the run failed (the world died, the recorder did)
             print(f"\nerror: {exc}", file=sys.stderr)
             return EXIT_INTERRUPTED if stop.is_set() else EXIT_ERROR
+        finally:
+            unregister(entry)
     interrupted = stop.is_set() and not summary["completed"]
     state = ("complete" if summary["completed"] else "STALLED" if summary["stalled"]
              else "INTERRUPTED" if interrupted else "NOT complete")
@@ -556,6 +571,9 @@ def _add_world(sub) -> None:
     w.add_argument("--profile", metavar="PATH",
                    help="on exit, write where the loop's time went (JSON: seconds stepping, publishing frames, "
                         "waiting for commands, per tick from the second; when the first tick was out)")
+    w.add_argument("--stdin-control", action="store_true",
+                   help="read `without ID` lines on stdin: the first tick does not wait for agent ID (its process "
+                        "died before attaching; conag run uses it)")
     w.add_argument("--max-tick-rate", type=float, metavar="HZ",
                    help="lockstep: step at most HZ ticks per wall second (default: as fast as the agents answer)")
     c = w.add_argument_group("checkpoints (the world survives its own death)")
@@ -577,7 +595,7 @@ def _add_status(sub) -> None:
     s.add_argument("--watch", action="store_true", help="keep printing each status update")
     s.add_argument("--json", action="store_true", help="print the status as JSON")
     s.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the world")
-    _bus_args(s)
+    _bus_args(s, find_run=True)
     s.set_defaults(func=cmd_status)
 
 
@@ -592,7 +610,7 @@ def _add_perturb(sub) -> None:
     q.add_argument("--force", action="store_true",
                    help="add even in a drop site's cell (a brick there fills the site) or onto an agent's body")
     q.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the world")
-    _bus_args(q)
+    _bus_args(q, find_run=True)
     q.set_defaults(func=cmd_perturb)
 
 
@@ -669,7 +687,10 @@ def _add_run(sub) -> None:
     u.add_argument("--headless", action="store_true", help="plain progress lines, no terminal tricks")
     u.add_argument("--quiet", action="store_true", help="no progress lines")
     u.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
-                   help="where the world listens (default tcp/127.0.0.1:7447)")
+                   help="where the world listens (default: a free loopback port of its own, so that runs on one "
+                        "machine never meet; the other verbs find the run by --run NAME)")
+    u.add_argument("--name", help="the run's name, for --run of status, kill, restart, perturb, record, view and "
+                                  "echo (default: the scenario's name, with -2, -3... while a run going has it)")
     u.add_argument("--world-id", default="w0")
     u.add_argument("--secure", nargs="?", const="", metavar="DIR",
                    help="a secure bus: a zenoh router with access control on the --listen endpoint, every "
@@ -715,7 +736,7 @@ def _add_control(sub) -> None:
         k = sub.add_parser(name, help=text)
         k.add_argument("id", help="agent id, e.g. a2")
         k.add_argument("--timeout", type=float, default=5.0)
-        _bus_args(k)
+        _bus_args(k, find_run=True)
         k.set_defaults(func=cmd_control)
 
 
@@ -751,6 +772,10 @@ def main(argv: list[str] | None = None) -> int:
     from world_server.scenario import ScenarioError
 
     try:
+        if getattr(args, "find_run", False) and not getattr(args, "file", None):  # (conag view FILE: no bus)
+            from conag.runs import apply_run
+
+            apply_run(args)
         return args.func(args)
     except (ScenarioError, FileNotFoundError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)

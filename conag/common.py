@@ -20,8 +20,16 @@ RECORDER_PRIORITY = "idle"
 LOW_NICE = 10  # "low": this much above the starting nice value
 
 
-def bus_args(p: argparse.ArgumentParser) -> None:
+def bus_args(p: argparse.ArgumentParser, *, find_run: bool = False) -> None:
+    """The bus flags; with `find_run`, also --run NAME: the command talks to a `conag run`
+    found by name (conag/runs.py), or to the one going when neither --run nor a bus flag is
+    given."""
     g = p.add_argument_group("bus")
+    if find_run:
+        g.add_argument("--run", metavar="NAME",
+                       help="the `conag run` to talk to, by name (default: the one going, if only one is; "
+                            "else the default endpoint)")
+        p.set_defaults(find_run=True)
     g.add_argument("--zenoh-config", metavar="FILE", help="a zenoh JSON5 configuration file")
     g.add_argument("--connect", metavar="ENDPOINT", action="append", default=[],
                    help="zenoh endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)")

@@ -132,11 +132,12 @@ def cmd_check(args) -> int:
     return 1 if bad else 0
 
 
-def warn_if_unbuildable(path: str, scenario, agents: int | None = None) -> None:
+def warn_if_unbuildable(path: str, scenario, agents: int | None = None) -> str:
     """`conag run` still runs an unbuildable scenario (a repair experiment may want one),
-    but says so first."""
+    but says so first. Returns why it cannot be built ("" if it can), for the stall report."""
     from world_server.buildability import check_layout
 
     verdict = check_layout(scenario.layout, scenario.agents if agents is None else agents)
     if not verdict.ok:
         print(f"warning: {path} cannot be built: {verdict.reason}", file=sys.stderr, flush=True)
+    return verdict.reason

@@ -22,6 +22,10 @@ recording holds every tick; it stops last, after the agents' final state reports
 at `record_priority` ("idle" by default: Linux SCHED_IDLE), so the world and the agents get
 the CPU first.
 
+The run's world listens on `endpoint`: `conag run` picks a free loopback port unless told
+(`--listen`), and registers the run by name while it runs (`conag/runs.py`), so two runs
+on one machine never exchange a message and the verbs find a run by `--run NAME`.
+
 With `secure` (`conag run --secure`, `conag/secure.py`), a zenoh router with access control
 listens on the run's endpoint, every process is a client of it with its own credential, and
 this process's session is the operator's.
@@ -72,6 +76,7 @@ class RunOptions:
     teacher: bool = False             # also run a teacher process (`conag teacher`)
     weights_dir: str | None = None    # learning agents save their weights to weights_dir/<id>.json
     stall_ticks: int = DEFAULT_STALL_TICKS  # stop when no site is filled for this many ticks; 0: never
+    unbuildable: str = ""             # why the start-up check found the structure cannot be built (stall report)
     record: str | None = None         # record the run to this MCAP file (`conag record`)
     record_priority: str = RECORDER_PRIORITY  # the recorder's CPU priority (`conag record --priority`)
     view: int | None = None           # serve the browser viewer on this port (`conag view`)
@@ -172,14 +177,17 @@ class Fleet:
                 pass  # the host has just exited: the agent is gone anyway
         return f"stopped {agent_id} in its host (pid {proc.pid})"
 
-    def exited(self) -> tuple[str, int] | None:
-        """An agent process that has exited, as (agent id, exit code), or None."""
+    def exited_all(self) -> list[tuple[str, int, int]]:
+        """Every agent whose process has exited, as (agent id, exit code, pid)."""
         with self.lock:
-            for agent_id, proc in self.procs.items():
-                code = proc.poll()
-                if code is not None:
-                    return agent_id, code
-        return None
+            procs = list(self.procs.items())
+        return [(a, code, p.pid) for a, p in procs if (code := p.poll()) is not None]
+
+    def all_exited(self) -> bool:
+        """Whether every agent process has exited (and there was one)."""
+        with self.lock:
+            procs = list(self.procs.values())
+        return bool(procs) and all(p.poll() is not None for p in procs)
 
     def restart(self, agent_id: str) -> str:
         killed = self.kill(agent_id) + ", " if agent_id in self.procs else ""
@@ -323,11 +331,28 @@ class WorldProcess:
     started: float = 0.0
     from_tick: int = -1      # the tick of the checkpoint it started from (-1: the start)
     quick_deaths: int = 0
+    without: set[str] = field(default_factory=set)  # agents its first tick does not wait for (they died)
 
     def start(self, resume: Path | None = None) -> None:
         self.proc = _start_world(self.opts, self.n_agents, self.final_path, self.checkpoint, resume)
         self.started = time.monotonic()
         self.from_tick = _checkpoint_tick(resume) if resume else -1
+        for agent in sorted(self.without):  # a world started again is told again
+            self._tell(f"without {agent}")
+
+    def go_without(self, agent: str) -> None:
+        """Its first tick does not wait for `agent` (`conag world --stdin-control`)."""
+        self.without.add(agent)
+        self._tell(f"without {agent}")
+
+    def _tell(self, line: str) -> None:
+        if self.proc is None or self.proc.stdin is None or self.proc.poll() is not None:
+            return  # a world that died is told again when it is started again
+        try:
+            self.proc.stdin.write(line + "\n")
+            self.proc.stdin.flush()
+        except (BrokenPipeError, OSError):
+            pass  # it has just exited: the same
 
     def died(self) -> bool:
         """The process exited without writing the final status (killed, crashed)."""
@@ -367,7 +392,7 @@ def _run(opts: RunOptions, stop: threading.Event, tmp: Path) -> dict:
         Path(opts.weights_dir).mkdir(parents=True, exist_ok=True)
     teacher = _start_teacher(opts) if opts.teacher else None
     fleet = Fleet(opts)
-    watch = StallWatch(opts.stall_ticks)
+    watch = StallWatch(opts.stall_ticks, opts.unbuildable)
     tty = sys.stdout.isatty() and not opts.headless
     recorder = viewer = None
     with RunBus(opts, fleet, watch, tty) as run_bus:
@@ -385,16 +410,16 @@ def _run(opts: RunOptions, stop: threading.Event, tmp: Path) -> dict:
                     fleet.start(f"a{first}")
                 else:
                     fleet.start_host(first, min(first + k - 1, n_agents))
+            early = EarlyDeaths(fleet, world, run_bus)
             while True:
-                _wait_until(lambda: world.proc.poll() is not None, stop.is_set, lambda: watch.stalled,
-                            lambda: _lost_before_start(fleet, run_bus) is not None)
-                lost = _lost_before_start(fleet, run_bus)
-                if lost is not None and not stop.is_set():
-                    # The world waits for every agent before its first tick: it would wait for ever.
-                    raise RuntimeError(f"agent {lost[0]} exited (code {lost[1]}) before the world's first tick; "
-                                       f"the world waits for all {n_agents} agents, so the run cannot start "
-                                       f"(its error is above)")
-                if stop.is_set() or watch.stalled or not world.died():
+                _wait_until(lambda: world.proc.poll() is not None, stop.is_set, lambda: watch.stalled, early.seen)
+                if not stop.is_set():
+                    early.handle(tty)
+                if stop.is_set() or watch.stalled:
+                    break
+                if world.proc.poll() is None:
+                    continue  # woken by an agent that died before the first tick: the run goes on
+                if not world.died():
                     break
                 message = world.restart()
                 run_bus.world_restarts = world.restarts
@@ -418,10 +443,47 @@ def _run(opts: RunOptions, stop: threading.Event, tmp: Path) -> dict:
     return summary.as_dict()
 
 
-def _lost_before_start(fleet: Fleet, run_bus: RunBus) -> tuple[str, int] | None:
-    """An agent process that exited before the world stepped once (after that, agents die
-    and return as the run goes on: `conag kill`, crashes)."""
-    return fleet.exited() if run_bus.last_tick <= 0 else None
+class EarlyDeaths:
+    """Agent processes that exit before the world's first tick. The world waits for every
+    agent before that tick: each one is told to the world, which then goes without it, and
+    the run goes on with the others (`conag restart ID` starts it again; it then attaches
+    as any agent does). Once every agent process has exited before the first tick, nothing
+    is left to build: the run ends as an error. After the first tick agents die and return
+    as the run goes on (`conag kill`, crashes): the world sees their tokens go."""
+
+    def __init__(self, fleet: Fleet, world: WorldProcess, run_bus: RunBus):
+        self.fleet, self.world, self.run_bus = fleet, world, run_bus
+        self._told: set[tuple[str, int]] = set()  # (agent, pid) of the processes already told
+
+    def _new(self) -> list[tuple[str, int, int]]:
+        if self.run_bus.last_tick > 0:
+            return []
+        return [(a, code, pid) for a, code, pid in self.fleet.exited_all() if (a, pid) not in self._told]
+
+    def seen(self) -> bool:
+        """Whether an agent process exited before the first tick that the world has not been told of."""
+        return bool(self._new())
+
+    def handle(self, tty: bool = False) -> None:
+        """Tell the world, and the user, of each; raise RuntimeError once every agent is gone."""
+        for agent, code, pid in self._new():
+            self._told.add((agent, pid))
+            self.world.go_without(agent)
+            print(("\n" if tty else "") + f"agent {agent} {exit_words(code)} before the world's first tick: the run "
+                  f"goes on without it (`conag restart {agent}` starts it again)", flush=True)
+        if self._told and self.run_bus.last_tick <= 0 and self.fleet.all_exited():
+            raise RuntimeError("every agent process exited before the world's first tick: nothing is left to build")
+
+
+def exit_words(code: int) -> str:
+    """How a process ended, from its return code: "exited (code 1)", "was killed (SIGKILL)"."""
+    if code < 0:
+        try:
+            name = signal.Signals(-code).name
+        except ValueError:
+            name = f"signal {-code}"
+        return f"was killed ({name})"
+    return f"exited (code {code})"
 
 
 def _wait_until(*conditions: Callable[[], bool], poll: float = 0.1) -> None:
@@ -473,7 +535,8 @@ def _start_world(opts: RunOptions, n_agents: int, final_path: Path, checkpoint: 
         cmd += ["--seed", str(opts.seed)]
     if opts.profile:
         cmd += ["--profile", opts.profile]
-    return subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
+    # stdin: `without ID` lines, for agents that died before the first tick (EarlyDeaths)
+    return subprocess.Popen([*cmd, "--stdin-control"], stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
 
 
 def _final_summary(final_path: Path, world: subprocess.Popen) -> RunSummary:

@@ -24,6 +24,11 @@ def check_id(value: str, what: str = "id") -> str:
     return value
 
 
+def valid_id(value: str) -> bool:
+    """Whether `value` is a valid world/agent id (`check_id` without the error)."""
+    return isinstance(value, str) and bool(_ID.match(value))
+
+
 def world_root(world: str) -> str:
     """The key prefix of everything about one world."""
     return f"{ROOT}/world/{check_id(world, 'world id')}"
@@ -64,10 +69,24 @@ def maps_request_token(world: str, requester: str, every: int, agent: str = MAPS
     """A liveliness token asking `agent` (every agent: MAPS_ALL) for its map snapshot each
     `every` ticks (at ticks that are multiples of it); an agent follows the smallest
     `every` among the tokens up for it."""
-    if not (isinstance(every, int) and every >= 1):
-        raise ValueError("maps every must be an int >= 1 (ticks)")
+    if not (isinstance(every, int) and 1 <= every <= MAPS_EVERY_MAX):
+        raise ValueError(f"maps every must be an int from 1 to {MAPS_EVERY_MAX} (ticks)")
     return (f"{world_root(world)}/alive/maps/{check_id(requester, 'requester id')}/"
             f"{check_id(agent, 'agent id')}/{every}")
+
+
+MAPS_EVERY_MAX = 10**9  # ticks: the longest period a maps request token may ask for
+
+
+def maps_request_every(key: str) -> int | None:
+    """The period (ticks) a maps request token's key asks for: its last segment, ASCII
+    digits making 1 to MAPS_EVERY_MAX; None for anything else (a token from a foreign or
+    broken process, to ignore). Not `str.isdigit`, which takes '²' and other digits int()
+    refuses."""
+    every = str(key).rsplit("/", 1)[-1]
+    if not (every.isascii() and every.isdigit() and len(every) <= len(str(MAPS_EVERY_MAX))):
+        return None
+    return int(every) if 1 <= int(every) <= MAPS_EVERY_MAX else None
 
 
 def maps_requests_for(world: str, agent: str) -> tuple[str, str]:

@@ -4,10 +4,14 @@ subprocesses, and small worlds built from inline layouts."""
 
 from __future__ import annotations
 
+import atexit
+import os
+import shutil
 import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Callable
@@ -16,6 +20,7 @@ from typing import TypeVar
 
 import numpy as np
 import pytest
+from hypothesis import settings
 
 from protocol.bus import BusOptions, open_session
 from world_server.scenario import load_scenario, parse_scenario
@@ -24,6 +29,23 @@ from world_server.world import World
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENARIOS = ROOT / "scenarios"
+
+# Property tests draw the same examples on every run, everywhere (CI, a fresh clone, a
+# laptop): a failure is one anybody can reproduce with the same command, never a draw that
+# comes and goes, and no example database left in .hypothesis/ replays a failure after it
+# was fixed (or keeps one from a branch). The failing example's blob is printed.
+# HYPOTHESIS_PROFILE=explore draws new examples each run (and keeps the database), to look
+# for bugs on purpose.
+settings.register_profile("derandomized", derandomize=True, database=None, print_blob=True)
+settings.register_profile("explore", print_blob=True)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "derandomized"))
+
+# `conag run` registers by name (conag/runs.py) and the verbs find runs there: the tests,
+# and every process they start, keep a runs directory of their own, so they never see
+# (nor are seen by) the runs of whoever else uses this machine.
+_RUNS_DIR = tempfile.mkdtemp(prefix="conag-test-runs-")
+os.environ["CONAG_RUNS_DIR"] = _RUNS_DIR
+atexit.register(shutil.rmtree, _RUNS_DIR, True)
 
 
 def free_port() -> int:

@@ -143,6 +143,21 @@ def test_a_site_inside_a_closed_ring_with_no_brick_is_refused():
     assert result.order == ()
 
 
+def test_every_site_no_agent_can_reach_is_named():
+    layout = ["A.b.b.b.b.b.b.b.b", "..+..............", "#####.###.###.###", "#+++#.#+#.#+#.#+#",
+              "#####.###.###.###"]
+    assert check_layout(layout).reason == (
+        "site (1,3) is inside a closed ring with no brick and no way in (and 5 more sites no agent can reach: "
+        "(2,3), (3,3), (7,3), (11,3), (15,3))")
+    layout[3] += "#+#"
+    layout[2] += "###"
+    layout[4] += "###"
+    layout[0] += "..."
+    layout[1] += "..."
+    assert check_layout(layout).reason.endswith("(and 6 more sites no agent can reach: (2,3), (3,3), (7,3), (11,3), "
+                                                "(15,3), ...)")
+
+
 def test_a_closed_ring_with_bricks_inside_but_no_agent_is_walled_off():
     layout = [row.replace("F.+.F", "F.+bF") for row in RING_WITH_A_SITE_INSIDE]
     assert check_layout(layout).reason == "site (4,3) is walled off from every agent start (with 1 brick)"

@@ -3,14 +3,10 @@
 from __future__ import annotations
 
 import json
-import threading
-import time
 
 import pytest
 
-from conag.run import RunOptions, run
 from tests.conftest import LONG_WALL, conag, free_port, run_and_restart_mid_build
-from world_server.scenario import load_scenario
 
 pytestmark = pytest.mark.slow
 
@@ -52,14 +48,3 @@ def test_kill_with_no_run_going_is_a_clear_error():
 def test_a_bad_map_size_is_a_usage_error_before_anything_starts():
     r = conag("run", "scenarios/quick_wall.toml", "--map-size", 40, "--listen", f"tcp/127.0.0.1:{free_port()}")
     assert r.returncode == 2 and "map_size must be an odd integer" in r.stderr
-
-
-def test_an_agent_that_dies_before_the_first_tick_stops_the_run_with_the_reason(endpoint):
-    # The world waits for every agent before it steps: an agent process that exits first
-    # (here: a flag it does not know) used to leave `conag run` at tick 0 for ever.
-    opts = RunOptions("scenarios/quick_wall.toml", load_scenario("scenarios/quick_wall.toml"), endpoint,
-                      headless=True, quiet=True, extra_agent_args=("--no-such-flag",))
-    started = time.monotonic()
-    with pytest.raises(RuntimeError, match=r"agent a\d exited \(code 2\) before the world's first tick"):
-        run(opts, threading.Event())
-    assert time.monotonic() - started < 60

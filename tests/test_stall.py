@@ -5,6 +5,7 @@ naming every agent, `stalled` and behaviour counts in the summary)."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import pytest
 
@@ -12,7 +13,7 @@ from conag import sim
 from protocol.messages import BEHAVIOURS, AgentState, Perturbation, WorldStatus
 from tests.conftest import conag, free_port
 from world_server.scenario import parse_scenario
-from world_server.stall import StallClock, stall_report
+from world_server.stall import StallClock, StallWatch, stall_report
 from world_server.summary import run_summary
 
 # The only site is walled in by `#`: no agent can ever bring a brick to it.
@@ -102,6 +103,44 @@ def test_the_report_names_every_agent_with_its_position_and_last_state():
     assert lines[2] == "  a2: GONE at (6.50, 4.50): no AgentState received"
 
 
+# The last site is inside a closed `#` box: an agent fills the one it can reach, then
+# believes every site is filled (it never sees the boxed one open), though the world counts
+# 1/2. The report must say why the build stalled (issue 35), not repeat the agent's belief.
+BOXED = '''
+name = "boxed"
+seed = 1
+agents = 1
+max_ticks = 20000
+layout = """
+..........
+.A...+....
+.bb.......
+......###.
+......#+#.
+......###.
+"""
+'''
+BOXED_WHY = "site (7,4) is inside a closed ring with no brick and no way in"
+
+
+def test_an_agent_that_believes_every_site_filled_gets_the_start_up_checks_reason_as_its_blocker():
+    status = replace(STATUS, sites_filled=5, sites_total=6)
+    believes = state("a1", sites_open=0, blocker="believes every site is filled")
+    line = stall_report(status, 600, {"a1": believes}, BOXED_WHY)[1]
+    assert line.endswith(f"blocker: {BOXED_WHY} (found at start-up; the agent: believes every site is filled)")
+    # No reason found at start-up: the world's count says the agent is wrong.
+    line = stall_report(status, 600, {"a1": believes})[1]
+    assert line.endswith("blocker: believes every site is filled, but the world counts 1 open")
+    # An agent that names what blocks it, with sites open, is taken at its word.
+    line = stall_report(status, 600, {"a1": state("a1")}, BOXED_WHY)[1]
+    assert line.endswith("blocker: holds a brick but no open site is reachable")
+    # A watch passes the reason on to its report.
+    watch = StallWatch(300, BOXED_WHY)
+    watch.states["a1"] = believes
+    assert not watch.observe(replace(status, tick=100)) and watch.observe(replace(status, tick=400))
+    assert BOXED_WHY in watch.report[1]
+
+
 def test_the_summary_has_stalled_and_each_agents_behaviour_ticks():
     s = run_summary(STATUS, {"a1": state("a1", "config_nav")}, stalled=True)
     assert s["stalled"] is True and s["completed"] is False
@@ -122,6 +161,16 @@ def test_a_simrun_that_cannot_progress_stops_as_stalled_and_reports_why():
     assert lines[0] == "STALLED at tick 300: no site filled for 300 ticks (0/1 sites)"
     assert [line.split(":")[0] for line in lines[1:]] == ["  a1", "  a2"]
     assert all("alive at (" in line and "blocker:" in line for line in lines[1:]), lines
+
+
+def test_a_simrun_stalled_by_a_site_in_a_closed_box_names_it_as_the_blocker():
+    run = sim.start(parse_scenario(BOXED))
+    result = run.run(5000, stall_ticks=300)
+    assert result.stalled and run.world.status().sites_filled == 1
+    lines = run.stall_report()
+    assert "(1/2 sites)" in lines[0]
+    assert f"0 sites open, blocker: {BOXED_WHY} (found at start-up; the agent: believes every site is filled)" \
+        in lines[1], lines
 
 
 @pytest.mark.slow
@@ -158,3 +207,17 @@ def test_conag_run_stops_a_stalled_build_with_exit_code_4_and_a_report(tmp_path)
     assert [a["id"] for a in s["agents"]] == ["a1", "a2"]
     for a in s["agents"]:
         assert set(a["behaviour_ticks"]) <= set(BEHAVIOURS) and sum(a["behaviour_ticks"].values()) > 0, a
+
+
+@pytest.mark.slow
+def test_conag_run_names_the_unreachable_site_as_the_blocker_of_a_stalled_build(tmp_path):
+    scenario = tmp_path / "boxed.toml"
+    scenario.write_text(BOXED)
+    r = conag("run", scenario, "--headless", "--stall-ticks", 300, "--listen", f"tcp/127.0.0.1:{free_port()}",
+              timeout=120)
+    assert r.returncode == 4, r.stdout + r.stderr
+    assert f"cannot be built: {BOXED_WHY}" in r.stderr
+    lines = r.stdout.splitlines()
+    head = next(i for i, line in enumerate(lines) if line.startswith("STALLED at tick "))
+    assert "(1/2 sites)" in lines[head]
+    assert lines[head + 1].startswith("  a1: alive at (") and f"blocker: {BOXED_WHY}" in lines[head + 1], lines

@@ -60,6 +60,8 @@ _CUTS_SITE, _TOO_FEW, _NO_BRICK = 1, 2, 3
 # order builds with few or no backtracks. A layout that needs more is hard in a way worth
 # reporting.
 SEARCH_WORK = 60_000_000
+# Sites named in a reason beside the first that no agent can reach.
+MORE_SITES_NAMED = 5
 # Bricks tried per site when backtracking (the first is nearly always right; the others
 # matter when a pile must be dug through in a particular way).
 MAX_BRICK_CHOICES = 4
@@ -166,7 +168,12 @@ def _necessary(grid: np.ndarray, cols: int, starts: np.ndarray) -> tuple[str, in
     sites = np.flatnonzero(grid == SITE_CELL)
     lost = sites[~mine[labels[sites]]]
     if len(lost):
-        return _walled_off(grid, labels, lost[0], cols), 0
+        more = ""
+        if len(lost) > 1:
+            shown = ", ".join(_fmt(_cell(i, cols)) for i in lost[1:1 + MORE_SITES_NAMED])
+            more = (f" (and {_count(len(lost) - 1, 'more site')} no agent can reach: {shown}"
+                    + (", ..." if len(lost) - 1 > MORE_SITES_NAMED else "") + ")")
+        return _walled_off(grid, labels, lost[0], cols) + more, 0
     bricks = np.flatnonzero(grid == BRICK_CELL)
     site_count = np.bincount(labels[sites], minlength=n)
     brick_count = np.bincount(labels[bricks], minlength=n)

@@ -44,12 +44,13 @@ _KEYS = {"name", "seed", "agents", "tick_mode", "max_ticks", "description", "lay
 
 
 class ScenarioError(ValueError):
-    """A scenario file is invalid; carries where and what was expected."""
+    """A scenario file is invalid; carries where (line 0: the file as a whole) and what was expected."""
 
     def __init__(self, path: str, line: int, column: int, expected: str, found: str = ""):
         self.path, self.line, self.column, self.expected = path, line, column, expected
         detail = f" (found {found})" if found else ""
-        super().__init__(f"{path}:{line}:{column}: expected {expected}{detail}")
+        where = f"{path}:{line}:{column}" if line else path
+        super().__init__(f"{where}: expected {expected}{detail}")
 
 
 @dataclass(frozen=True)
@@ -107,9 +108,26 @@ class Scenario:
 
 
 def load_scenario(path: str | Path) -> Scenario:
-    """Read and validate a scenario file; raise ScenarioError or FileNotFoundError."""
+    """Read and validate a scenario file; raise ScenarioError or FileNotFoundError.
+
+    A directory, an unreadable file or one that is not UTF-8 text is a ScenarioError that
+    names the file (and the place of the first byte that is not UTF-8)."""
     path = Path(path)
-    return parse_scenario(path.read_text(encoding="utf-8"), str(path))
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise
+    except IsADirectoryError:
+        raise ScenarioError(str(path), 0, 0, "a scenario file", "a directory") from None
+    except OSError as exc:
+        raise ScenarioError(str(path), 0, 0, "a readable scenario file", exc.strerror or str(exc)) from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        before = data[:exc.start].decode("utf-8").split("\n")
+        raise ScenarioError(str(path), len(before), len(before[-1]) + 1, "UTF-8 text",
+                            f"byte 0x{data[exc.start]:02x}") from None
+    return parse_scenario(text, str(path))
 
 
 def parse_scenario(text: str, path: str = "<string>") -> Scenario:

@@ -88,6 +88,7 @@ from world_server.world import World
 
 log = logging.getLogger("conag.world")
 RESUME_WAIT = 10.0  # wall seconds a resumed world waits for its live agents to attach again
+WAIT_REPORT = 5.0   # wall seconds between the lines a lockstep world logs while it cannot tick
 
 
 # What zenoh's threads hand the loop thread (`WorldServer._handle` dispatches on the type) ------
@@ -128,6 +129,13 @@ class ViewAsked:
 
 
 @dataclass(frozen=True)
+class GoWithout:
+    """The first tick does not wait for this agent (its process died before attaching)."""
+
+    agent: str
+
+
+@dataclass(frozen=True)
 class BadInput:
     """Input that could not be decoded or did not match its key; a command's `agent` is
     answered on its error key."""
@@ -136,7 +144,7 @@ class BadInput:
     agent: str | None = None
 
 
-Event = CommandArrived | LivelinessChanged | AttachAsked | PerturbAsked | ViewAsked | BadInput
+Event = CommandArrived | LivelinessChanged | AttachAsked | PerturbAsked | ViewAsked | GoWithout | BadInput
 
 
 class WorldServer:
@@ -196,6 +204,15 @@ class WorldServer:
         if max_tick_rate is not None and not max_tick_rate > 0:
             raise ValueError("max_tick_rate must be > 0 ticks per second")
         self._min_period = 1.0 / max_tick_rate if max_tick_rate else 0.0  # lockstep: wall seconds between ticks
+        self._not_awaited: set[str] = set()  # agents the first tick does not wait for (`go_without`)
+        self._idle_since: float | None = None  # lockstep: since when the world cannot tick (None: it can)
+        self._idle_reported = 0.0
+
+    def go_without(self, agent: str) -> None:
+        """The first tick does not wait for `agent` (its process died before attaching: `conag
+        run` says so): `wait_agents` counts the others. Thread-safe; if it attaches later it
+        takes part as any agent does."""
+        self._events.put(GoWithout(agent))
 
     # zenoh callbacks: decode if cheap, then hand over to the loop thread ------------------
     def _on_command(self, sample: zenoh.Sample) -> None:
@@ -266,7 +283,7 @@ class WorldServer:
                 t2 = timer()
                 self._publish_frames()
                 t3 = timer()
-                self.times.tick_done(self.world.tick, len(self.world.agents) >= self.wait_agents, warmup,
+                self.times.tick_done(self.world.tick, self._all_came(), warmup,
                                      time.monotonic(), wait=t1 - t0, step=t2 - t1, publish=t3 - t2)
                 if self.checkpoint is not None and self.checkpoint.due(self.world.tick):
                     self._checkpoint()
@@ -344,8 +361,9 @@ class WorldServer:
             live = self._live()
             awaited = self.lockstep.awaited(live)
             # Realtime ticks by the clock; lockstep only once agents are there to drive it.
-            armed = self.mode == "realtime" or (bool(live) and len(self.world.agents) >= self.wait_agents)
+            armed = self.mode == "realtime" or (bool(live) and self._all_came())
             armed = armed and not self._resuming(live)
+            self._report_idle(armed, live)
             if self._unclaimed and armed:
                 self._let_go_of_unclaimed()
                 continue
@@ -375,6 +393,40 @@ class WorldServer:
             self._next_event(timeout)
         return False
 
+    def _all_came(self) -> bool:
+        """Whether the agents the first tick waits for have attached (`wait_agents`, less
+        those it goes without)."""
+        came = len(self.world.agents.keys() - self._not_awaited)
+        return came >= self.wait_agents - len(self._not_awaited)
+
+    def _report_idle(self, armed: bool, live: list[str]) -> None:
+        """A lockstep world that cannot tick says why every WAIT_REPORT seconds (from the
+        WAIT_REPORT-th on): it never waits in silence."""
+        if self.mode != "lockstep" or armed:
+            self._idle_since = None
+            return
+        now = self.clock()
+        if self._idle_since is None:
+            self._idle_since = self._idle_reported = now
+            return
+        if now - self._idle_reported < WAIT_REPORT:
+            return
+        self._idle_reported = now
+        waited = now - self._idle_since
+        tick = self.world.tick
+        if self._resume_deadline is not None:
+            missing = sorted(set(live) - self._attached)
+            log.warning("tick %d: waiting %.0f s for the agents of the resumed world to attach again (%s)", tick,
+                        waited, ", ".join(missing) or "none holds its token yet")
+        elif not self._all_came():
+            came = len(self.world.agents.keys() - self._not_awaited)
+            log.warning("tick %d: waiting %.0f s for agents to attach: %d of %d so far; no tick before they all have",
+                        tick, waited, came, self.wait_agents - len(self._not_awaited))
+        else:
+            gone = sorted(a for a in self.world.agents if a not in live)
+            log.warning("tick %d: no live agent for %.0f s (%s gone): waiting for one to attach; no tick before",
+                        tick, waited, ", ".join(gone) or "all")
+
     def _next_event(self, timeout: float) -> None:
         """Handle the next bus event, if one comes within `timeout` seconds."""
         try:
@@ -401,6 +453,10 @@ class WorldServer:
                 self._perturb(query)
             case ViewAsked(query):
                 self._answer_view(query)
+            case GoWithout(agent):
+                if agent not in self._not_awaited:
+                    self._not_awaited.add(agent)
+                    log.info("agent %s will not be waited for before the first tick", agent)
             case BadInput(detail, agent):
                 self._bad(detail, agent)
             case _:
@@ -556,3 +612,18 @@ class WorldServer:
         if self.on_status:
             self.on_status(status)
         return status
+
+
+def read_go_without_requests(server: WorldServer, stream) -> threading.Thread:
+    """A daemon thread feeding the `without ID` lines of `stream` (the world's stdin, from
+    `conag run`) to `server.go_without`; other lines are ignored."""
+
+    def read() -> None:
+        for line in stream:
+            words = line.split()
+            if len(words) == 2 and words[0] == "without" and keys.valid_id(words[1]):
+                server.go_without(words[1])
+
+    thread = threading.Thread(target=read, name="world-stdin", daemon=True)
+    thread.start()
+    return thread

@@ -61,8 +61,9 @@ class StallWatch:
     in `states` (kept by the caller). Once no site has been filled for `limit` ticks (0:
     never), `observe` keeps the stall report in `report` and sets `stalled`."""
 
-    def __init__(self, limit: int):
+    def __init__(self, limit: int, unbuildable: str = ""):
         self.clock = StallClock(limit) if limit > 0 else None
+        self.unbuildable = unbuildable  # why the start-up check found the structure cannot be built ("": it can)
         self.states: dict[str, AgentState] = {}
         self.stalled = False
         self.report: list[str] = []
@@ -72,20 +73,40 @@ class StallWatch:
         if self.clock is None or self.stalled:
             return self.stalled
         if self.clock.observe(status.tick, status.sites_filled, status.sites_total):
-            self.report = stall_report(status, self.clock.idle(status.tick), dict(self.states))
+            self.report = stall_report(status, self.clock.idle(status.tick), dict(self.states), self.unbuildable)
             self.stalled = True
         return self.stalled
 
 
-def stall_report(status: WorldStatus, idle_ticks: int, states: Mapping[str, AgentState]) -> list[str]:
-    """The stall report: a headline and one line per agent (see `agent_line`)."""
+def stall_report(status: WorldStatus, idle_ticks: int, states: Mapping[str, AgentState],
+                 unbuildable: str = "") -> list[str]:
+    """The stall report: a headline and one line per agent (see `agent_lines`). `unbuildable`:
+    why the start-up check (`world_server.buildability`) found the structure cannot be built."""
     head = (f"STALLED at tick {status.tick}: no site filled for {idle_ticks} ticks "
             f"({status.sites_filled}/{status.sites_total} sites)")
-    return [head, *agent_lines(status, states)]
+    return [head, *agent_lines(status, states, unbuildable)]
 
 
-def agent_lines(status: WorldStatus, states: Mapping[str, AgentState]) -> list[str]:
-    """One line per agent of `status`, by id: where its body is and what it last said it does."""
+def blocker(status: WorldStatus, state: AgentState, unbuildable: str = "") -> str:
+    """What keeps an agent from building, for the report: what it says, unless it believes
+    nothing is left to do (no site open, or nothing blocks it) while the world counts open
+    sites. Then the agent is wrong about the world, and the truth is what the start-up
+    check found (`unbuildable`: sites no agent can reach, too few bricks), or else the
+    world's count; the agent's own word follows in brackets."""
+    left = status.sites_total - status.sites_filled
+    own = state.blocker or "none"
+    if left <= 0 or (state.sites_open > 0 and state.blocker):
+        return own
+    if unbuildable:
+        return f"{unbuildable} (found at start-up; the agent: {own})"
+    if state.sites_open == 0:
+        return f"{own}, but the world counts {left} open"
+    return own
+
+
+def agent_lines(status: WorldStatus, states: Mapping[str, AgentState], unbuildable: str = "") -> list[str]:
+    """One line per agent of `status`, by id: where its body is and what it last said it does
+    (its blocker as `blocker` gives it)."""
     lines = []
     for i, agent in sorted(enumerate(status.agent_ids), key=lambda item: item[1]):
         where = ""
@@ -97,6 +118,6 @@ def agent_lines(status: WorldStatus, states: Mapping[str, AgentState]) -> list[s
             doing = "no AgentState received"
         else:
             doing = (f"{state.behaviour} (tick {state.tick}), holding {'a brick' if state.holding else 'nothing'}, "
-                     f"{state.sites_open} sites open, blocker: {state.blocker or 'none'}")
+                     f"{state.sites_open} sites open, blocker: {blocker(status, state, unbuildable)}")
         lines.append(f"  {agent}: {alive}{where}: {doing}")
     return lines

@@ -49,7 +49,7 @@ def add_commands(sub) -> None:
                    help="the recorder's CPU priority, so the run it records gets the CPU first: idle (the default) "
                         "runs it only when a core would otherwise idle (Linux SCHED_IDLE), low raises its nice "
                         "value by 10, normal leaves it as any process")
-    bus_args(r)
+    bus_args(r, find_run=True)
     r.set_defaults(func=cmd_record)
 
     p = sub.add_parser("replay", help="publish a recording again (or --verify it against a fresh world)")
@@ -77,7 +77,7 @@ def add_commands(sub) -> None:
     e.add_argument("--hz", action="store_true", help="print the rate of the messages instead, like ros2 topic hz")
     e.add_argument("--period", type=float, default=1.0, metavar="S", help="seconds between rate lines (default 1)")
     e.add_argument("--window", type=int, default=1000, metavar="N", help="messages the rate is taken over")
-    bus_args(e)
+    bus_args(e, find_run=True)
     e.set_defaults(func=cmd_echo)
 
 
@@ -180,7 +180,7 @@ def _verify(args, rec, entries, world_id: str) -> int:
     import numpy as np
 
     from conag.recording.replay import LockstepScript
-    from conag.recording.replayer import drive_world
+    from conag.recording.replayer import DriveError, drive_world
     from protocol.bus import BusOptions, join_callback_threads, open_session
     from world_server.checkpoint import CheckpointPlan
     from world_server.scenario import parse_scenario
@@ -190,10 +190,12 @@ def _verify(args, rec, entries, world_id: str) -> int:
     if "scenario" not in rec.info or "seed" not in rec.info:
         raise ValueError(f"{args.file} holds no scenario or seed (record with --scenario, or conag run --record)")
     script = LockstepScript.from_entries(entries)
+    if not script.frames:
+        raise ValueError(f"{args.file} holds no agent's frame to compare (it ends before any agent attached)")
     for limit in script.limits:
         print(f"warning: {limit}: the replay may differ from then on", file=sys.stderr)
     if script.cut_short:
-        print(f"note: {script.cut_short}: the replay ends at tick {script.last_tick + 1}", file=sys.stderr)
+        print(f"note: {script.cut_short}: the replay ends at tick {script.end_tick}", file=sys.stderr)
     scenario = parse_scenario(rec.info["scenario"], rec.info.get("scenario_path", "<recording>"))
     # The script stands in for every command the recorded world stepped without: this one
     # never times out itself (a busy machine makes the replay slower, not different).
@@ -221,9 +223,14 @@ def _verify(args, rec, entries, world_id: str) -> int:
                 if not args.quiet and tick % 500 == 0:
                     print(f"tick {tick}", flush=True)
 
-            result = drive_world(client, script, world_id, stop, on_tick=progress, timeout=60.0)
-            world_stop.set()
-            thread.join(10)
+            try:
+                result = drive_world(client, script, world_id, stop, on_tick=progress, timeout=60.0)
+            except DriveError as exc:  # the replayed world did not answer: nothing compared from there on
+                print(f"error: {args.file}: the replay stopped: {exc}", file=sys.stderr)
+                return EXIT_DIFFERENT
+            finally:
+                world_stop.set()
+                thread.join(10)
         finally:
             client.close()
             serve.close()
@@ -231,7 +238,7 @@ def _verify(args, rec, entries, world_id: str) -> int:
     if result.identical:
         lost = f" ({result.dropped} dropped on the bus, not compared)" if result.dropped else ""
         print(f"identical: {result.matched} frames of {len(script.agents())} agents over ticks 0-"
-              f"{script.last_tick + 1} match the recording{lost}", flush=True)
+              f"{script.end_tick} match the recording{lost}", flush=True)
         return 0
     print(f"DIFFERENT: {result.first_difference or 'no frame compared'} ({result.matched} frames matched before)",
           flush=True)

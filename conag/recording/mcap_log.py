@@ -195,16 +195,43 @@ class Recording:
         return list(dict.fromkeys(e.key for e in self.entries))
 
 
+class RecordingError(ValueError):
+    """A file that is no ConAg recording: unreadable, empty, not MCAP, or without the
+    `conag` metadata record every recording starts with. The message names the file."""
+
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"  # the 8 bytes every MCAP file starts with
+
+
 def read_recording(path: str | Path, keep: Callable[[str], bool] | None = None) -> Recording:
     """Read a recording (a finished file, or the `.part` a killed recorder left: up to its
-    last complete chunk). `keep(key)` selects channels; None keeps all."""
-    with open(path, "rb") as f:
+    last complete chunk). `keep(key)` selects channels; None keeps all. Raises
+    FileNotFoundError, or RecordingError for a file that is no ConAg recording."""
+    try:
+        f = open(path, "rb")  # noqa: SIM115 -- closed below; the with statement would wrap the OSError too
+    except FileNotFoundError:
+        raise
+    except OSError as exc:
+        raise RecordingError(f"{path}: cannot read it ({exc.strerror or exc})") from None
+    with f:
         try:
-            return _read_indexed(f, keep)
-        except Exception:  # noqa: BLE001 -- no summary or footer (McapError), or damage mcap reports otherwise
-            pass  # a recording cut short: read it as a stream
+            start = f.read(len(MCAP_MAGIC))
+        except OSError as exc:
+            raise RecordingError(f"{path}: cannot read it ({exc.strerror or exc})") from None
+        if not start:
+            raise RecordingError(f"{path}: not a recording (the file is empty)")
+        if start != MCAP_MAGIC:
+            raise RecordingError(f"{path}: not a recording (not an MCAP file: it does not start with MCAP's magic)")
         f.seek(0)
-        return _read_stream(f, keep)
+        try:
+            rec = _read_indexed(f, keep)
+        except Exception:  # noqa: BLE001 -- no summary or footer (McapError), or damage mcap reports otherwise
+            f.seek(0)  # a recording cut short: read it as a stream
+            rec = _read_stream(f, keep)
+    if METADATA not in rec.metadata:
+        raise RecordingError(f"{path}: not a ConAg recording (no {METADATA!r} metadata record"
+                             + (f"; {rec.problem}" if rec.problem else "") + ")")
+    return rec
 
 
 def read_end(path: str | Path) -> dict[str, str]:

@@ -164,6 +164,17 @@ class LockstepScript:
             self.cut_short = (f"the recording holds no command of {agent} after tick {tick}, though it holds its "
                               f"frames to tick {last_frame[agent]} (the recorder stopped before they reached it)")
             self.last_tick = max(tick, 0)
+            if tick < 0:
+                # Not one tick holds the command of every agent (cut short right after the
+                # attaches): the replay compares the attaches' frames and takes no step (a
+                # world fed some of tick 0's commands would wait for the others for ever).
+                self.commands.pop(0, None)
+
+    @property
+    def end_tick(self) -> int:
+        """The last tick whose frames the replay compares: the step after `last_tick`, if
+        the script holds commands of `last_tick` to take it."""
+        return self.last_tick + 1 if self.commands.get(self.last_tick) else self.last_tick
 
     def agents(self) -> list[str]:
         """Every agent that attached, in the order it first did."""

@@ -97,6 +97,10 @@ def drive_world(session: zenoh.Session, script: LockstepScript, world_id: str, s
         timeouts = declared.add(Inbox(1024).subscribe(session, keys.lockstep_timeouts(world_id)))
         commands: dict[str, zenoh.Publisher] = {}
         for tick in range(last + 2):   # the frames of last + 1 answer the commands of last
+            if tick == last + 1 and not script.commands.get(last):
+                # None there (a recording cut short after the attaches, before any command):
+                # the world cannot step, and its frames of last + 1 would be waited for in vain.
+                break
             # The step to `tick` (the world takes it once every attached agent's command came,
             # or after its lockstep timeout where the recording holds none), then the attaches
             # and perturbations of `tick`, each as the world met them, then the commands.

@@ -21,6 +21,7 @@ import numpy as np
 from agent_runtime.brain import Brain, Step
 from agent_runtime.config import AgentConfig
 from protocol.messages import SITE_OPS, Perturbation, PerturbResult
+from world_server.buildability import check_layout
 from world_server.scenario import Scenario
 from world_server.stall import StallClock, stall_report
 from world_server.world import World
@@ -128,7 +129,8 @@ class SimRun:
         status = self.world.status()
         idle = self.stall.idle(status.tick) if self.stall is not None else 0
         states = {a: brain.state_report(status.tick) for a, brain in self.brains.items()}
-        return stall_report(status, idle, states)
+        unbuildable = check_layout(self.world.scenario.layout, len(self.brains)).reason
+        return stall_report(status, idle, states, unbuildable)
 
 
 class FirstCompletion:

@@ -37,7 +37,7 @@ def add_commands(sub) -> None:
     v.add_argument("--priority", choices=PRIORITIES, default=VIEWER_PRIORITY,
                    help=f"live: the viewer's CPU priority, so a run on the same cores gets the CPU first "
                         f"(default {VIEWER_PRIORITY}: nice +10; idle: only when a core would idle; normal)")
-    bus_args(v)
+    bus_args(v, find_run=True)  # live only: a recording needs no bus
     v.set_defaults(func=cmd_view)
 
 

@@ -21,12 +21,13 @@ from protocol.bus.session import (
     DEFAULT_ENDPOINT,
     MODES,
     BusOptions,
+    EndpointInUse,
     is_client,
     join_callback_threads,
     make_config,
     open_session,
 )
 
-__all__ = ["DEFAULT_ENDPOINT", "MODES", "BusOptions", "Declarations", "Inbox", "Presence", "is_client",
+__all__ = ["DEFAULT_ENDPOINT", "MODES", "BusOptions", "Declarations", "EndpointInUse", "Inbox", "Presence", "is_client",
            "join_callback_threads", "make_config", "open_session", "token_event", "undeclare", "wait_for_token",
            "watch_tokens"]

@@ -3,6 +3,8 @@
 One host, no server to install (the default): the world listens on DEFAULT_ENDPOINT in
 peer mode and every other process connects to it as a peer, listening on a free
 loopback port so that peers can also reach each other (gossip scouting, no multicast).
+(`conag run` gives its world a free endpoint of its own instead: conag/runs.py.) A world
+asked to listen where another process does fails at once with `EndpointInUse`.
 Several hosts: pass `--zenoh-config deploy/multi-host/client.json5` (or `--connect
 tcp/ROUTER:7447 --mode client`) to every process and run a zenoh router.
 Sessions are opened inside the process that uses them, never before a fork.
@@ -19,6 +21,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import threading
 import time
 from dataclasses import dataclass
@@ -93,15 +96,27 @@ def _resolve_dictionary(config, path: str) -> None:
         config.insert_json5("transport/auth/usrpwd/dictionary_file", json.dumps(resolved))
 
 
+class EndpointInUse(ValueError):
+    """A session could not listen where it was asked to: something listens there already."""
+
+
 def open_session(opts: BusOptions, *, serve: bool = False):
-    """Open a zenoh session (quiet logs unless RUST_LOG says otherwise)."""
+    """Open a zenoh session (quiet logs unless RUST_LOG says otherwise). EndpointInUse, naming
+    the endpoint, where another process listens already (zenoh's ZError otherwise)."""
     import zenoh
 
     if opts.mode == "router":
         # Read once, when zenoh first starts its receive runtime: before the first session.
         os.environ.setdefault("ZENOH_RUNTIME", ROUTER_RUNTIME)
     zenoh.init_log_from_env_or("error")
-    return zenoh.open(make_config(opts, serve=serve))
+    try:
+        return zenoh.open(make_config(opts, serve=serve))
+    except zenoh.ZError as exc:
+        m = re.search(r"listener bound to (\S+?): \[.*Address already in use", str(exc))
+        if m is None:
+            raise
+        raise EndpointInUse(f"cannot listen on {m.group(1)}: another process listens there (another world or "
+                            "`conag run`?); choose another endpoint with --listen") from None
 
 
 def join_callback_threads(timeout: float = 2.0) -> bool:
