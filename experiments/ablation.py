@@ -1,7 +1,7 @@
 """Issue 33: what each addition beyond the paper buys. The ablation table.
 
-    python3 -m experiments.ablation --quick             # a few small layouts: a smoke table
-    python3 -m experiments.ablation --sample 60 --jobs 2  # the committed table (docs/results)
+    python3 -m experiments.ablation --quick             # three small layouts: ablation_quick.md
+    python3 -m experiments.ablation --sample 60 --jobs 2  # the 60-layout table: ablation.md
 
 Each layout of a sample of the generated suite (every `--every`-th file, so every family
 and size comes in) is built in process (`conag.sim`, goal sequencing on) by several
@@ -88,11 +88,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sample", type=int, default=60, help="layouts from the suite (default 60)")
     ap.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     ap.add_argument("--stall", type=int, default=DEFAULT_STALL, help="ticks with no site filled that stop a run")
-    ap.add_argument("--out", type=Path, default=ROOT / "experiments", help="folder for ablation.json and .md")
+    ap.add_argument("--agents", help="only these agents, comma separated (default: every one)")
+    ap.add_argument("--out", type=Path, default=ROOT / "experiments",
+                    help="folder for the json and md (ablation_quick.* with --quick, else ablation.*)")
     args = ap.parse_args(argv)
     names = sorted(p.name for p in materialise())
     layouts = list(QUICK) if args.quick else names[::max(len(names) // args.sample, 1)][:args.sample]
-    jobs = [(layout, agent) for layout in layouts for agent in variants()]
+    agents = list(variants()) if not args.agents else args.agents.split(",")
+    unknown = [a for a in agents if a not in variants()]
+    if unknown:
+        ap.error(f"unknown agent(s) {', '.join(unknown)}; known: {', '.join(variants())}")
+    jobs = [(layout, agent) for layout in layouts for agent in agents]
     runs: list[Run] = []
     with pool(args.jobs) as workers:
         futures = [workers.submit(run_one, layout, agent, args.stall) for layout, agent in jobs]
@@ -102,9 +108,10 @@ def main(argv: list[str] | None = None) -> int:
             print(f"[{k}/{len(jobs)}] {r.layout} {r.agent}: {'complete' if r.completed else 'not complete'} "
                   f"in {r.ticks} ticks", file=sys.stderr, flush=True)
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "ablation.json").write_text(json.dumps([asdict(r) for r in runs], indent=1) + "\n", encoding="utf-8")
+    stem = "ablation_quick" if args.quick else "ablation"
+    (args.out / f"{stem}.json").write_text(json.dumps([asdict(r) for r in runs], indent=1) + "\n", encoding="utf-8")
     text = table(runs)
-    (args.out / "ablation.md").write_text(text + "\n", encoding="utf-8")
+    (args.out / f"{stem}.md").write_text(text + "\n", encoding="utf-8")
     print(text)
     return 0
 

@@ -165,3 +165,18 @@ def test_a_goal_with_no_layout_in_the_run_is_not_reported_as_measured_or_missed(
     assert "| goal sequencing completes buildable layouts | >= 98% | 100.0% of 1 | yes |" in table
     assert "| ... with <= 3 agents in worlds up to 60 x 60 | 100% | no such layout in this run | — |" in table
     assert "nan" not in table
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(900)
+def test_the_ablation_quick_run_reproduces_the_committed_rows(tmp_path):
+    # Two of its agents on the three quick layouts: the default and the paper's; each run is
+    # in-process lockstep from the layout's seed, so the rows are the committed ones exactly.
+    r = subprocess.run([sys.executable, "-m", "experiments.ablation", "--quick", "--agents", "default,paper",
+                        "--jobs", "2", "--out", str(tmp_path)], cwd=ROOT, capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stderr[-2000:]
+    committed = (ROOT / "experiments" / "ablation_quick.md").read_text(encoding="utf-8").splitlines()
+    rows = (tmp_path / "ablation_quick.md").read_text(encoding="utf-8").splitlines()
+    for agent in ("default", "paper"):
+        mine = next(line for line in rows if line.startswith(f"| {agent} |"))
+        assert mine in committed, (mine, committed)
