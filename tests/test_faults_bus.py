@@ -45,6 +45,14 @@ def test_a_silent_agent_with_a_token_stops_slowing_lockstep_and_is_waited_for_ag
     a1 = ScriptedBody(WorldLink(bus.client_session(), "w0", "a1"))
     silent = WorldLink(bus.client_session(), "w0", "a2")
     silent.attach()
+    # It drives east for a few ticks, then falls silent (a frozen process) ...
+    last = -1
+    for _ in range(5):
+        frame = silent.next_frame(last, timeout=5.0)
+        assert frame is not None
+        silent.send(frame.tick, speed=2.0)
+        last = frame.tick
+        a1.act()
     # The silent agent costs one timeout per tick, lockstep_miss_limit times ...
     for _ in range(cfg.lockstep_miss_limit + 1):
         a1.act()
@@ -55,6 +63,11 @@ def test_a_silent_agent_with_a_token_stops_slowing_lockstep_and_is_waited_for_ag
         a1.act()
     assert a1.frame.tick - start >= 30, f"only {a1.frame.tick - start} ticks in {3 * cfg.lockstep_timeout} s"
     assert rw.world.status().agents_alive == 2  # still attached, frames still sent to it
+    # Its body stopped when the world stopped waiting: its last command no longer drives it.
+    still = rw.world.agent_poses()[1, :2].copy()
+    for _ in range(10):
+        a1.act()
+    assert np.hypot(*(rw.world.agent_poses()[1, :2] - still)) < 0.05
     # It answers again (its command may name a tick the world has left): it is waited for again,
     # and its commands drive its body.
     frame = silent.next_frame(-1, timeout=5.0)

@@ -386,7 +386,11 @@ class WorldServer:
                         log.info("tick %d: no command from %s in time", self.world.tick, ", ".join(late))
                         for agent in self.lockstep.deadline_passed(late):
                             log.info("tick %d: agent %s missed %d deadlines in a row: not waiting for it "
-                                     "until it answers", self.world.tick, agent, self.cfg.lockstep_miss_limit)
+                                     "until it answers; its body stops", self.world.tick, agent,
+                                     self.cfg.lockstep_miss_limit)
+                            # A frozen process's last command would drive its body on until
+                            # zenoh's lease ends (seconds): 25-36 units of odometry were seen.
+                            self.world.halt(agent)
                         self._stepping_without(sorted(set(live) - self._answered))
                     return True
                 timeout = min(last_tick + period - now, 0.05)

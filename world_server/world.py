@@ -162,6 +162,16 @@ class World:
             blueprint_version=self.blueprint_version, epoch=self.epoch,
             **{name: float(getattr(self.cfg, name)) for name in WELCOME_CONSTANTS})
 
+    def halt(self, agent_id: str) -> None:
+        """Stop a live agent's body where it is (speed set point and velocity to 0): the
+        world no longer waits for its commands, and its last one must not drive it on."""
+        rec = self.agents.get(agent_id)
+        if rec is None or not rec.alive:
+            return
+        self.speed[rec.index] = self.turn[rec.index] = 0.0
+        self.action[rec.index] = 0
+        self.physics.set_velocity(rec.index, (0.0, 0.0))
+
     def detach(self, agent_id: str) -> None:
         """The agent's process is gone: its body stops, and a brick it held is put down where
         nothing needs it (`brick_drop_cell`: not on a site, not beside one, not in a gap).
