@@ -197,7 +197,7 @@ class EgocentricMaps:
         # distance, so nothing ever clears it) would be sealed for good. Farther readings
         # still clear the cells in front of them, and the wall is mapped as it comes near.
         # The rest is marked at its cell, except food and water read from farther than the
-        # obstacle trust whose cell is a blueprint site; a near wall reading always is.
+        # obstacle trust whose cell is a blueprint site.
         _sense_kernel(self._all, self.clear_age.reshape(-1), self.known.reshape(-1), cells, dist, k, sector, starts,
                       core_sector, core_starts, vx, vy, r, float(reach), self.size, self.centre,
                       float(self.frac[0]), float(self.frac[1]), dirs[0], dirs[1], obstacle_trust(sectors),
@@ -450,13 +450,6 @@ def _sense_kernel(flat, clear_age, known, cells, dist, k, sector, starts, core_s
         vy_k[p] = vy[k[p]]
     explained = _associate_kernel(flat, cells_k, dist_k, sector, vx_k, vy_k, np.ascontiguousarray(r[:_DISC_CHANNELS]),
                                   cos_s, sin_s, nn * CONFIG, BRICK, BAND, n_ch)
-    # A near wall reading is its own cell, never a marked wall cell beside it that only the
-    # sector's width reaches: walls stand on cell centres, and within `trust` the sector's
-    # centre angle lands in the right cell. Taken by a marked neighbour, a wall cell beside
-    # the agent stayed off the map and a one-cell gap looked two cells wide.
-    for s in range(sectors):
-        if r[_OBSTACLE_CH, s] <= trust:
-            explained[_OBSTACLE_CH, s] = False
     for i in range(AGENT * nn, (AGENT + 1) * nn):
         flat[i] = 0.0
     hit = np.zeros((n_ch, sectors), np.bool_)

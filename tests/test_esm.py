@@ -501,8 +501,8 @@ def reference_sense(m: EgocentricMaps, ranges: np.ndarray, reach: float) -> np.n
        wedge within 0.75 of its distance): score = distance to the measured point, minus 2
        if the cell is marked in that layer, minus 1 for a brick on a blueprint cell; the best
        must be marked or a blueprint brick cell. Other marked, non-blueprint brick cells of
-       the band are ghosts and cleared. Unattributed readings, and wall readings within the
-       obstacle trust, are written at the sector's centre angle.
+       the band are ghosts and cleared. Unattributed readings are written at the sector's
+       centre angle.
     """
     out = m.maps.copy()
     n, sectors = m.size, ranges.shape[1]
@@ -551,9 +551,7 @@ def reference_sense(m: EgocentricMaps, ranges: np.ndarray, reach: float) -> np.n
             cell = m.cell_of(px, py)
             # far walls are not written (see obstacle_trust), nor far food and water on a site
             on_site = m.contains(*cell) and cleared[CONFIG][cell] > 0.5
-            # a near wall reading is its own cell, even where a marked wall cell beside it won
-            if ((not won or (layer == OBSTACLE and not far)) and not (layer == OBSTACLE and far)
-                    and not (layer in (FOOD, WATER) and far and on_site)):
+            if not won and not (layer == OBSTACLE and far) and not (layer in (FOOD, WATER) and far and on_site):
                 plain.append((layer, cell))
             if layer == BRICK:  # ghosts of the one brick this sector saw, attributed or written plainly
                 ghosts += [(layer, c) for score, c, marked, bp in scored if marked and not bp and c not in won]
