@@ -163,6 +163,30 @@ def conag(*args, timeout: float = 60.0) -> subprocess.CompletedProcess:
                           text=True, timeout=timeout)
 
 
+def run_acting_mid_build(scenario: Path, summary: Path, act: Callable[[str, subprocess.Popen], T], *run_args,
+                         timeout: float = 240.0) -> T:
+    """`conag run` a scenario on an endpoint of its own; once it ticks, `act(endpoint, run)`;
+    wait for the run to end (it must exit 0, its summary written to `summary`). Returns what
+    `act` returned."""
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    run = subprocess.Popen([sys.executable, "-m", "conag", "run", str(scenario), *map(str, run_args), "--headless",
+                            "--summary", str(summary), "--listen", ep], cwd=ROOT, stdout=subprocess.PIPE,
+                           stderr=subprocess.STDOUT, text=True)
+    try:
+        assert run.stdout is not None
+        for line in run.stdout:  # wait until the build is under way
+            if line.startswith("tick ") and int(line.split()[1]) > 0:
+                break
+        result = act(ep, run)
+        rest, _ = run.communicate(timeout=timeout)
+        assert run.returncode == 0, rest
+    finally:
+        if run.poll() is None:
+            run.kill()
+            run.wait(10)
+    return result
+
+
 def run_and_restart_mid_build(tmp_path: Path, scenario_text: str, *run_args, agent: str = "a2",
                               timeout: float = 240.0) -> tuple[dict, subprocess.CompletedProcess]:
     """`conag run` a scenario; once it ticks, `conag restart` one agent (SIGKILL, then a new
@@ -170,24 +194,10 @@ def run_and_restart_mid_build(tmp_path: Path, scenario_text: str, *run_args, age
     summary and the restart command's outcome."""
     import json
 
-    out, ep = tmp_path / "summary.json", f"tcp/127.0.0.1:{free_port()}"
-    scenario = tmp_path / "scenario.toml"
+    out, scenario = tmp_path / "summary.json", tmp_path / "scenario.toml"
     scenario.write_text(scenario_text)
-    run = subprocess.Popen([sys.executable, "-m", "conag", "run", str(scenario), *map(str, run_args), "--headless",
-                            "--summary", str(out), "--listen", ep], cwd=ROOT, stdout=subprocess.PIPE,
-                           stderr=subprocess.STDOUT, text=True)
-    try:
-        assert run.stdout is not None
-        for line in run.stdout:  # wait until the build is under way
-            if line.startswith("tick ") and int(line.split()[1]) > 0:
-                break
-        restarted = conag("restart", agent, "--connect", ep)
-        rest, _ = run.communicate(timeout=timeout)
-        assert run.returncode == 0, rest
-    finally:
-        if run.poll() is None:
-            run.kill()
-            run.wait(10)
+    restarted = run_acting_mid_build(scenario, out, lambda ep, _run: conag("restart", agent, "--connect", ep),
+                                     *run_args, timeout=timeout)
     return json.loads(out.read_text()), restarted
 
 

@@ -8,13 +8,12 @@ import json
 import os
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
 
-from tests.conftest import ROOT, free_port, wait_until
+from tests.conftest import ROOT, run_acting_mid_build, wait_until
 
 SCENARIO = ROOT / "scenarios" / "nested_squares.toml"
 FREEZE_S = 15.0
@@ -45,27 +44,16 @@ def _pid_of(*words: str) -> int | None:
 def _freeze_mid_build(tmp_path: Path, target) -> dict:
     """`conag run` nested_squares with two agents; once it ticks, SIGSTOP the process
     `target(endpoint, run)` names for FREEZE_S seconds, then SIGCONT; the run's summary."""
-    out, ep = tmp_path / "summary.json", f"tcp/127.0.0.1:{free_port()}"
-    run = subprocess.Popen([sys.executable, "-m", "conag", "run", str(SCENARIO), "--agents", "2", "--headless",
-                            "--summary", str(out), "--listen", ep], cwd=ROOT, stdout=subprocess.PIPE,
-                           stderr=subprocess.STDOUT, text=True)
-    try:
-        assert run.stdout is not None
-        for line in run.stdout:  # wait until the build is under way
-            if line.startswith("tick ") and int(line.split()[1]) > 0:
-                break
+    def freeze(ep: str, run: subprocess.Popen) -> None:
         pid = wait_until(lambda: target(ep, run), timeout=30, what="the process to freeze")
         os.kill(pid, signal.SIGSTOP)
         try:
             time.sleep(FREEZE_S)  # the freeze itself is what is tested: a fixed length, by design
         finally:
             os.kill(pid, signal.SIGCONT)
-        rest, _ = run.communicate(timeout=400)
-        assert run.returncode == 0, rest
-    finally:
-        if run.poll() is None:
-            run.kill()
-            run.wait(10)
+
+    out = tmp_path / "summary.json"
+    run_acting_mid_build(SCENARIO, out, freeze, "--agents", 2, timeout=400)
     return json.loads(out.read_text())
 
 
