@@ -297,16 +297,9 @@ class FarMemory:
         returns how many had never been seen before."""
         if self.seen is None or self.ever_seen is None:
             return 0
-        hit = self._by_pos.get("near")
-        key = (int(self.pos[0]), int(self.pos[1]), radius)
-        if hit is not None and hit[0] == key:
-            # The same squares as last step: `ever_seen` holds them already (it only grows),
-            # so none is new; `seen` may have been reset by a new sweep since.
-            self.seen |= hit[2]
-            return 0
         centres = self._block_centres()
-        near = np.hypot(centres[..., 0] - self.pos[0], centres[..., 1] - self.pos[1]) <= radius
-        self._by_pos["near"] = (key, None, near)
+        near = self._cached("near", (radius,), None, lambda: np.hypot(centres[..., 0] - self.pos[0],
+                                                                      centres[..., 1] - self.pos[1]) <= radius)
         new = int(np.count_nonzero(near & ~self.ever_seen))
         self.seen |= near
         self.ever_seen |= near

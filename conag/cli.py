@@ -206,7 +206,7 @@ def is_newer_status(st, last) -> bool:
     return last is None or st.seq > last.seq or st.tick < last.tick
 
 
-def _non_negative(text: str) -> int:
+def non_negative(text: str) -> int:
     try:
         value = int(text)
     except ValueError:
@@ -216,8 +216,8 @@ def _non_negative(text: str) -> int:
     return value
 
 
-def _positive(text: str) -> int:
-    value = _non_negative(text)
+def positive(text: str) -> int:
+    value = non_negative(text)
     if value < 1:
         raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
     return value
@@ -580,7 +580,7 @@ def _add_world(sub) -> None:
     c.add_argument("--checkpoint", metavar="FILE",
                    help="write the whole world to FILE every --checkpoint-every ticks and when stopped (SIGTERM); "
                         "atomic, the one before kept as FILE.prev")
-    c.add_argument("--checkpoint-every", type=_positive, metavar="N",
+    c.add_argument("--checkpoint-every", type=positive, metavar="N",
                    help=f"ticks between checkpoints (default {CHECKPOINT_EVERY}; with --resume, the checkpoint's own, "
                         "so the resumed world steps exactly as one that never stopped)")
     c.add_argument("--resume", metavar="FILE",
@@ -681,7 +681,7 @@ def _add_run(sub) -> None:
     u.add_argument("--agents", type=int, help="number of agents (default: the scenario's)")
     u.add_argument("--seed", type=int, help="override the scenario's seed")
     u.add_argument("--max-ticks", type=int, help="stop after this many ticks (default: the scenario's)")
-    u.add_argument("--stall-ticks", type=_non_negative, default=3000, metavar="N",
+    u.add_argument("--stall-ticks", type=non_negative, default=3000, metavar="N",
                    help="stop as stalled when no site has been filled for N ticks (default 3000; 0: never)")
     u.add_argument("--summary", metavar="PATH", help="write the run summary (JSON); - prints it")
     u.add_argument("--headless", action="store_true", help="plain progress lines, no terminal tricks")
@@ -702,10 +702,10 @@ def _add_run(sub) -> None:
                         "see conag record --priority)")
     u.add_argument("--view", nargs="?", type=int, const=8765, metavar="PORT",
                    help="watch the run in the browser: starts `conag view` on PORT (default 8765)")
-    u.add_argument("--maps-every", type=_non_negative, default=0, metavar="N",
+    u.add_argument("--maps-every", type=non_negative, default=0, metavar="N",
                    help="the agents publish their maps every N ticks for --record (default 0: off); for --view, "
                         "the shown agent at most every N (default: conag view's), about once a second")
-    u.add_argument("--checkpoint-every", type=_positive, metavar="N",
+    u.add_argument("--checkpoint-every", type=positive, metavar="N",
                    help=f"the world checkpoints every N ticks (default {CHECKPOINT_EVERY}); when its process dies "
                         "the run restarts it from the last checkpoint and the agents attach again")
     u.add_argument("--map-size", type=int, default=AGENT_MAP_SIZE, metavar="N",

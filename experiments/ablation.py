@@ -27,7 +27,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from agent_runtime.config import ADDITIONS, AgentConfig
-from experiments.generalisation import DEFAULT_STALL, LAYOUTS, _bound, family_of, materialise, stall_limit
+from experiments.generalisation import DEFAULT_STALL, LAYOUTS, distance_bound, family_of, materialise, stall_limit
 from experiments.workers import pool
 from world_server.scenario import load_scenario
 
@@ -63,7 +63,7 @@ def run_one(layout: str, agent: str, stall: int) -> Run:
     result = run.run(sc.max_ticks, stall_ticks=stall_limit(sc, stall))
     status = run.world.status()
     return Run(layout=layout, family=family_of(sc), agent=agent, completed=result.completed, ticks=result.ticks,
-               distance=float(sum(status.agent_distance)), bound=_bound(sc, starts))
+               distance=float(sum(status.agent_distance)), bound=distance_bound(sc, starts))
 
 
 def table(runs: list[Run]) -> str:

@@ -141,11 +141,11 @@ def run_job(job: Job, pictures: Path | None) -> Outcome:
                    ticks=result.ticks, max_ticks=sc.max_ticks, sites_filled=status.sites_filled,
                    sites_total=status.sites_total, bricks_total_start=bricks_start,
                    bricks_total_end=status.bricks_total, distance=float(sum(status.agent_distance)),
-                   bound=_bound(sc, starts), seconds=time.perf_counter() - began, report=report,
+                   bound=distance_bound(sc, starts), seconds=time.perf_counter() - began, report=report,
                    picture=picture)
 
 
-def _bound(sc: Scenario, starts: list[tuple[int, int]]) -> float:
+def distance_bound(sc: Scenario, starts: list[tuple[int, int]]) -> float:
     """Lower bound on the total distance (world units), on the initial map."""
     from experiments.replay import lower_bound
 

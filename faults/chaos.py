@@ -42,7 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from conag.cli import EXIT_ERROR, EXIT_INCOMPLETE, EXIT_INTERRUPTED, _non_negative, _positive
+from conag.cli import EXIT_ERROR, EXIT_INCOMPLETE, EXIT_INTERRUPTED, non_negative, positive
 from conag.common import stop_on_signals
 from conag.run import control
 from protocol import keys
@@ -358,7 +358,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--runs", type=int, default=1, help="conag runs, one after the other (default 1)")
     c.add_argument("--kill-every", type=float, default=3.0, metavar="S",
                    help="mean wall seconds between agent kills (default 3; 0: no agent is killed)")
-    c.add_argument("--min-life", type=_non_negative, default=200, metavar="N",
+    c.add_argument("--min-life", type=non_negative, default=200, metavar="N",
                    help="kill an agent only once the world has ticked N ticks since it was (re)started "
                         "(default 200): on a slow machine a process killed sooner has done nothing yet")
     c.add_argument("--restart-share", type=float, default=0.5, metavar="P",
@@ -366,7 +366,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--kill-world-every", type=float, default=0.0, metavar="S",
                    help="also SIGKILL the world process every S wall seconds on average (default 0: never); "
                         "conag run restarts it from its last checkpoint")
-    c.add_argument("--checkpoint-every", type=_positive, metavar="N",
+    c.add_argument("--checkpoint-every", type=positive, metavar="N",
                    help=f"the world's checkpoint interval in ticks (default {DEFAULT_EVERY})")
     c.add_argument("--min-alive", type=int, default=1, metavar="N",
                    help="never leave fewer agents alive (a kill then restarts; default 1)")
@@ -374,7 +374,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--world-seed", type=int, help="the world's seed (default: the scenario's)")
     c.add_argument("--agents", type=int, help="number of agents (default: the scenario's)")
     c.add_argument("--max-ticks", type=int, help="tick limit per run (default: the scenario's)")
-    c.add_argument("--stall-ticks", type=_non_negative, default=3000, metavar="N",
+    c.add_argument("--stall-ticks", type=non_negative, default=3000, metavar="N",
                    help="a run stops as stalled after N ticks without a site filled (default 3000)")
     c.add_argument("--run-timeout", type=float, default=600.0, metavar="S",
                    help="stop a run after S wall seconds (default 600)")
