@@ -347,7 +347,7 @@ def cmd_agent(args) -> int:
     report = AgentReport()
 
     with _stopped_by_signal():
-        session = open_session(_bus(args))
+        session = open_session(_bus(args), leaf=True)
         try:
             run_agent(session, opts, report=report)
         except AttachError as exc:
@@ -373,7 +373,7 @@ def cmd_agents(args) -> int:
                         attach_timeout=args.attach_timeout, recorded=args.recorded)
 
     with _stopped_by_signal():
-        session = open_session(_bus(args))
+        session = open_session(_bus(args), leaf=True)
         try:
             host = AgentHost(session, host_options(base, ids))
             try:

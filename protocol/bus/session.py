@@ -30,6 +30,14 @@ CALLBACK_THREAD = "(pyo3-closure)"   # how zenoh-python names the thread that ru
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 MODES = ("peer", "client", "router")
 ROUTER_RUNTIME = "(rx: (worker_threads: 16))"
+# An agent process connects to the world (its connect endpoint) and to routers, never to the
+# other agents gossip tells it of: nothing flows between agents, and N agent peers that all
+# connect to each other make N^2 links (100 agent processes: about 10,000 sockets, each with
+# its buffers and keep-alives, and a minute of connecting before the first tick). The
+# processes that do want an agent's messages (recorder, teacher, viewer, the run's
+# supervisor) still connect to it: their sessions keep zenoh's default.
+LEAF_AUTOCONNECT = '["router"]'
+
 
 
 @dataclass(frozen=True)
@@ -45,8 +53,9 @@ class BusOptions:
 CONNECT_RETRY = {"period_init_ms": 100, "period_max_ms": 1000, "period_increase_factor": 2}
 
 
-def make_config(opts: BusOptions, *, serve: bool = False):
-    """A zenoh.Config for a process; `serve` is True for the world (it listens by default)."""
+def make_config(opts: BusOptions, *, serve: bool = False, leaf: bool = False):
+    """A zenoh.Config for a process; `serve` is True for the world (it listens by default),
+    `leaf` for an agent process (see LEAF_AUTOCONNECT; a configuration file is taken as it is)."""
     import zenoh
 
     if opts.zenoh_config:
@@ -75,6 +84,8 @@ def make_config(opts: BusOptions, *, serve: bool = False):
     config.insert_json5("connect/endpoints", json.dumps(connect))
     if mode == "client":
         config.insert_json5("listen/endpoints", "[]")
+    if leaf and mode == "peer":
+        config.insert_json5("scouting/gossip/autoconnect", LEAF_AUTOCONNECT)
     # A process started beside the world (conag run starts them together) may find it not yet
     # listening: try again within a tenth of a second, not after zenoh's 1 s, 2 s, 4 s backoff,
     # by which time a short lockstep build can be over.
@@ -100,9 +111,10 @@ class EndpointInUse(ValueError):
     """A session could not listen where it was asked to: something listens there already."""
 
 
-def open_session(opts: BusOptions, *, serve: bool = False):
-    """Open a zenoh session (quiet logs unless RUST_LOG says otherwise). EndpointInUse, naming
-    the endpoint, where another process listens already (zenoh's ZError otherwise)."""
+def open_session(opts: BusOptions, *, serve: bool = False, leaf: bool = False):
+    """Open a zenoh session (quiet logs unless RUST_LOG says otherwise); `serve` and `leaf` as
+    in `make_config`. EndpointInUse, naming the endpoint, where another process listens
+    already (zenoh's ZError otherwise)."""
     import zenoh
 
     if opts.mode == "router":
@@ -110,7 +122,7 @@ def open_session(opts: BusOptions, *, serve: bool = False):
         os.environ.setdefault("ZENOH_RUNTIME", ROUTER_RUNTIME)
     zenoh.init_log_from_env_or("error")
     try:
-        return zenoh.open(make_config(opts, serve=serve))
+        return zenoh.open(make_config(opts, serve=serve, leaf=leaf))
     except zenoh.ZError as exc:
         m = re.search(r"listener bound to (\S+?): \[.*Address already in use", str(exc))
         if m is None:
