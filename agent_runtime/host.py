@@ -9,7 +9,8 @@ the agents of one host think one after another, as in the in-process simulator.
 What it buys: the interpreter, numpy, numba and the compiled kernels are loaded once per
 host instead of once per agent (an agent process costs about 75 MB of private memory and
 most of a second of CPU to start, a hosted agent a few MB and a few milliseconds), and
-the world sends its frames over one connection per host. What it costs: the agents of a
+the world sends its frames over one connection per host; the commands of the agents
+stepped in one pass over the host's frames go back together, in one zenoh batch. What it costs: the agents of a
 host share one core, and a crash of the host (a SIGKILL, an exception) takes all of them.
 One agent is stopped alone by a line `stop ID` on the host's stdin (`conag run` does that
 for `conag kill ID`): it closes that agent's links, its token goes, and the world treats
@@ -27,6 +28,7 @@ import re
 import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import replace
 
 from agent_runtime.node import AgentOptions, AgentProcess, AgentReport
@@ -81,19 +83,28 @@ class AgentHost:
     def serve(self, stop: threading.Event | None = None) -> None:
         """Step whichever agent has a new frame until `stop` is set or no agent is left."""
         pause = 0.0
+        outbox: list[Callable[[], None]] = []
         while self.agents and (stop is None or not stop.is_set()):
             self._apply_stop_requests()
             stepped = False
             for agent in list(self.agents.values()):
                 frame = agent.link.next_frame(agent.tick, timeout=0.0)
                 if frame is not None:
-                    agent.step(frame)
+                    agent.step(frame, outbox)
                     stepped = True
                 elif agent.link.world_lost:
                     # The world died (`conag run` restarts it from its checkpoint): wait for it
-                    # and attach again, as a lone agent does; the others follow at once.
+                    # and attach again, as a lone agent does; the others follow at once. The
+                    # commands not yet sent answer the dead world's frames: they go too.
+                    outbox.clear()
                     agent.reattach(stop)
                     stepped = True
+            # The pass's commands together, after it: zenoh writes them to the world in one
+            # batch, and the world wakes once for them, not once per agent (a lockstep world
+            # waits for them all anyway).
+            for send in outbox:
+                send()
+            outbox.clear()
             if stepped:
                 pause = 0.0
             else:

@@ -29,7 +29,9 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
@@ -187,15 +189,22 @@ class AgentProcess:
                             "come back ...", a, w, self.tick, waited, w)
                 said = waited
 
-    def step(self, frame) -> None:
-        """Learn from the reinforcements that came, decide, act, tell the teacher, report."""
+    def step(self, frame, outbox: list[Callable[[], None]] | None = None) -> None:
+        """Learn from the reinforcements that came, decide, act, tell the teacher, report.
+
+        The command goes to the world at once, or with `outbox` is left there as a call that
+        sends it (a host sends its agents' commands together: `agent_runtime.host`)."""
         learning, student, teacher = self.learning, self.student, self.teacher
         if teacher is not None:
             for d, r in teacher.poll(wait=learning.wait):
                 student.learn(d.state, d.arm, d.motor, r.arm, r.motor, learning.eta)
         self.feeds.before_step(self.brain)
         step = self.brain.step(frame)
-        self.link.send(frame.tick, step.speed, step.turn, step.action)
+        send = partial(self.link.send, frame.tick, step.speed, step.turn, step.action)
+        if outbox is None:
+            send()
+        else:
+            outbox.append(send)
         if teacher is not None:
             teacher.publish(step.decision)
         else:

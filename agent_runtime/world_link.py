@@ -75,8 +75,9 @@ class WorldLink:
                                                                   zenoh.handlers.RingChannel(1)))
         qos = dict(congestion_control=zenoh.CongestionControl.BLOCK, reliability=zenoh.Reliability.RELIABLE) \
             if block else {}
-        self._pub = self._declared.add(session.declare_publisher(keys.command(world_id, agent_id), express=True,
-                                                                 **qos))
+        # Not express: the commands of a host's agents, sent together (agent_runtime.host),
+        # leave in one batch; a lone command still leaves at once.
+        self._pub = self._declared.add(session.declare_publisher(keys.command(world_id, agent_id), **qos))
         self._world_up = threading.Event()  # the world's liveliness token is there
         self.world_lost = False             # the token went since the last attach
         self._declared.add(watch_tokens(session, keys.world_token(world_id), self._on_world_token))

@@ -214,11 +214,12 @@ MAX_PEER_AGENTS = 32  # agent processes that still connect as peers with agent_m
 
 
 def agent_bus_mode(mode: str, processes: int) -> str:
-    """The zenoh mode of a run's agent processes. Peers reach each other directly (zenoh's
-    gossip makes a full mesh, n(n-1)/2 connections): quickest for a few, but 100 agent
-    processes opening 4,950 connections on two cores did not attach within 30 s. Clients
-    connect to the world alone, which routes for them. "auto": peers up to MAX_PEER_AGENTS
-    processes, clients beyond."""
+    """The zenoh mode of a run's agent processes. Agent peers link to the world and are
+    linked to by the processes that want their messages (recorder, teacher, viewer,
+    supervisor), never to each other (`protocol.bus.session.LEAF_AUTOCONNECT`; before that,
+    100 agent peers opened 4,950 connections among themselves and did not attach within
+    30 s). Clients connect to the world alone, which routes for them. "auto": peers up to
+    MAX_PEER_AGENTS processes, clients beyond."""
     if mode != "auto":
         return mode
     return "peer" if processes <= MAX_PEER_AGENTS else "client"
