@@ -432,12 +432,17 @@ class WorldServer:
                         tick, waited, ", ".join(gone) or "all")
 
     def _next_event(self, timeout: float) -> None:
-        """Handle the next bus event, if one comes within `timeout` seconds."""
+        """Handle the next bus event, if one comes within `timeout` seconds, and every event
+        queued behind it: what is due is worked out again only after the lot (it costs a
+        pass over the live agents, which once per command made a tick quadratic in the
+        agents: a host's commands come in a burst)."""
         try:
             event = self._events.get(timeout=timeout)
         except queue.Empty:
             return
         self._handle(event)
+        for _ in range(self._events.qsize()):  # those queued now: a flood cannot hold the loop here
+            self._handle(self._events.get_nowait())
 
     def _stepping_without(self, agents: list[str]) -> None:
         """Tell a recorder that this step goes without the commands of `agents` (late, or
