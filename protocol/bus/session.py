@@ -2,7 +2,8 @@
 
 One host, no server to install (the default): the world listens on DEFAULT_ENDPOINT in
 peer mode and every other process connects to it as a peer, listening on a free
-loopback port so that peers can also reach each other (gossip scouting, no multicast).
+loopback port so that peers can also reach each other (gossip scouting, no multicast);
+agent processes only accept such links, they open none (`LEAF_AUTOCONNECT`).
 (`conag run` gives its world a free endpoint of its own instead: conag/runs.py.) A world
 asked to listen where another process does fails at once with `EndpointInUse`.
 Several hosts: pass `--zenoh-config deploy/multi-host/client.json5` (or `--connect
