@@ -21,15 +21,18 @@ Side by side with a reference (issue 31): every row also runs on a git worktree 
 `--reference` (default f7f6a27, `bench_agent_step.REFERENCE`: the code before issue 31) or
 on the checkout `--reference-dir`, right after this tree's run of the same row, so both
 share the machine's state. Each side runs its own code: cwd and PYTHONPATH are its tree.
-The in-process measurement is a script passed with `python3 -c` (`CHILD`) that imports
-`sim.start` from `conag.sim` or, at f7f6a27, from the top-level `sim` package; the
-processes row is the same `conag run` command line on both sides (f7f6a27's `conag run`
-already has `--listen`, `--profile` and `--per-process`, and its world writes the same
-profile, so both sides' ticks/s come from their world's profile). Both trees load their
-compiled kernels once before the first row, so a fresh worktree's first row does not pay
-for compiling them. `--quick` leaves the reference out unless `--reference` or
-`--reference-dir` is given; `--no-reference` always does. Every run listens on a free
-port of its own (the machine may be shared).
+
+* The in-process measurement is a script passed with `python3 -c` (`CHILD`); it imports
+  `start` from `conag.sim.loop` or, before the package move (f7f6a27), from `sim.loop`.
+* The processes row is the same `conag run` command line on both sides: f7f6a27's
+  `conag run` already has `--listen`, `--profile` and `--per-process`, and its world writes
+  the same profile, so both sides' ticks/s come from their world's profile. A reference
+  without those flags fails its first row with its own usage message.
+* Both trees load their compiled kernels before the first row (a 3-tick in-process run
+  and a 3-tick `conag run`), so a fresh worktree's first row does not pay for compiling.
+* `--quick` leaves the reference out unless `--reference` or `--reference-dir` is given;
+  `--no-reference` always does.
+* Every run listens on a free port of its own (the machine may be shared).
 
 Every row runs a fixed number of ticks (`--ticks`, fewer for large teams: at most
 `--agent-ticks` agent steps), so the bench ends in bounded time. Reported per row:
@@ -388,8 +391,11 @@ def lockstep(trees: dict[str, Path], scenario: str, args) -> list[dict]:
     """The lockstep rows; each run on this tree is followed at once by the same run on the
     reference (`trees["reference"]`, if any)."""
     rows = []
-    for tree in trees.values():  # compile and cache both sides' kernels before anything is timed
+    for side, tree in trees.items():  # compile and cache both sides' kernels before anything is timed
+        t0 = time.monotonic()
         in_process(tree, scenario, 1, 3)
+        as_processes(tree, scenario, 1, 3, 1)  # conag run's own kernels too (the layout check)
+        print(f"{side}: kernels loaded ({time.monotonic() - t0:.0f} s)", file=sys.stderr, flush=True)
     for n in args.agents:
         ticks = row_ticks(n, args.ticks, args.agent_ticks)
         sims = {}
