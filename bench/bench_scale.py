@@ -391,7 +391,11 @@ def lockstep(trees: dict[str, Path], scenario: str, args) -> list[dict]:
     """The lockstep rows; each run on this tree is followed at once by the same run on the
     reference (`trees["reference"]`, if any)."""
     rows = []
+    warmed: set[Path] = set()
     for side, tree in trees.items():  # compile and cache both sides' kernels before anything is timed
+        if tree.resolve() in warmed:
+            continue  # the reference is this tree (--reference-dir .)
+        warmed.add(tree.resolve())
         t0 = time.monotonic()
         in_process(tree, scenario, 1, 3)
         as_processes(tree, scenario, 1, 3, 1)  # conag run's own kernels too (the layout check)

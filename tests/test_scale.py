@@ -222,6 +222,7 @@ def test_the_scale_benchmark_quick_run_prints_both_tables(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(600)
 def test_the_scale_benchmark_runs_each_row_at_the_reference_too(tmp_path):
     """This checkout as its own reference (`--reference-dir`): the mechanics, without a worktree."""
     import subprocess
