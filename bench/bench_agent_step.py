@@ -13,6 +13,9 @@ before the cheaper step), one after the other for each row and `--repeats` times
 alternation, so both sides share the machine's load; the table gives both medians and
 their ratio. Both sides also hash every decision (speed, turn, action, behaviour, state
 nodes, outputs): "same decisions" says whether the two codes chose alike, step for step.
+
+`REFERENCE` and `reference_checkout` are shared with `bench_scale`: one reference commit for
+the benches of issue 31.
 """
 
 from __future__ import annotations
@@ -24,6 +27,8 @@ import statistics
 import subprocess
 import sys
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from world_server.suite import materialise
@@ -85,8 +90,24 @@ def reference_tree(rev: str, where: Path) -> Path:
     r = subprocess.run(["git", "worktree", "add", "--detach", "-f", str(tree), rev], cwd=ROOT,
                        capture_output=True, text=True, check=False)
     if r.returncode != 0:
-        raise SystemExit(f"bench_agent_step: cannot make a worktree of {rev}: {r.stderr.strip()}")
+        raise SystemExit(f"{Path(sys.argv[0]).stem}: cannot make a worktree of {rev}: {r.stderr.strip()}")
     return tree
+
+
+@contextmanager
+def reference_checkout(rev: str, directory: Path | None = None) -> Iterator[Path]:
+    """The reference tree: `directory` if given (an existing checkout, left as it is), else a
+    detached git worktree of `rev` in a temporary directory, removed again at the end."""
+    if directory is not None:
+        yield directory.resolve()
+        return
+    with tempfile.TemporaryDirectory(prefix="bench-reference-") as tmp:
+        tree = reference_tree(rev, Path(tmp))
+        try:
+            yield tree
+        finally:
+            subprocess.run(["git", "worktree", "remove", "--force", str(tree)], cwd=ROOT, capture_output=True,
+                           check=False)
 
 
 def compare(trees: dict[str, Path], layouts, maps, warmup: int, ticks: int, repeats: int):
@@ -118,24 +139,18 @@ def main(argv: list[str] | None = None) -> int:
     warmup, ticks = (20, 20) if args.quick else (args.warmup, args.ticks)
     maps = [int(m) for m in args.maps.split(",")]
     materialise(MANIFEST, SUITE)
-    with tempfile.TemporaryDirectory(prefix="bench-agent-step-") as tmp:
-        ref = args.reference_dir or reference_tree(args.reference, Path(tmp))
-        try:
-            print(f"| layout | world | agents | map | step median ms, this | at {args.reference} | ratio "
-                  "| same decisions |")
-            print("|---|---|---:|---:|---:|---:|---:|---|")
-            rows = []
-            for r in compare({"this": ROOT, "reference": ref}, LAYOUTS, maps, warmup, ticks, args.repeats):
-                rows.append(r)
-                print(f"| {r['layout']} | {r['size']} | {r['agents']} | {r['map']} | {r['this_ms']:.3f} | "
-                      f"{r['ref_ms']:.3f} | {r['ref_ms'] / r['this_ms']:.2f}x | {'yes' if r['same'] else 'no'} |",
-                      flush=True)
-            if args.json:
-                args.json.write_text(json.dumps(rows, indent=1) + "\n", encoding="utf-8")
-        finally:
-            if args.reference_dir is None:
-                subprocess.run(["git", "worktree", "remove", "--force", str(ref)], cwd=ROOT, capture_output=True,
-                               check=False)
+    with reference_checkout(args.reference, args.reference_dir) as ref:
+        print(f"| layout | world | agents | map | step median ms, this | at {args.reference} | ratio "
+              "| same decisions |")
+        print("|---|---|---:|---:|---:|---:|---:|---|")
+        rows = []
+        for r in compare({"this": ROOT, "reference": ref}, LAYOUTS, maps, warmup, ticks, args.repeats):
+            rows.append(r)
+            print(f"| {r['layout']} | {r['size']} | {r['agents']} | {r['map']} | {r['this_ms']:.3f} | "
+                  f"{r['ref_ms']:.3f} | {r['ref_ms'] / r['this_ms']:.2f}x | {'yes' if r['same'] else 'no'} |",
+                  flush=True)
+        if args.json:
+            args.json.write_text(json.dumps(rows, indent=1) + "\n", encoding="utf-8")
     return 0
 
 

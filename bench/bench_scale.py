@@ -4,6 +4,8 @@
     python3 -m bench.bench_scale --agents 1,3,10 --ticks 300
     python3 -m bench.bench_scale --per-process 1,20       # processes of 1 agent, and of 20 (conag agents)
     python3 -m bench.bench_scale --json scale.json
+    python3 -m bench.bench_scale --reference-dir ../old     # an existing checkout as the reference
+    python3 -m bench.bench_scale --no-reference             # this tree alone
 
 For each agent count, on one scenario and seed (`scenarios/large/scale.toml` by default: a
 generated 60 x 60 world, 136 open sites, room for 100 agents round its starts), one after
@@ -15,10 +17,29 @@ the other on the same machine:
   process and one process per agent (with `--per-process K`, `conag agents` processes of K
   agents each), over zenoh on loopback, in lockstep.
 
+Side by side with a reference (issue 31): every row also runs on a git worktree of
+`--reference` (default f7f6a27, `bench_agent_step.REFERENCE`: the code before issue 31) or
+on the checkout `--reference-dir`, right after this tree's run of the same row, so both
+share the machine's state. Each side runs its own code: cwd and PYTHONPATH are its tree.
+
+* The in-process measurement is a script passed with `python3 -c` (`CHILD`); it imports
+  `start` from `conag.sim.loop` or, before the package move (f7f6a27), from `sim.loop`.
+* The processes row is the same `conag run` command line on both sides: f7f6a27's
+  `conag run` already has `--listen`, `--profile` and `--per-process`, and its world writes
+  the same profile, so both sides' ticks/s come from their world's profile. A reference
+  without those flags fails its first row with its own usage message.
+* Both trees load their compiled kernels before the first row (a 3-tick in-process run
+  and a 3-tick `conag run`), so a fresh worktree's first row does not pay for compiling.
+* `--quick` leaves the reference out unless `--reference` or `--reference-dir` is given;
+  `--no-reference` always does.
+* Every run listens on a free port of its own (the machine may be shared).
+
 Every row runs a fixed number of ticks (`--ticks`, fewer for large teams: at most
 `--agent-ticks` agent steps), so the bench ends in bounded time. Reported per row:
 
 * ticks/s from the second tick to the last (start-up left out), and processes / in-process;
+* with a reference: its in-process and processes ticks/s, and this tree's processes ticks/s
+  over the reference's (issue 31's target: at least 3 with 10 agent processes);
 * the time from launching the interpreter(s) to the first tick (the world's first frames
   out), which includes imports, loading the compiled kernels and attaching;
 * memory as PSS and USS (from /proc/PID/smaps_rollup; RSS counts shared pages in every
@@ -36,17 +57,35 @@ The machine should be otherwise idle: on a shared one the figures swing widely.
 from __future__ import annotations
 
 import argparse
+import inspect
 import json
 import os
+import socket
 import subprocess
 import sys
 import tempfile
 import threading
 import time
+from contextlib import nullcontext
 from pathlib import Path
+
+from bench.bench_agent_step import REFERENCE, reference_checkout
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENARIO = "scenarios/large/scale.toml"
+
+
+def free_port() -> int:
+    """A TCP port free on loopback now (the kernel's pick): every run gets its own, as other
+    runs may share the machine."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def tree_env(tree: Path) -> dict[str, str]:
+    """The environment of a run of `tree`: its own packages first (cwd is the tree too)."""
+    return {**os.environ, "PYTHONPATH": str(tree)}
 
 
 # ------------------------------------------------------------------ memory
@@ -144,58 +183,85 @@ def _agents_in(cmd: str) -> int:
 
 # ------------------------------------------------------------------ in-process
 
-def sim_child(scenario: str, agents: int, ticks: int, launched: float, out: str) -> None:
-    """The in-process row, run in a fresh interpreter (`--child`): imports count in its start-up."""
+# Runs in a fresh interpreter (`python3 -c`, cwd and PYTHONPATH the tree measured), so
+# imports count in its start-up; `smaps` is prepended. It must run on this tree's package
+# layout and on the one before the move (`sim` at the top level, as at f7f6a27).
+CHILD_MAIN = r"""
+import json, os, sys, time
+from pathlib import Path
+try:
     from conag.sim.loop import start
-    from world_server.scenario import load_scenario
+except ImportError:
+    from sim.loop import start
+from world_server.scenario import load_scenario
 
-    run = start(load_scenario(scenario), agents=agents)
-    run.step()
-    first = time.monotonic() - launched
-    world_s = agents_s = 0.0
-    mem = (0, 0)
-    t_start = time.perf_counter()
-    for i in range(ticks - 1):
-        t0 = time.perf_counter()
-        frames = run.world.frames()
-        t1 = time.perf_counter()
-        for frame in frames:
-            s = run.brains[frame.agent_id].step(frame)
-            run.world.set_command(frame.agent_id, s.speed, s.turn, s.action)
-        t2 = time.perf_counter()
-        run.world.step()
-        world_s += time.perf_counter() - t2 + (t1 - t0)
-        agents_s += t2 - t1
-        if i == ticks // 2:
-            mem = smaps(os.getpid())
-    seconds = time.perf_counter() - t_start
-    n = max(ticks - 1, 1)
-    Path(out).write_text(json.dumps({
-        "rate": n / seconds, "first_tick_s": first, "world_ms": 1000 * world_s / n, "agents_ms": 1000 * agents_s / n,
-        "total_pss_mb": mem[0] / 2**20, "total_uss_mb": mem[1] / 2**20,
-        "sites": f"{int(run.world.sites_filled().sum())}/{len(run.world.sites_xy)}"}))
+scenario, agents, ticks, launched, out = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), float(sys.argv[4]), \
+    sys.argv[5]
+run = start(load_scenario(scenario), agents=agents)
+run.step()
+first = time.monotonic() - launched
+world_s = agents_s = 0.0
+mem = (0, 0)
+t_start = time.perf_counter()
+for i in range(ticks - 1):
+    t0 = time.perf_counter()
+    frames = run.world.frames()
+    t1 = time.perf_counter()
+    for frame in frames:
+        s = run.brains[frame.agent_id].step(frame)
+        run.world.set_command(frame.agent_id, s.speed, s.turn, s.action)
+    t2 = time.perf_counter()
+    run.world.step()
+    world_s += time.perf_counter() - t2 + (t1 - t0)
+    agents_s += t2 - t1
+    if i == ticks // 2:
+        mem = smaps(os.getpid())
+seconds = time.perf_counter() - t_start
+n = max(ticks - 1, 1)
+Path(out).write_text(json.dumps({
+    "rate": n / seconds, "first_tick_s": first, "world_ms": 1000 * world_s / n, "agents_ms": 1000 * agents_s / n,
+    "total_pss_mb": mem[0] / 2**20, "total_uss_mb": mem[1] / 2**20,
+    "sites": f"{int(run.world.sites_filled().sum())}/{len(run.world.sites_xy)}"}))
+"""
+CHILD = inspect.getsource(smaps) + CHILD_MAIN
 
 
-def in_process(scenario: str, agents: int, ticks: int) -> dict:
+def in_process(tree: Path, scenario: str, agents: int, ticks: int) -> dict:
+    """The in-process row on `tree`'s code."""
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "sim.json"
         launched = time.monotonic()
-        subprocess.run([sys.executable, "-m", "bench.bench_scale", "--child", scenario, str(agents), str(ticks),
-                        repr(launched), str(out)], cwd=ROOT, check=True)
+        r = subprocess.run([sys.executable, "-c", CHILD, scenario, str(agents), str(ticks), repr(launched), str(out)],
+                           cwd=tree, env=tree_env(tree), capture_output=True, text=True, check=False)
+        if r.returncode != 0:
+            raise RuntimeError(f"the in-process run failed in {tree}:\n{r.stderr[-3000:]}")
         return json.loads(out.read_text())
+
+
+NO_SIM = {"rate": float("nan"), "first_tick_s": float("nan"), "world_ms": float("nan"), "agents_ms": float("nan"),
+          "total_pss_mb": float("nan")}
 
 
 # ------------------------------------------------------------------ processes
 
-def as_processes(scenario: str, agents: int, ticks: int, port: int, per_process: int) -> dict:
+def processes_command(scenario: str, agents: int, ticks: int, port: int, per_process: int, profile: Path) -> list[str]:
+    """The processes row's command line, the same for this tree and the reference (f7f6a27's
+    `conag run` has every flag used here)."""
+    cmd = [sys.executable, "-m", "conag", "run", scenario, "--agents", str(agents), "--max-ticks", str(ticks),
+           "--stall-ticks", "0", "--headless", "--listen", f"tcp/127.0.0.1:{port}", "--profile", str(profile)]
+    if per_process > 1:
+        cmd += ["--per-process", str(per_process)]
+    return cmd
+
+
+def as_processes(tree: Path, scenario: str, agents: int, ticks: int, per_process: int) -> dict:
+    """The processes row on `tree`'s code, on a free port of its own."""
     with tempfile.TemporaryDirectory() as tmp:
         profile = Path(tmp) / "world.json"
-        cmd = [sys.executable, "-m", "conag", "run", scenario, "--agents", str(agents), "--max-ticks", str(ticks),
-               "--stall-ticks", "0", "--headless", "--listen", f"tcp/127.0.0.1:{port}", "--profile", str(profile)]
-        if per_process > 1:
-            cmd += ["--per-process", str(per_process)]
+        cmd = processes_command(scenario, agents, ticks, free_port(), per_process, profile)
         launched = time.monotonic()
-        proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        proc = subprocess.Popen(cmd, cwd=tree, env=tree_env(tree), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                text=True)
         last = [""]
         samples = _MemorySampler(proc.pid)
         assert proc.stdout is not None
@@ -205,7 +271,7 @@ def as_processes(scenario: str, agents: int, ticks: int, port: int, per_process:
         mem = samples.middle()
         proc.wait()
         if not profile.exists():
-            raise RuntimeError(f"{' '.join(cmd)} wrote no profile (exit {proc.returncode}): {last[0]}")
+            raise RuntimeError(f"{' '.join(cmd)} in {tree} wrote no profile (exit {proc.returncode}): {last[0]}")
         prof = json.loads(profile.read_text())
     busy = sum(prof[k] for k in ("step", "publish", "wait", "other"))
     per_tick = prof["per_tick_ms"]
@@ -228,7 +294,7 @@ def realtime_scenario(scenario: str, out: Path, rate: float) -> Path:
     return out
 
 
-def realtime(scenario: str, agents: int, seconds: float, port: int, per_process: int, rate: float) -> dict:
+def realtime(scenario: str, agents: int, seconds: float, per_process: int, rate: float) -> dict:
     """Run `conag run` in realtime mode at `rate`; once every agent is alive, `seconds` more
     (after the world's own 2 s warm-up), then stop it; the world's profile says how fast it
     ticked and how far behind the agents' commands were."""
@@ -236,9 +302,10 @@ def realtime(scenario: str, agents: int, seconds: float, port: int, per_process:
         profile = Path(tmp) / "world.json"
         sc = realtime_scenario(scenario, Path(tmp) / "realtime.toml", rate)
         cmd = [sys.executable, "-m", "conag", "run", str(sc), "--agents", str(agents), "--stall-ticks", "0",
-               "--headless", "--listen", f"tcp/127.0.0.1:{port}", "--profile", str(profile),
+               "--headless", "--listen", f"tcp/127.0.0.1:{free_port()}", "--profile", str(profile),
                "--per-process", str(per_process)]
-        proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        proc = subprocess.Popen(cmd, cwd=ROOT, env=tree_env(ROOT), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                text=True)
         assert proc.stdout is not None
         everyone = f"agents alive {agents}/{agents}"
         for line in proc.stdout:
@@ -285,21 +352,76 @@ def row_ticks(agents: int, ticks: int, agent_ticks: int, min_ticks: int = 60) ->
     return max(min_ticks, min(ticks, agent_ticks // agents))
 
 
-def table(rows: list[dict]) -> str:
-    head = ("| agents | per process | ticks | in-process ticks/s | processes ticks/s | ratio | first tick in-process s "
-            "| first tick processes s | PSS per agent MB | USS per agent MB | total PSS MB (in-process) "
-            "| in-process: world / agents ms | world process: step / publish / wait ms |")
-    lines = [head, "|" + "---:|" * 13]
+def table(rows: list[dict], reference: str | None = None) -> str:
+    """The lockstep table; with `reference` (its label), three more columns from each row's
+    `ref_sim` and `ref_proc`: the reference's ticks/s and this tree's processes over its."""
+    nan = float("nan")
+    ref_head = (f" in-process ticks/s at {reference} | processes ticks/s at {reference} "
+                f"| processes this / {reference} |" if reference else "")
+    head = ("| agents | per process | ticks | in-process ticks/s | processes ticks/s | ratio |" + ref_head +
+            " first tick in-process s | first tick processes s | PSS per agent MB | USS per agent MB "
+            "| total PSS MB (in-process) | in-process: world / agents ms | world process: step / publish / wait ms |")
+    lines = [head, "|" + "---:|" * (16 if reference else 13)]
     for r in rows:
         s, p = r["sim"], r["proc"]
+        ref = ""
+        if reference:
+            rs, rp = r.get("ref_sim") or {}, r.get("ref_proc") or {}
+            ref_rate = rp.get("rate", nan)
+            ref = (f" {rs.get('rate', nan):.1f} | {ref_rate:.1f} "
+                   f"| {p['rate'] / ref_rate if ref_rate else nan:.2f} |")
         lines.append(
             f"| {r['agents']} | {r['per_process']} | {r['ticks']} | {s['rate']:.1f} | {p['rate']:.1f} "
-            f"| {p['rate'] / s['rate']:.2f} | {s['first_tick_s']:.1f} | {p['first_tick_s']:.1f} "
-            f"| {p.get('agent_pss_mb', float('nan')):.0f} | {p.get('agent_uss_mb', float('nan')):.0f} "
-            f"| {p.get('total_pss_mb', float('nan')):.0f} ({s['total_pss_mb']:.0f}) "
+            f"| {p['rate'] / s['rate'] if s['rate'] else nan:.2f} |{ref} {s['first_tick_s']:.1f} "
+            f"| {p['first_tick_s']:.1f} "
+            f"| {p.get('agent_pss_mb', nan):.0f} | {p.get('agent_uss_mb', nan):.0f} "
+            f"| {p.get('total_pss_mb', nan):.0f} ({s['total_pss_mb']:.0f}) "
             f"| {s['world_ms']:.2f} / {s['agents_ms']:.1f} "
             f"| {p['step_ms']:.2f} / {p['publish_ms']:.2f} / {p['wait_ms']:.1f} |")
     return "\n".join(lines)
+
+
+def tree_label(tree: Path, fallback: str) -> str:
+    """A checkout's short commit hash (`fallback` if it is not a git checkout)."""
+    r = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=tree, capture_output=True, text=True, check=False)
+    return r.stdout.strip() if r.returncode == 0 and r.stdout.strip() else fallback
+
+
+def lockstep(trees: dict[str, Path], scenario: str, args) -> list[dict]:
+    """The lockstep rows; each run on this tree is followed at once by the same run on the
+    reference (`trees["reference"]`, if any)."""
+    rows = []
+    warmed: set[Path] = set()
+    for side, tree in trees.items():  # compile and cache both sides' kernels before anything is timed
+        if tree.resolve() in warmed:
+            continue  # the reference is this tree (--reference-dir .)
+        warmed.add(tree.resolve())
+        t0 = time.monotonic()
+        in_process(tree, scenario, 1, 3)
+        as_processes(tree, scenario, 1, 3, 1)  # conag run's own kernels too (the layout check)
+        print(f"{side}: kernels loaded ({time.monotonic() - t0:.0f} s)", file=sys.stderr, flush=True)
+    for n in args.agents:
+        ticks = row_ticks(n, args.ticks, args.agent_ticks)
+        sims = {}
+        for side, tree in trees.items():
+            t0 = time.monotonic()
+            sims[side] = NO_SIM if args.no_sim else in_process(tree, scenario, n, ticks)
+            print(f"{n} agents, {ticks} ticks in-process, {side}: {sims[side]['rate']:.1f} ticks/s, first tick "
+                  f"after {sims[side]['first_tick_s']:.1f} s ({time.monotonic() - t0:.0f} s)", file=sys.stderr,
+                  flush=True)
+        for k in args.per_process:
+            if k > 1 and k >= n * 2:
+                continue  # one host for everyone is the in-process row again, plus the bus
+            procs = {}
+            for side, tree in trees.items():
+                t0 = time.monotonic()
+                procs[side] = proc = as_processes(tree, scenario, n, ticks, k)
+                print(f"{n} agents, {k} per process, {side}: {proc['rate']:.1f} ticks/s, first tick after "
+                      f"{proc['first_tick_s']:.1f} s, {proc.get('total_pss_mb', 0):.0f} MB PSS in total "
+                      f"({time.monotonic() - t0:.0f} s)", file=sys.stderr, flush=True)
+            rows.append({"agents": n, "per_process": k, "ticks": ticks, "sim": sims["this"], "proc": procs["this"],
+                         "ref_sim": sims.get("reference"), "ref_proc": procs.get("reference")})
+    return rows
 
 
 def _ints(text: str) -> list[int]:
@@ -307,10 +429,6 @@ def _ints(text: str) -> list[int]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    if argv is None and len(sys.argv) > 1 and sys.argv[1] == "--child":
-        scenario, agents, ticks, launched, out = sys.argv[2:7]
-        sim_child(scenario, int(agents), int(ticks), float(launched), out)
-        return 0
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--scenario", default=SCENARIO)
     p.add_argument("--agents", type=_ints, default=[1, 3, 10, 30, 100], metavar="N,N,...")
@@ -320,57 +438,49 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--agent-ticks", type=int, default=20000,
                    help="at most this many agent steps per row: fewer ticks for large teams (default 20000)")
     p.add_argument("--no-sim", action="store_true", help="skip the in-process runs (their columns say nan)")
+    p.add_argument("--reference", metavar="REV",
+                   help=f"the commit every lockstep row also runs at, in a git worktree (default {REFERENCE})")
+    p.add_argument("--reference-dir", type=Path, metavar="PATH",
+                   help="an existing checkout of the reference, instead of a worktree")
+    p.add_argument("--no-reference", action="store_true", help="this tree alone")
     p.add_argument("--realtime", type=_ints, default=[], metavar="N,N,...",
                    help="also run these agent counts in realtime mode at --rate: does the tick keep up?")
     p.add_argument("--rate", type=float, default=20.0, help="realtime ticks per second (default 20)")
     p.add_argument("--seconds", type=float, default=10.0, help="seconds measured per realtime row (default 10)")
-    p.add_argument("--port", type=int, default=17900)
     p.add_argument("--json", metavar="PATH", help="write every figure as JSON")
     p.add_argument("--quick", action="store_true",
-                   help="a smoke run (1 and 2 agents, 300 ticks, 1 s of realtime), not a measurement")
+                   help="a smoke run (1 and 2 agents, 300 ticks, 1 s of realtime; no reference unless "
+                        "--reference or --reference-dir), not a measurement")
     args = p.parse_args(argv)
     if args.quick:
         args.agents, args.per_process, args.ticks, args.realtime, args.seconds = [1, 2], [1, 2], 300, [2], 1.0
-    rows = []
-    port = args.port
-    for n in args.agents:
-        ticks = row_ticks(n, args.ticks, args.agent_ticks)
-        t0 = time.monotonic()
-        sim = (in_process(args.scenario, n, ticks) if not args.no_sim else
-               {"rate": float("nan"), "first_tick_s": float("nan"), "world_ms": float("nan"),
-                "agents_ms": float("nan"), "total_pss_mb": float("nan")})
-        print(f"{n} agents, {ticks} ticks in-process: {sim['rate']:.1f} ticks/s, first tick after "
-              f"{sim['first_tick_s']:.1f} s ({time.monotonic() - t0:.0f} s)", file=sys.stderr, flush=True)
-        for k in args.per_process:
-            if k > 1 and k >= n * 2:
-                continue  # one host for everyone is the in-process row again, plus the bus
-            t0 = time.monotonic()
-            port += 1
-            proc = as_processes(args.scenario, n, ticks, port, k)
-            print(f"{n} agents, {k} per process: {proc['rate']:.1f} ticks/s, first tick after "
-                  f"{proc['first_tick_s']:.1f} s, {proc.get('total_pss_mb', 0):.0f} MB PSS in total "
-                  f"({time.monotonic() - t0:.0f} s)", file=sys.stderr, flush=True)
-            rows.append({"agents": n, "per_process": k, "ticks": ticks, "sim": sim, "proc": proc})
+    scenario = str((ROOT / args.scenario).resolve())  # both sides load this tree's scenario file
+    with_reference = not args.no_reference and (not args.quick or args.reference or args.reference_dir)
+    rev = args.reference or REFERENCE
+    with reference_checkout(rev, args.reference_dir) if with_reference else nullcontext() as ref:
+        trees = {"this": ROOT} | ({"reference": ref} if ref is not None else {})
+        label = None if ref is None else tree_label(ref, str(ref)) if args.reference_dir else rev
+        rows = lockstep(trees, scenario, args) if args.agents else []
     live = []
     for n in args.realtime:
         for k in args.per_process:
             if k > 1 and k >= n * 2:
                 continue
-            port += 1
-            live.append(realtime(args.scenario, n, args.seconds, port, k, args.rate))
+            live.append(realtime(scenario, n, args.seconds, k, args.rate))
             r = live[-1]
             print(f"{n} agents, {k} per process, realtime {args.rate:g} Hz: {r['rate']:.1f} ticks/s, "
                   f"{100 * r['answered']:.0f}% of frames answered, {100 * r['stale_share']:.1f}% of commands "
                   f"older than one tick", file=sys.stderr, flush=True)
-    print(f"{args.scenario}, {os.cpu_count()} cores, load average at the end {os.getloadavg()[0]:.1f}\n")
+    print(f"{args.scenario}, {os.cpu_count()} cores, load average at the end {os.getloadavg()[0]:.1f}"
+          + (f"; reference {label}" if label else "") + "\n")
     if rows:
-        print(table(rows))
+        print(table(rows, label))
     if live:
         print()
         print(realtime_table(live))
     if args.json:
-        Path(args.json).write_text(json.dumps({"lockstep": rows, "realtime": live}, indent=2) + "\n",
-                                   encoding="utf-8")
+        Path(args.json).write_text(json.dumps({"reference": label, "lockstep": rows, "realtime": live}, indent=2)
+                                   + "\n", encoding="utf-8")
     return 0
 
 

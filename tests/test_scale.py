@@ -168,25 +168,79 @@ def test_a_realtime_row_is_kept_only_if_the_agents_answered_nearly_every_frame()
     assert "| 50 | 10 | 20 | 20.0 | 8264 | 69% | 0.0% | 1 | no |" in realtime_table([row])
 
 
+def test_the_scale_table_gives_the_reference_side_by_side_when_there_is_one():
+    from bench.bench_scale import NO_SIM, table
+
+    sim = {"rate": 80.0, "first_tick_s": 1.5, "world_ms": 0.5, "agents_ms": 11.0, "total_pss_mb": 150.0}
+    proc = {"rate": 60.0, "first_tick_s": 3.0, "step_ms": 0.4, "publish_ms": 0.2, "wait_ms": 15.0,
+            "agent_pss_mb": 70.0, "agent_uss_mb": 40.0, "total_pss_mb": 900.0}
+    row = {"agents": 10, "per_process": 1, "ticks": 600, "sim": sim, "proc": proc, "ref_sim": None, "ref_proc": None}
+    alone = table([row]).splitlines()
+    assert "at " not in alone[0] and alone[1].count("|") == 14
+    assert alone[2] == ("| 10 | 1 | 600 | 80.0 | 60.0 | 0.75 | 1.5 | 3.0 | 70 | 40 | 900 (150) | 0.50 / 11.0 "
+                        "| 0.40 / 0.20 / 15.0 |")
+    both = table([row | {"ref_sim": sim | {"rate": 84.5}, "ref_proc": proc | {"rate": 20.0}}], "f7f6a27").splitlines()
+    assert ("| ratio | in-process ticks/s at f7f6a27 | processes ticks/s at f7f6a27 | processes this / f7f6a27 "
+            "| first tick in-process s |") in both[0]
+    assert both[1].count("|") == both[0].count("|") == 17
+    assert both[2].startswith("| 10 | 1 | 600 | 80.0 | 60.0 | 0.75 | 84.5 | 20.0 | 3.00 | 1.5 | 3.0 |")
+    # no in-process runs (--no-sim): its figures say nan, the rest stands
+    assert "| 60.0 | nan | nan | 20.0 | 3.00 |" in table([row | {"sim": NO_SIM, "ref_sim": NO_SIM,
+                                                                "ref_proc": proc | {"rate": 20.0}}], "f7f6a27")
+
+
+def test_the_in_process_run_is_a_standalone_script_for_either_package_layout():
+    from bench.bench_scale import CHILD, free_port
+
+    compile(CHILD, "<bench_scale child>", "exec")  # smaps and the run, no import of bench
+    assert "from conag.sim.loop import start" in CHILD and "from sim.loop import start" in CHILD
+    assert "def smaps(" in CHILD and "bench" not in CHILD.replace("bench_scale", "")
+    assert 0 < free_port() < 65536
+
+
 @pytest.mark.slow
 def test_the_scale_benchmark_quick_run_prints_both_tables(tmp_path):
     import subprocess
     import sys
 
-    from tests.conftest import ROOT, free_port
+    from tests.conftest import ROOT
 
     out = tmp_path / "scale.json"
-    r = subprocess.run([sys.executable, "-m", "bench.bench_scale", "--quick", "--port", str(free_port()),
-                        "--json", str(out)], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    r = subprocess.run([sys.executable, "-m", "bench.bench_scale", "--quick", "--json", str(out)], cwd=ROOT,
+                       capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-3000:]
     rows = json.loads(out.read_text())
-    # 1 agent alone; 2 agents one process each and in one host of 2
+    # 1 agent alone; 2 agents one process each and in one host of 2; --quick: no reference
     assert [(row["agents"], row["per_process"]) for row in rows["lockstep"]] == [(1, 1), (2, 1), (2, 2)]
+    assert rows["reference"] is None and " at " not in r.stdout.split("| agents |")[1].splitlines()[0]
     for row in rows["lockstep"]:
         assert row["sim"]["rate"] > 0 and row["proc"]["rate"] > 0 and row["proc"]["first_tick_s"] > 0
         assert row["proc"]["agent_pss_mb"] > 0 and row["proc"]["total_pss_mb"] > row["proc"]["agent_pss_mb"]
+        assert row["ref_sim"] is None and row["ref_proc"] is None
     assert [(r_["agents"], r_["target"]) for r_ in rows["realtime"]] == [(2, 20.0), (2, 20.0)]
     assert "| 2 | 2 | 300 |" in r.stdout and "| kept |" in r.stdout
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(600)
+def test_the_scale_benchmark_runs_each_row_at_the_reference_too(tmp_path):
+    """This checkout as its own reference (`--reference-dir`): the mechanics, without a worktree."""
+    import subprocess
+    import sys
+
+    from tests.conftest import ROOT
+
+    out = tmp_path / "scale.json"
+    r = subprocess.run([sys.executable, "-m", "bench.bench_scale", "--agents", "1", "--ticks", "100",
+                        "--reference-dir", str(ROOT), "--json", str(out)], cwd=ROOT, capture_output=True, text=True,
+                       timeout=600)
+    assert r.returncode == 0, r.stderr[-3000:]
+    s = json.loads(out.read_text())
+    [row] = s["lockstep"]
+    assert s["reference"] and row["ref_sim"]["rate"] > 0 and row["ref_proc"]["rate"] > 0
+    assert row["ref_proc"]["agent_pss_mb"] > 0 and s["realtime"] == []
+    assert f"| processes this / {s['reference']} |" in r.stdout
+    assert r.stderr.count("1 agents, 1 per process, ") == 2  # this, then the reference
 
 
 def test_the_cpu_split_names_each_process_by_its_role_and_counts_threads_born_midway():
