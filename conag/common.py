@@ -1,4 +1,5 @@
-"""What every `conag` subcommand on the bus shares: the bus flags, and stopping on signals."""
+"""What every `conag` subcommand on the bus shares: the bus flags, one query, the status
+line, stopping on signals and the CPU priority of the helper processes."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ import argparse
 import os
 import signal
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
 from protocol.bus import MODES, BusOptions
@@ -43,6 +44,24 @@ def bus_options(args) -> BusOptions:
     return BusOptions(args.zenoh_config, tuple(args.connect), tuple(args.listen), args.mode)
 
 
+def query(session, key: str, payload: bytes | None, timeout: float) -> tuple[bytes | None, str | None]:
+    """Ask the queryable on `key` once: (its answer, None), (None, its error text), or
+    (None, None) when nothing answered within `timeout` seconds."""
+    replies = list(session.get(key, payload=payload, timeout=timeout))
+    for r in replies:
+        if r.ok is not None:
+            return r.ok.payload.to_bytes(), None
+        return None, r.err.payload.to_bytes().decode(errors="replace")
+    return None, None
+
+
+def status_line(st) -> str:
+    """One line of a WorldStatus, as `conag world` and `conag status` print it."""
+    return (f"tick {st.tick:>7}  sites {st.sites_filled}/{st.sites_total}  bricks {st.bricks_total}  "
+            f"agents alive {st.agents_alive}/{len(st.agent_ids)}  bad {st.bad_messages}  seq {st.seq}"
+            + ("  COMPLETE" if st.completed else ""))
+
+
 def ignore_repeat(_signum, _frame) -> None:
     """A signal handler for signals after the first: the process is already stopping."""
 
@@ -67,6 +86,31 @@ def stop_on_signals(on_stop: Callable[[], None] | None = None):
     previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         yield stop
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
+
+
+class _Stopped(Exception):
+    """Raised by `stopped_by_signal`'s handler, so a blocking wait ends at once."""
+
+
+@contextmanager
+def stopped_by_signal() -> Iterator[None]:
+    """The first SIGINT/SIGTERM raises `_Stopped` where the process waits (an agent, for a
+    frame), and the block ends quietly; later ones (a second Ctrl-C while closing) are let
+    pass, so the cleanup finishes without a traceback. The previous handlers come back
+    afterwards."""
+    def raise_stop(_signum, _frame):
+        for s in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(s, ignore_repeat)
+        raise _Stopped()
+
+    previous = {s: signal.signal(s, raise_stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    except _Stopped:
+        pass
     finally:
         for s, h in previous.items():
             signal.signal(s, h)

@@ -44,6 +44,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+from conag.agent_settings import AgentSettings
 from conag.common import RECORDER_PRIORITY
 from conag.secure import bus_flags, run_bus_options, secure_bus
 from protocol import keys
@@ -60,8 +61,10 @@ MAX_QUICK_DEATHS = 3  # a world dying this many times in a row soon after starti
 QUICK_DEATH = 10.0    # wall seconds: a death sooner than this after starting counts as quick
 
 
-@dataclass
+@dataclass(frozen=True)
 class RunOptions:
+    """What `conag run` runs, and how (`conag.commands.run` reads them from its flags)."""
+
     scenario_path: str
     scenario: Scenario
     endpoint: str
@@ -72,7 +75,7 @@ class RunOptions:
     summary: str | None = None
     headless: bool = False
     quiet: bool = False
-    extra_agent_args: tuple[str, ...] = ()
+    agent: AgentSettings = field(default_factory=AgentSettings)  # every agent's (the flags: AgentSettings.argv)
     teacher: bool = False             # also run a teacher process (`conag teacher`)
     weights_dir: str | None = None    # learning agents save their weights to weights_dir/<id>.json
     stall_ticks: int = DEFAULT_STALL_TICKS  # stop when no site is filled for this many ticks; 0: never
@@ -122,7 +125,7 @@ class Fleet:
         o = self.opts
         cmd = [sys.executable, "-m", "conag", "agents", "--ids", f"a{first}..a{last}", "--stdin-control",
                *self._bus_args(f"a{first}"), "--seed", str(o.seed if o.seed is not None else o.scenario.seed),
-               *o.extra_agent_args]
+               *o.agent.argv()]
         ids = [f"a{i}" for i in range(first, last + 1)]
         with self.lock:
             if self.closed:
@@ -136,7 +139,7 @@ class Fleet:
     def start(self, agent_id: str) -> subprocess.Popen:
         o = self.opts
         cmd = [sys.executable, "-m", "conag", "agent", "--id", agent_id, *self._bus_args(agent_id),
-               "--seed", str(o.seed if o.seed is not None else o.scenario.seed), *o.extra_agent_args]
+               "--seed", str(o.seed if o.seed is not None else o.scenario.seed), *o.agent.argv()]
         if o.weights_dir:
             weights = Path(o.weights_dir) / f"{agent_id}.json"
             cmd += ["--weights-out", str(weights)]
@@ -505,7 +508,7 @@ def _start_recorder(opts: RunOptions) -> subprocess.Popen:
     cmd = [sys.executable, "-m", "conag", "record", opts.record, "--world-id", opts.world_id,
            *bus_flags(opts, OBSERVER), "--scenario", opts.scenario_path, "--seed", str(seed),
            "--note", f"agents={opts.agents if opts.agents is not None else opts.scenario.agents}",
-           "--note", "agent_args=" + " ".join(opts.extra_agent_args), "--maps-every", str(opts.maps_every),
+           "--note", "agent_args=" + " ".join(opts.agent.argv()), "--maps-every", str(opts.maps_every),
            "--priority", opts.record_priority,
            "--note", f"checkpoint_every={opts.checkpoint_every}"]
     return subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)

@@ -1,14 +1,13 @@
-"""`conag keys OUTDIR` and the secure bus of `conag run --secure`.
+"""The secure bus of `conag run --secure`, and the agent's check of its credential.
 
-    conag keys OUTDIR --agents N [--world-id W] [--router tcp/HOST:7447] [--router-listen EP]
-
-writes a deployment (`protocol.bus.deployment`): a router configuration with user/password
-authentication and the access control of `protocol.bus.acl`, its credentials dictionary, and one
-client configuration per process (world, teacher, operator, observer, agent-a1..aN), all
-0600. `conag run --secure [DIR]` uses one (DIR, or a fresh one in the run's temporary
-directory): it starts `conag router` with it on the run's endpoint and starts every process
-as a client of that router with its own credential; its own session (progress, stall watch,
-`conag kill` / `restart`) is the operator.
+`conag keys OUTDIR` (`conag.commands.keys`) writes a deployment (`protocol.bus.deployment`):
+a router configuration with user/password authentication and the access control of
+`protocol.bus.acl`, its credentials dictionary, and one client configuration per process
+(world, teacher, operator, observer, agent-a1..aN), all 0600. `conag run --secure [DIR]`
+uses one (DIR, or a fresh one in the run's temporary directory): it starts `conag router`
+with it on the run's endpoint and starts every process as a client of that router with its
+own credential; its own session (progress, stall watch, `conag kill` / `restart`) is the
+operator.
 """
 
 from __future__ import annotations
@@ -24,57 +23,17 @@ from pathlib import Path
 from protocol.bus import BusOptions, make_config
 from protocol.bus.acl import OPERATOR, agent_user
 from protocol.bus.deployment import (
-    DEFAULT_ROUTER,
     ROUTER_FILE,
     DeploymentSpec,
     client_file,
     read_manifest,
-    users,
     write_deployment,
 )
-
-KEYS_HELP = "write a secure deployment: a router with access control and one credential per process"
-
-
-def add_commands(sub) -> None:
-    """Register `keys` on the main parser's subparsers."""
-    k = sub.add_parser("keys", help=KEYS_HELP, description=KEYS_HELP + " (files 0600; see deploy/README.md)")
-    k.add_argument("outdir", metavar="OUTDIR", help="directory to write (created 0700)")
-    k.add_argument("--agents", type=int, default=3, metavar="N", help="agent ids a1..aN (default 3)")
-    k.add_argument("--agent-id", action="append", default=[], metavar="ID",
-                   help="an agent id of its own (repeatable; instead of a1..aN)")
-    k.add_argument("--world-id", default="w0", help="the world these credentials are for (default w0)")
-    k.add_argument("--router", default=DEFAULT_ROUTER, metavar="ENDPOINT",
-                   help=f"where the clients connect (default {DEFAULT_ROUTER}; e.g. tcp/ROUTER_HOST:7447)")
-    k.add_argument("--router-listen", metavar="ENDPOINT",
-                   help="where the router listens (default: --router; e.g. tcp/0.0.0.0:7447 for several hosts)")
-    k.add_argument("--force", action="store_true", help="replace a deployment already in OUTDIR")
-    k.set_defaults(func=cmd_keys)
 
 
 def agent_ids(n: int) -> tuple[str, ...]:
     """The ids `conag run` gives its agents: a1..aN."""
     return tuple(f"a{i + 1}" for i in range(n))
-
-
-def cmd_keys(args) -> int:
-    if args.agents < 1 and not args.agent_id:
-        raise ValueError("--agents must be at least 1")
-    spec = DeploymentSpec(tuple(args.agent_id) or agent_ids(args.agents), args.world_id, args.router,
-                          args.router_listen)
-    try:
-        manifest = write_deployment(args.outdir, spec, force=args.force)
-    except FileExistsError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2  # a usage error, as the CLI's others
-    out = Path(args.outdir)
-    print(f"wrote a secure deployment for world {spec.world_id} to {out}/ (files 0600):")
-    print(f"  {ROUTER_FILE} + {manifest['dictionary_file']}: the router, listening on {manifest['listen']}")
-    for user in users(spec):
-        print(f"  {client_file(user)}: {user}")
-    print(f"start the router:  conag router --zenoh-config {out / ROUTER_FILE}")
-    print(f"then each process: conag agent --id a1 --zenoh-config {out / client_file('agent-a1')}  (and so on)")
-    return 0
 
 
 def check_agent_credential(zenoh_config: str | None, agent_id: str) -> None:

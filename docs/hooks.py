@@ -9,6 +9,8 @@
   of that file under `_repo/` (a markdown file is rendered as a page there), or, for the
   files a page of the site already carries (deploy/README.md, examples/), to that page.
   A link to a file that does not exist is a warning, so `mkdocs build --strict` fails on it.
+* The results pages' pictures under experiments/ are made, not committed: before the build,
+  those missing are drawn (`python3 -m experiments.pictures`, a minute or so on a fresh clone).
 """
 
 from __future__ import annotations
@@ -155,8 +157,7 @@ def _expand_includes(text: str, real_dir: Path, page_dir: str, config) -> str:
 
 def _cli_reference(root: Path) -> str:
     os.environ.setdefault("COLUMNS", "100")
-    if str(root) not in sys.path:  # this checkout's conag, whichever one pip installed
-        sys.path.insert(0, str(root))
+    _import_path(root)
     from conag.cli import build_parser
 
     parser = build_parser()
@@ -169,6 +170,22 @@ def _cli_reference(root: Path) -> str:
         parts.append(f"## conag {name}\n")
         parts.append("```text\n" + buf.getvalue() + "```\n")
     return "\n".join(parts)
+
+
+def _import_path(root: Path) -> None:
+    if str(root) not in sys.path:  # this checkout's packages, whichever ones pip installed
+        sys.path.insert(0, str(root))
+
+
+def on_pre_build(config, **_):
+    """Draw the pictures of experiments/ the pages link to that are not there yet."""
+    _import_path(_root(config))
+    from experiments import pictures
+
+    names = pictures.missing()
+    if names:
+        log.info("drawing %s (python3 -m experiments.pictures)", ", ".join(names))
+        pictures.draw(names)
 
 
 def on_files(files, config):

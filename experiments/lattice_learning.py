@@ -3,8 +3,9 @@
 For corner-seeded and side-seeded squares, over several seeds: collect the
 teacher's decisions, train the one-hidden-layer network (conag/baselines/learned.py),
 record errors per epoch, and check whether the trained network, driving the
-lattice simulation, builds the square.  Writes experiments/lattice_learning.png
-and experiments/lattice_learning.md.
+lattice simulation, builds the square.  Writes experiments/lattice_learning.png,
+experiments/lattice_learning.md and experiments/lattice_learning.json (the curves, from
+which `python3 -m experiments.pictures` draws the picture again).
 
     python3 -m experiments.lattice_learning           # full run (~1-2 min)
     python3 -m experiments.lattice_learning --quick   # seconds-long smoke run
@@ -12,6 +13,7 @@ and experiments/lattice_learning.md.
 from __future__ import annotations
 
 import argparse
+import json
 import tempfile
 from pathlib import Path
 
@@ -21,6 +23,7 @@ from conag.baselines.learned import learn, simulate_policy
 from conag.baselines.rules import square_rules
 
 SEEDINGS = ("corners", "sides")
+FULL_N, FULL_SEEDS, FULL_EPOCHS, FULL_EPISODES = 6, range(5), 50, 5  # the full run (the committed table, the curve)
 
 
 def run(n, seeds, epochs, episodes, eval_runs, eval_steps):
@@ -70,6 +73,18 @@ def plot(out, path, n, n_seeds):
     plt.close(fig)
 
 
+def curve_data(out, n, seeds) -> dict:
+    """What the curve is drawn from, as lattice_learning.json keeps it (`plot(**...)` of `from_curve_data`)."""
+    return dict(n=n, seeds=list(seeds), curves={s: {"errors": out[s]["curves"].tolist(), "rules": out[s]["rules"],
+                                                    "states": out[s]["states"]} for s in SEEDINGS})
+
+
+def from_curve_data(raw: dict) -> dict:
+    """`run`'s output as far as `plot` reads it, from `curve_data`."""
+    return {s: dict(curves=np.array(c["errors"]), rules=c["rules"], states=c["states"])
+            for s, c in raw["curves"].items()}
+
+
 def table(out, n, seeds, epochs, episodes, eval_runs, eval_steps) -> str:
     lines = [f"# R3 — learning the transition rule set (Fig. 11), square n={n}", "",
              (f"Seeds {list(seeds)}; {episodes} teacher episodes per seed (8 agents); "
@@ -101,7 +116,7 @@ def table(out, n, seeds, epochs, episodes, eval_runs, eval_steps) -> str:
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="seconds-long smoke run")
-    parser.add_argument("--n", type=int, default=6, help="side of the square")
+    parser.add_argument("--n", type=int, default=FULL_N, help="side of the square")
     parser.add_argument("--out", type=Path, default=None,
                         help="output directory (default: experiments/, or the temp "
                         "directory for --quick so the smoke run never overwrites results)")
@@ -112,10 +127,11 @@ def main(argv=None):
     if args.quick:
         seeds, epochs, episodes, eval_runs, eval_steps = range(2), 5, 1, 1, 2000
     else:
-        seeds, epochs, episodes, eval_runs, eval_steps = range(5), 50, 5, 3, 5000
+        seeds, epochs, episodes, eval_runs, eval_steps = FULL_SEEDS, FULL_EPOCHS, FULL_EPISODES, 3, 5000
     out = run(args.n, seeds, epochs, episodes, eval_runs, eval_steps)
     stem = "lattice_learning"
     plot(out, args.out / f"{stem}.png", args.n, len(seeds))
+    (args.out / f"{stem}.json").write_text(json.dumps(curve_data(out, args.n, seeds)) + "\n", encoding="utf-8")
     text = table(out, args.n, seeds, epochs, episodes, eval_runs, eval_steps)
     (args.out / f"{stem}.md").write_text(text)
     print(text)

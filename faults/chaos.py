@@ -42,8 +42,9 @@ from pathlib import Path
 
 import numpy as np
 
-from conag.cli import EXIT_ERROR, EXIT_INCOMPLETE, EXIT_INTERRUPTED, non_negative, positive
+from conag.argtypes import non_negative, positive
 from conag.common import stop_on_signals
+from conag.exit_codes import EXIT_ERROR, EXIT_INCOMPLETE, EXIT_INTERRUPTED
 from conag.run import control
 from protocol import keys
 from protocol.bus import BusOptions, open_session

@@ -10,7 +10,8 @@ import logging
 
 import pytest
 
-from conag.cli import EXIT_USAGE, main
+from conag.cli import main
+from conag.exit_codes import EXIT_USAGE
 from conag.recording.mcap_log import McapRecorder, RecordingError, read_recording
 from conag.recording.replay import LockstepScript
 from protocol import keys

@@ -8,7 +8,8 @@ import time
 
 import pytest
 
-from conag.cli import _report_a_slow_stop, build_parser, log_level
+from conag.cli import build_parser, log_level
+from conag.commands.run import report_a_slow_stop
 
 
 @pytest.mark.parametrize("argv, level", [
@@ -46,7 +47,8 @@ def _checkpoint(tmp_path):
     (["--world-id", "w9"], "holds world 'w0'"),
 ])
 def test_conag_world_refuses_a_bad_resume_with_a_usage_error(tmp_path, capsys, extra, words):
-    from conag.cli import EXIT_USAGE, main
+    from conag.cli import main
+    from conag.exit_codes import EXIT_USAGE
     from tests.conftest import SCENARIOS
 
     path = _checkpoint(tmp_path)
@@ -60,7 +62,8 @@ def test_conag_world_refuses_a_bad_resume_with_a_usage_error(tmp_path, capsys, e
 
 
 def test_conag_world_needs_a_scenario_or_a_checkpoint(capsys):
-    from conag.cli import EXIT_USAGE, main
+    from conag.cli import main
+    from conag.exit_codes import EXIT_USAGE
 
     assert main(["world"]) == EXIT_USAGE
     assert "needs a SCENARIO file (or --resume CHECKPOINT)" in capsys.readouterr().err
@@ -71,7 +74,7 @@ def test_conag_world_needs_a_scenario_or_a_checkpoint(capsys):
 def test_a_run_that_is_slow_to_stop_shows_where_each_thread_waits(capfd):
     # CI once found `conag run` alive 120 s after two Ctrl-Cs and nothing said where it waited.
     stop = threading.Event()
-    _report_a_slow_stop(stop, after=0.1)
+    report_a_slow_stop(stop, after=0.1)
     time.sleep(0.3)
     assert "still stopping" not in capfd.readouterr().err   # nothing before the signal
     stop.set()
@@ -122,9 +125,53 @@ def test_the_slow_stop_report_fires_even_while_the_stop_events_lock_is_held(capf
     # The state CI's hang left: the first signal's handler inside `stop.set()` (flag set, the
     # Event's lock held, waiters not yet woken). A report waiting on the Event never woke.
     stop = threading.Event()
-    _report_a_slow_stop(stop, after=0.1)
+    report_a_slow_stop(stop, after=0.1)
     time.sleep(0.2)
     with stop._cond:
         stop._flag = True
         err = _stderr_until(capfd, "still stopping")
     assert "conag run: still stopping 0.1 s after the signal" in err
+
+
+def test_conag_help_loads_no_subcommand_module():
+    # The table's help lines are enough for `conag --help`: no command module (and none of
+    # numpy, zenoh or the world) is imported until its subcommand is parsed.
+    import subprocess
+    import sys
+
+    from tests.conftest import ROOT
+
+    code = ("import sys\nfrom conag.cli import main\ntry:\n    main(['--help'])\nexcept SystemExit:\n    pass\n"
+            "print(sorted(m for m in sys.modules if m.startswith(('conag.commands.', 'numpy', 'zenoh', "
+            "'world_server', 'agent_runtime'))))")
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert "world" in r.stdout and r.stdout.splitlines()[-1] == "[]"
+
+
+def test_every_subcommand_has_a_module_with_its_flags_and_its_run():
+    from conag.cli import COMMANDS
+
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.__class__.__name__ == "_SubParsersAction")
+    assert list(sub.choices) == list(COMMANDS)
+    for name, command in sub.choices.items():
+        assert f"usage: conag {name}" in command.format_help()
+        assert callable(command.get_default("func")), name
+
+
+@pytest.mark.parametrize("argv", [
+    [],
+    ["--map-size", "31", "--nearest-first"],
+    ["--agent", "paper", "--without", "unstick, seal_guard"],
+    ["--learn", "--eta", "0.25"],
+])
+def test_the_agent_flags_conag_run_forwards_ask_an_agent_for_the_same_settings(argv):
+    from conag.agent_settings import AgentSettings
+
+    settings = AgentSettings.from_args(build_parser().parse_args(["run", "fig6.toml", *argv]))
+    forwarded = build_parser().parse_args(["agent", "--id", "a1", *settings.argv()])
+    assert AgentSettings.from_args(forwarded) == settings
+    if not settings.learn:  # `conag agents` hosts no learners (conag run refuses --per-process for them)
+        hosted = build_parser().parse_args(["agents", "--ids", "a1..a3", *settings.argv()])
+        assert AgentSettings.from_args(hosted) == settings

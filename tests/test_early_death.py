@@ -16,6 +16,7 @@ import pytest
 
 from agent_runtime.world_link import WorldLink
 from conag import run as conag_run
+from conag.agent_settings import AgentSettings
 from conag.run import RunOptions, exit_words, run
 from tests.conftest import LONG_WALL, conag, free_port, wait_until
 from tests.scripted import ScriptedBody
@@ -150,9 +151,9 @@ def test_conag_run_starts_an_agent_that_died_before_the_first_tick_again_when_as
 
 @pytest.mark.slow
 def test_conag_run_ends_when_every_agent_died_before_the_first_tick(endpoint):
-    # Every agent process exits at once (a flag it does not know): nothing is left to build.
+    # Every agent process exits at once (a preset it does not know): nothing is left to build.
     opts = RunOptions("scenarios/quick_wall.toml", load_scenario("scenarios/quick_wall.toml"), endpoint,
-                      headless=True, quiet=True, extra_agent_args=("--no-such-flag",))
+                      headless=True, quiet=True, agent=AgentSettings(preset="no-such-preset"))
     started = time.monotonic()
     with pytest.raises(RuntimeError, match="every agent process exited before the world's first tick"):
         run(opts, threading.Event())

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from conag.cli import EXIT_ERROR, EXIT_INCOMPLETE, EXIT_INTERRUPTED, EXIT_STALLED
+from conag.exit_codes import EXIT_ERROR, EXIT_INCOMPLETE, EXIT_INTERRUPTED, EXIT_STALLED
 from tests.conftest import ROOT, free_port, wait_until
 
 pytestmark = pytest.mark.slow

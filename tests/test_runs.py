@@ -15,7 +15,8 @@ from pathlib import Path
 
 import pytest
 
-from conag.cli import EXIT_USAGE, main
+from conag.cli import main
+from conag.exit_codes import EXIT_USAGE
 from conag.runs import (
     RunNotFound,
     apply_run,

@@ -20,6 +20,7 @@ from agent_runtime.config import AgentConfig
 from agent_runtime.learning import Student
 from agent_runtime.network import ARM_OUTPUTS, MOTOR_OUTPUTS, NONE, engineered
 from agent_runtime.node import AgentOptions, AgentReport, Learning, run_agent
+from conag.agent_settings import AgentSettings
 from protocol import keys
 from protocol.codec import decode, encode
 from protocol.messages import Decision, Reinforcement
@@ -309,7 +310,8 @@ def test_a_restarted_student_in_conag_run_starts_from_its_saved_weights(tmp_path
 
     monkeypatch.setattr(run_mod.subprocess, "Popen", FakeProcess)
     opts = run_mod.RunOptions(scenario_path="x", scenario=load_scenario(SCENARIOS / "fig6.toml"),
-                              endpoint="tcp/127.0.0.1:1", extra_agent_args=("--learn",), weights_dir=str(tmp_path))
+                              endpoint="tcp/127.0.0.1:1", agent=AgentSettings(learn=True),
+                              weights_dir=str(tmp_path))
     fleet = run_mod.Fleet(opts)
     (tmp_path / "a1.json").write_text("{}")      # left over from an earlier run: not loaded at first
     fleet.start("a1")

@@ -150,7 +150,7 @@ def test_the_recording_page_scrubs_the_timeline(tmp_path, browser):
     with McapRecorder(out) as rec:
         for v in views:
             rec.add("conag/v4/world/w0/view", encode(v), v.tick)
-    from conag.viewer.command import load_timeline
+    from conag.commands.view import load_timeline
 
     with ViewerServer(load_timeline(str(out))).serve_in_thread() as server:
         browser.get(server.url)

@@ -15,7 +15,7 @@ import pytest
 import zenoh
 
 from agent_runtime.world_link import WorldLink
-from conag.cli import is_newer_status
+from conag.commands.status import is_newer_status
 from protocol import keys
 from protocol.codec import decode, encode
 from protocol.messages import (

@@ -220,10 +220,13 @@ class Scene:
         return a
 
 
-class _Entry(Protocol):
-    key: str
-    tick: int
-    data: bytes
+class _Entry(Protocol):  # read-only, so a frozen dataclass (mcap_log.Entry) is one
+    @property
+    def key(self) -> str: ...
+    @property
+    def tick(self) -> int: ...
+    @property
+    def data(self) -> bytes: ...
 
 
 class Timeline:

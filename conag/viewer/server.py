@@ -56,6 +56,8 @@ from protocol.bus import Declarations, undeclare
 from protocol.codec import decode, encode
 from protocol.messages import Perturbation, PerturbResult
 
+DEFAULT_PORT = 8765  # the HTTP port of `conag view` (and of `conag run --view` without one)
+
 log = logging.getLogger("conag.view")
 
 

@@ -3,25 +3,26 @@
     conag view [--port P]               serve http://127.0.0.1:P/ showing the world on the bus, live
     conag view FILE.mcap [--port P]     the same page over a recording, with a timeline to scrub and play
 
-Registered by conag/cli.py; the shell is conag/viewer/server.py, the pure part conag/viewer/.
-`conag run --view` starts `conag view` beside the run.
+The shell is conag/viewer/server.py, the pure part conag/viewer/. `conag run --view` starts
+`conag view` beside the run.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+import webbrowser
 
 from conag.common import PRIORITIES, bus_args, bus_options, lower_priority, restore_priority, stop_on_signals
-from conag.viewer.scene import DISPLAY_HZ
+from conag.recording.mcap_log import read_recording
+from conag.viewer.scene import DISPLAY_HZ, Timeline, wanted
+from conag.viewer.server import DEFAULT_PORT, serve_live, serve_timeline
+from protocol.bus import open_session
 
-DEFAULT_PORT = 8765
 VIEWER_PRIORITY = "low"  # not "idle", as the recorder: on a machine the run fills, the page would freeze
 
 
-def add_commands(sub) -> None:
-    """Register `view` on the main parser's subparsers."""
-    v = sub.add_parser("view", help="watch a world (or a recording) in the browser")
+def configure(v: argparse.ArgumentParser) -> None:
     v.add_argument("file", nargs="?", metavar="FILE.mcap", help="a recording to open instead of the live world")
     v.add_argument("--port", type=int, default=DEFAULT_PORT, help=f"HTTP port (default {DEFAULT_PORT}; 0: any free)")
     v.add_argument("--host", default="127.0.0.1", help="address to serve on (default 127.0.0.1: this machine only)")
@@ -38,7 +39,6 @@ def add_commands(sub) -> None:
                    help=f"live: the viewer's CPU priority, so a run on the same cores gets the CPU first "
                         f"(default {VIEWER_PRIORITY}: nice +10; idle: only when a core would idle; normal)")
     bus_args(v, find_run=True)  # live only: a recording needs no bus
-    v.set_defaults(func=cmd_view)
 
 
 def _display_hz(text: str) -> float:
@@ -51,27 +51,20 @@ def _display_hz(text: str) -> float:
     return hz
 
 
-def cmd_view(args) -> int:
+def run(args: argparse.Namespace) -> int:
     def ready(url: str) -> None:
         print(f"viewer at {url}", flush=True)
         if args.open:
-            import webbrowser
-
             webbrowser.open(url)
 
     # Stopped, it leaves at the normal priority: idle, it could wait long for a core (as the recorder).
     with stop_on_signals(on_stop=lambda: restore_priority(args.priority)) as stop:
         if args.file:
-            from conag.viewer.server import serve_timeline
-
             timeline = load_timeline(args.file)
             print(f"{args.file}: {len(timeline)} pictures, ticks {timeline.summary()['first']}-"
                   f"{timeline.summary()['last']}", flush=True)
             serve_timeline(timeline, stop, host=args.host, port=args.port, on_ready=ready)
             return 0
-        from conag.viewer.server import serve_live
-        from protocol.bus import open_session
-
         lower_priority(args.priority)  # before the session opens, so zenoh's threads have it too
         session = open_session(bus_options(args))
         try:
@@ -82,11 +75,8 @@ def cmd_view(args) -> int:
     return 0
 
 
-def load_timeline(path: str):
+def load_timeline(path: str) -> Timeline:
     """A recording's Timeline (only the keys the viewer draws are read)."""
-    from conag.recording.mcap_log import read_recording
-    from conag.viewer.scene import Timeline, wanted
-
     rec = read_recording(path, keep=wanted)
     if not rec.complete:
         print(f"warning: {path}: {rec.problem}", file=sys.stderr)

@@ -1,11 +1,7 @@
-"""`conag generate` and `conag check`: make buildable scenario files, check any file.
+"""`conag generate`: write seeded, buildable scenario files.
 
     conag generate --seed N [--family F] [--size N|WxH] [--agents K] --out FILE
     conag generate --suite COUNT --seed N --out-dir DIR      a balanced benchmark mix
-    conag check FILE...                                       parse + buildability, exit 1 if any fails
-
-Kept apart from conag/cli.py (which only registers these subcommands) because neither
-touches the bus: they need numpy and the grid model, nothing else.
 """
 
 from __future__ import annotations
@@ -14,12 +10,11 @@ import argparse
 import sys
 from pathlib import Path
 
+from world_server.generator import GenerationError, generate, generate_suite
 from world_server.layout_options import FAMILIES, MAX_AGENTS, MAX_SIZE, MIN_SIZE, SOURCES
 
 
-def add_commands(sub) -> None:
-    """Register `generate` and `check` on the main parser's subparsers."""
-    g = sub.add_parser("generate", help="write seeded, buildable scenario files (one, or a --suite)")
+def configure(g: argparse.ArgumentParser) -> None:
     g.add_argument("--seed", type=int, required=True, help="the same seed and options give the same file")
     g.add_argument("--family", choices=FAMILIES, help="blueprint family (default: drawn from the seed)")
     g.add_argument("--size", type=_size, metavar="N|WxH",
@@ -28,14 +23,9 @@ def add_commands(sub) -> None:
     g.add_argument("--source", choices=SOURCES, help="brick source (default: drawn)")
     g.add_argument("--max-sites", type=int, metavar="M", help="at most this many open sites")
     g.add_argument("--out", metavar="FILE", help="the scenario file to write (- prints it)")
-    g.add_argument("--suite", type=_positive, metavar="COUNT",
+    g.add_argument("--suite", type=_count, metavar="COUNT",
                    help="write COUNT layouts, balanced over families, size bands and agent counts")
     g.add_argument("--out-dir", metavar="DIR", help="where --suite writes its files")
-    g.set_defaults(func=cmd_generate)
-
-    c = sub.add_parser("check", help="parse scenario files and check that their structure can be built")
-    c.add_argument("files", nargs="+", metavar="FILE")
-    c.set_defaults(func=cmd_check)
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -48,7 +38,7 @@ def _size(text: str) -> tuple[int, int]:
     if len(dims) != 2 or not all(MIN_SIZE <= d <= MAX_SIZE for d in dims):
         raise argparse.ArgumentTypeError(f"size must be N or WxH with {MIN_SIZE} <= N, W, H <= {MAX_SIZE}, "
                                          f"got {text!r}")
-    return dims
+    return dims[0], dims[1]
 
 
 def _agents(text: str) -> int:
@@ -61,7 +51,7 @@ def _agents(text: str) -> int:
     return k
 
 
-def _positive(text: str) -> int:
+def _count(text: str) -> int:
     try:
         n = int(text)
     except ValueError:
@@ -77,9 +67,7 @@ def _line(gen, path) -> str:
             f"{gen.agents} agent{'s' if gen.agents > 1 else ''}, {gen.source} -> {path}")
 
 
-def cmd_generate(args) -> int:
-    from world_server.generator import GenerationError, generate, generate_suite
-
+def run(args: argparse.Namespace) -> int:
     if args.suite is None and not args.out:
         raise ValueError("generate needs --out FILE (or --suite COUNT --out-dir DIR)")
     if args.suite is not None and (not args.out_dir or args.out or args.size):
@@ -94,50 +82,22 @@ def cmd_generate(args) -> int:
                 Path(args.out).write_text(gen.text, encoding="utf-8")
                 print(_line(gen, args.out))
             return 0
-        out = Path(args.out_dir)
-        out.mkdir(parents=True, exist_ok=True)
-        options = {"families": (args.family,)} if args.family else {}
-        if args.agents:
-            options["agents"] = (args.agents,)
-        if args.max_sites:
-            options["max_sites"] = (args.max_sites,) * 3
-        for gen in generate_suite(args.suite, args.seed, **options):
-            path = out / f"{gen.name}.toml"
-            path.write_text(gen.text, encoding="utf-8")
-            print(_line(gen, path), flush=True)
+        _write_suite(args)
         return 0
     except GenerationError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
 
 
-def cmd_check(args) -> int:
-    from world_server.buildability import check_buildable
-    from world_server.scenario import ScenarioError, load_scenario
-
-    bad = 0
-    for name in args.files:
-        try:
-            scenario = load_scenario(name)
-        except (ScenarioError, OSError) as exc:
-            print(f"{name}: invalid: {exc}")
-            bad += 1
-            continue
-        verdict = check_buildable(scenario)
-        if verdict.ok:
-            print(f"{name}: OK ({len(verdict.order)} open sites, a fill order exists)")
-        else:
-            print(f"{name}: NOT buildable: {verdict.reason}")
-            bad += 1
-    return 1 if bad else 0
-
-
-def warn_if_unbuildable(path: str, scenario, agents: int | None = None) -> str:
-    """`conag run` still runs an unbuildable scenario (a repair experiment may want one),
-    but says so first. Returns why it cannot be built ("" if it can), for the stall report."""
-    from world_server.buildability import check_layout
-
-    verdict = check_layout(scenario.layout, scenario.agents if agents is None else agents)
-    if not verdict.ok:
-        print(f"warning: {path} cannot be built: {verdict.reason}", file=sys.stderr, flush=True)
-    return verdict.reason
+def _write_suite(args: argparse.Namespace) -> None:
+    out = Path(args.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    options: dict = {"families": (args.family,)} if args.family else {}
+    if args.agents:
+        options["agents"] = (args.agents,)
+    if args.max_sites:
+        options["max_sites"] = (args.max_sites,) * 3
+    for gen in generate_suite(args.suite, args.seed, **options):
+        path = out / f"{gen.name}.toml"
+        path.write_text(gen.text, encoding="utf-8")
+        print(_line(gen, path), flush=True)

@@ -1,0 +1,82 @@
+"""What an agent process is asked to be: the typed form of `conag agent`'s agent flags.
+
+`conag agent`, `conag agents` and `conag run` read the same flags (--agent, --without,
+--map-size, --nearest-first; --learn and --eta) into one `AgentSettings`, and the first two
+attach alike (`add_attach_args`). `conag run` checks
+them once and hands them, typed, to the supervisor (`conag.run.RunOptions.agent`), which
+starts the agent processes; `AgentSettings.argv` is the one place they become command-line
+flags again, at that process boundary.
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+
+from agent_runtime.config import ADDITIONS, AgentConfig
+from agent_runtime.node import Learning
+
+
+@dataclass(frozen=True)
+class AgentSettings:
+    """An agent's kind (preset, additions switched off, map size, goal sequencing) and
+    whether it is a learning student, at which rate."""
+
+    preset: str = "default"
+    without: tuple[str, ...] = ()     # additions switched off (agent_runtime.config.ADDITIONS)
+    map_size: int = AgentConfig.map_size
+    nearest_first: bool = False       # no goal sequencing (paper §4)
+    learn: bool = False               # a student with random weights, learning from the teacher
+    eta: float = Learning.eta         # the student's learning rate
+
+    @classmethod
+    def from_args(cls, args: argparse.Namespace) -> AgentSettings:
+        """The settings parsed flags ask for (`--learn`, `--eta`: False and the default where
+        a subcommand has no such flag)."""
+        learn = getattr(args, "learn", False)
+        eta = getattr(args, "eta", None)
+        return cls(preset=args.agent, without=split_names(args.without), map_size=args.map_size,
+                   nearest_first=args.nearest_first, learn=learn, eta=Learning.eta if eta is None else eta)
+
+    def config(self) -> AgentConfig:
+        """The AgentConfig these settings describe (ValueError names what is wrong)."""
+        unknown = [n for n in self.without if n not in ADDITIONS]
+        if unknown:
+            raise ValueError(f"--without: unknown addition(s) {', '.join(unknown)}; known: {', '.join(ADDITIONS)}")
+        return AgentConfig.preset(self.preset, map_size=self.map_size, goal_sequencing=not self.nearest_first,
+                                  **dict.fromkeys(self.without, False))
+
+    def argv(self) -> list[str]:
+        """The `conag agent` / `conag agents` flags that ask for these settings."""
+        flags = ["--map-size", str(self.map_size)]
+        if self.learn:
+            flags += ["--learn", "--eta", str(self.eta)]
+        if self.nearest_first:
+            flags.append("--nearest-first")
+        flags += ["--agent", self.preset]
+        if self.without:
+            flags += ["--without", ",".join(self.without)]
+        return flags
+
+
+def split_names(text: str | None) -> tuple[str, ...]:
+    """`--without a,b` as names, blanks dropped."""
+    return tuple(n.strip() for n in (text or "").split(",") if n.strip())
+
+
+def add_kind_args(p: argparse.ArgumentParser) -> None:
+    """--agent and --without, as `conag agent`, `conag agents` and `conag run` take them."""
+    p.add_argument("--agent", default="default", metavar="PRESET",
+                   help="which agent: default (the best agent) or paper (the agent as the paper describes it, "
+                        "every switchable addition off); see docs/design.md")
+    p.add_argument("--without", metavar="NAMES",
+                   help="switch these additions off, comma separated (e.g. unstick,seal_guard; "
+                        "agent_runtime.config.ADDITIONS names them all)")
+
+
+def add_attach_args(a: argparse.ArgumentParser) -> None:
+    """How `conag agent` and `conag agents` attach."""
+    a.add_argument("--attach-timeout", type=float, default=30.0, help="seconds to wait for the world")
+    a.add_argument("--recorded", action="store_true",
+                   help="the run is recorded: attach once a recorder of the world is heard (at most --attach-timeout "
+                        "seconds), so the recording holds this agent's messages from its first tick")
