@@ -3,7 +3,7 @@
     python3 -m experiments.noise --quick        # 4 small layouts x 3 settings: noise_quick.md (minutes)
     python3 -m experiments.noise --jobs 2       # the sample x every setting: noise.md, noise.png (about an hour)
     python3 -m experiments.noise --report-only  # the tables and the plot again from noise.json
-    python3 -m experiments.noise --pictures     # the pictures of docs/noise.md: one agent's maps per option
+    python3 -m experiments.noise --pictures     # docs/noise.md's picture (as experiments.pictures noise_maps)
 
 The sample: the first SAMPLE layouts, in the suite's order, of the generated suite of
 `experiments.generalisation` (made from its committed manifest) whose longer side is at

@@ -19,8 +19,8 @@ from conag.agent_settings import AgentSettings, add_kind_args
 from conag.argtypes import non_negative, positive
 from conag.common import PRIORITIES, RECORDER_PRIORITY, stop_on_signals
 from conag.exit_codes import EXIT_ERROR, EXIT_INCOMPLETE, EXIT_INTERRUPTED, EXIT_STALLED, EXIT_USAGE
-from conag.recording.mcap_log import read_end, world_cut_short
 from conag.noise_flags import add_noise_args, noise_settings
+from conag.recording.mcap_log import read_end, world_cut_short
 from conag.run import RunOptions
 from conag.runs import check_name, endpoint_in_use, free_endpoint, register, unregister
 from conag.viewer.server import DEFAULT_PORT
