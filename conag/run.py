@@ -46,6 +46,7 @@ from pathlib import Path
 
 from conag.agent_settings import AgentSettings
 from conag.common import RECORDER_PRIORITY
+from conag.noise_flags import to_note
 from conag.secure import bus_flags, run_bus_options, secure_bus
 from protocol import keys
 from protocol.bus import Declarations, open_session
@@ -53,6 +54,7 @@ from protocol.bus.acl import OBSERVER, TEACHER, WORLD, agent_user
 from protocol.codec import ProtocolError, decode, encode
 from protocol.messages import AgentState, RunControl, RunControlResult, WorldStatus
 from world_server.checkpoint import DEFAULT_EVERY, CheckpointError, newest_good, read_checkpoint
+from world_server.noise import NoiseSettings
 from world_server.scenario import Scenario
 from world_server.stall import DEFAULT_STALL_TICKS, StallWatch
 from world_server.summary import RunSummary
@@ -89,6 +91,7 @@ class RunOptions:
     agent_mode: str = "auto"          # zenoh mode of agent processes: peer, client, auto (`agent_bus_mode`)
     secure: str | None = None         # a secure bus (conag/secure.py): a deployment dir; "" a fresh one
     checkpoint_every: int = DEFAULT_EVERY  # ticks between the world's checkpoints (it is restarted from the last)
+    noise: NoiseSettings = field(default_factory=NoiseSettings)  # the world's noise overrides (docs/noise.md)
 
 
 class RunEnding(RuntimeError):
@@ -511,6 +514,8 @@ def _start_recorder(opts: RunOptions) -> subprocess.Popen:
            "--note", "agent_args=" + " ".join(opts.agent.argv()), "--maps-every", str(opts.maps_every),
            "--priority", opts.record_priority,
            "--note", f"checkpoint_every={opts.checkpoint_every}"]
+    if not opts.noise.changes_nothing:  # `conag replay --verify` puts them on the scenario again
+        cmd += ["--note", f"noise={to_note(opts.noise)}"]
     return subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
 
 
@@ -535,8 +540,8 @@ def _start_world(opts: RunOptions, n_agents: int, final_path: Path, checkpoint: 
            "--checkpoint", str(checkpoint), "--checkpoint-every", str(opts.checkpoint_every)]
     if resume is not None:
         cmd += ["--resume", str(resume)]
-    elif opts.seed is not None:
-        cmd += ["--seed", str(opts.seed)]
+    else:  # a checkpoint holds the seed and the noise settings
+        cmd += [*(["--seed", str(opts.seed)] if opts.seed is not None else []), *opts.noise.to_args()]
     if opts.profile:
         cmd += ["--profile", opts.profile]
     # stdin: `without ID` lines, for agents that died before the first tick (EarlyDeaths)

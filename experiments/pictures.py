@@ -11,6 +11,7 @@ seeds it used:
     lattice_moved_brick  Fig. 12: the same with a brick moved out
     lattice_nested       Fig. 14: nested squares
     lattice_learning     Fig. 11: learning the rule set, from lattice_learning.json
+    noise_maps           docs/noise.md: one agent's maps under each noise option (seeded runs, a minute)
 
 Each experiment's full run draws its own pictures as well; this command draws them without
 running the experiments. By default it writes into experiments/, where the results pages
@@ -70,6 +71,12 @@ def lattice_learning(out: Path) -> list[Path]:
     return [path]
 
 
+def noise_maps(out: Path) -> list[Path]:
+    from experiments import noise
+
+    return [noise.draw_maps(out / "noise_maps.png")]
+
+
 # name -> what draws it (lattice() draws all three lattice_* pictures at once)
 PICTURES: dict[str, Callable[[Path], list[Path]]] = {
     "fig9_learning": fig9_learning,
@@ -78,6 +85,7 @@ PICTURES: dict[str, Callable[[Path], list[Path]]] = {
     "lattice_moved_brick": lattice,
     "lattice_nested": lattice,
     "lattice_learning": lattice_learning,
+    "noise_maps": noise_maps,
 }
 
 

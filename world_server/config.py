@@ -26,7 +26,12 @@ class WorldConfig:
     sensor_sectors: int = 16
     sensor_range: float = 6.0
     sensor_noise: float = 0.02      # noise std per unit of distance (uniform, zero mean): far readings are worse
-    odometry_noise: float = 0.0     # noise std per unit of distance moved
+    odometry_noise: float = 0.0     # noise std per unit of distance moved (normal, the same in every direction)
+    # Noise and occlusion (docs/noise.md); all off by default.
+    odometry_distance_slip: float = 0.0  # std of the relative error of each step's reported length
+    odometry_heading_slip: float = 0.0   # std (radians) of the error of each step's reported direction
+    occlusion: bool = False         # a sector reports only the nearest object of any channel in it
+    aliasing: float = 0.0           # probability a sector reports the second nearest disc of its colour
     grab_reach: float = 1.2         # agent centre to brick centre
     grab_cone: float = math.pi / 3  # the gripper takes bricks within this angle of the heading
     touch_margin: float = 0.25      # eat/drink: surfaces closer than this count as touching (an
@@ -55,6 +60,14 @@ class WorldConfig:
         for name in ("sensor_noise", "odometry_noise", "touch_margin"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"world.{name} must be >= 0")
+        for name in ("odometry_distance_slip", "odometry_heading_slip"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise ValueError(f"world.{name} must be a finite number >= 0, got {value!r}")
+        if not (isinstance(self.aliasing, (int, float)) and 0 <= self.aliasing <= 1):
+            raise ValueError(f"world.aliasing must be a probability from 0 to 1, got {self.aliasing!r}")
+        if not isinstance(self.occlusion, bool):
+            raise ValueError(f"world.occlusion must be true or false, got {self.occlusion!r}")
         if self.max_speed * self.dt > self.agent_radius * (1 + 1e-9):
             # The physics has no continuous collision detection: a body that moves further
             # than its radius in one tick can jump through the world's boundary.
@@ -80,7 +93,10 @@ class WorldConfig:
         values = {}
         for key, value in table.items():
             default = getattr(cls, key)
-            if isinstance(default, int) and not isinstance(default, bool):
+            if isinstance(default, bool):
+                if not isinstance(value, bool):
+                    raise ValueError(f"world.{key} must be true or false")
+            elif isinstance(default, int):
                 if not isinstance(value, int) or isinstance(value, bool):
                     raise ValueError(f"world.{key} must be an integer")
             elif isinstance(default, float):

@@ -9,6 +9,12 @@ deviation proportional to the distance is added to every reading that saw someth
 so near objects are sensed more accurately (the paper asks only that the mean error
 grow with distance; a uniform error of +-sqrt(3) x noise x d has exactly that spread).
 
+Two options make the readings less faithful (docs/noise.md; both off by default, and
+then they cost nothing): occlusion, where a sector reports only the nearest object of
+any channel, as one range sensor would (a brick behind a food disc is not seen), and
+perceptual aliasing, where a sector of a disc colour that holds two discs of it reports
+the second nearest instead of the nearest with a given probability.
+
 The sweep is compiled: objects are bucketed on a uniform grid, so each agent only looks
 at nearby ones, O(objects + agents x neighbours). The noise comes from a counter-based
 generator (splitmix64) keyed by one seed per tick, which the caller draws from its
@@ -21,9 +27,12 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from protocol.messages import CHANNELS, NO_READING
+from protocol.messages import CHANNELS, DISC_KINDS, NO_READING
 
 AGENT_CHANNEL = CHANNELS.index("agent")
+# Channels 0 .. DISC_CHANNELS - 1 are the discs' (food, water, brick: a disc's kind is its channel).
+DISC_CHANNELS = len(DISC_KINDS)
+assert CHANNELS[:DISC_CHANNELS] == DISC_KINDS
 
 
 @njit(cache=True)
@@ -140,33 +149,125 @@ def _scan(a, agent_xy, n_discs, grid, radius, sectors, noise, seed, out):
                 if cur < 0.0 or d < cur:
                     out[a, ch, s] = d
     if noise > 0.0:
-        spread = np.sqrt(3.0) * noise
-        channels = out.shape[1]
-        for ch in range(channels):
-            for s in range(sectors):
+        _add_noise(a, radius, sectors, noise, seed, out)
+
+
+@njit(cache=True)
+def _add_noise(a, radius, sectors, noise, seed, out):
+    """Zero-mean uniform noise of std noise x d on every reading of agent a that saw something."""
+    spread = np.sqrt(3.0) * noise
+    channels = out.shape[1]
+    for ch in range(channels):
+        for s in range(sectors):
+            d = out[a, ch, s]
+            if d >= 0.0:
+                u = 2.0 * _unit_random(seed, (a * channels + ch) * sectors + s) - 1.0
+                out[a, ch, s] = min(max(d + spread * u * d, 0.0), radius)
+
+
+@njit(cache=True)
+def _scan_degraded(a, agent_xy, n_discs, grid, radius, sectors, noise, seed, out, occlusion, aliasing,
+                   alias_seed, disc_channels):
+    """`_scan` with occlusion and aliasing between the nearest readings and the noise."""
+    _scan(a, agent_xy, n_discs, grid, radius, sectors, 0.0, seed, out)
+    _occlude_and_alias(a, agent_xy, grid, radius, sectors, out, occlusion, aliasing, alias_seed, disc_channels,
+                       n_discs + a)
+    if noise > 0.0:
+        _add_noise(a, radius, sectors, noise, seed, out)
+
+
+@njit(cache=True)
+def _occlude_and_alias(a, agent_xy, grid, radius, sectors, out, occlusion, aliasing, alias_seed,
+                       disc_channels, me):
+    """Occlusion and perceptual aliasing on agent a's noise-free nearest readings out[a].
+
+    Aliasing: a sector of a disc channel that holds a second disc of that colour reports
+    it instead of the nearest with probability `aliasing` (one draw per reading, keyed
+    by `alias_seed`). Occlusion: a sector reports only the nearest object of any channel
+    (a range sensor's first return); the other channels read nothing there. With both, a
+    second disc hidden behind an object of another channel cannot be reported.
+    """
+    channels = out.shape[1]
+    second = np.full((channels, sectors), NO_READING)
+    if aliasing > 0.0:
+        # The second nearest object per (channel, sector): one more pass over the neighbours.
+        cell, nx, ny, starts, sx, sy, sch, sid = grid
+        ax, ay = agent_xy[a, 0], agent_xy[a, 1]
+        x0 = min(max(int((ax - radius) / cell), 0), nx - 1)
+        x1 = min(max(int((ax + radius) / cell), 0), nx - 1)
+        y0 = min(max(int((ay - radius) / cell), 0), ny - 1)
+        y1 = min(max(int((ay + radius) / cell), 0), ny - 1)
+        r2 = radius * radius
+        scale = sectors / (2.0 * np.pi)
+        for bx in range(x0, x1 + 1):
+            for by in range(y0, y1 + 1):
+                b = bx * ny + by
+                for k in range(starts[b], starts[b + 1]):
+                    ch = sch[k]
+                    if ch >= disc_channels:
+                        continue
+                    dx = sx[k] - ax
+                    dy = sy[k] - ay
+                    d2 = dx * dx + dy * dy
+                    if d2 > r2 or sid[k] == me:
+                        continue
+                    s = int(_compass_angle(dx, dy) * scale) % sectors
+                    d = np.sqrt(d2)
+                    cur = second[ch, s]
+                    if d > out[a, ch, s] and (cur < 0.0 or d < cur):
+                        second[ch, s] = d
+    for s in range(sectors):
+        first = -1.0    # the nearest reading of any channel in this sector
+        behind = -1.0   # the nearest of the other channels' readings (what hides a second disc)
+        if occlusion:
+            for ch in range(channels):
                 d = out[a, ch, s]
                 if d >= 0.0:
-                    u = 2.0 * _unit_random(seed, (a * channels + ch) * sectors + s) - 1.0
-                    out[a, ch, s] = min(max(d + spread * u * d, 0.0), radius)
+                    if first < 0.0 or d < first:
+                        behind = first
+                        first = d
+                    elif behind < 0.0 or d < behind:
+                        behind = d
+        for ch in range(channels):
+            d = out[a, ch, s]
+            if d < 0.0:
+                continue
+            if occlusion and d > first:
+                out[a, ch, s] = NO_READING
+                continue
+            alt = second[ch, s]
+            hidden = occlusion and behind >= 0.0 and alt > behind
+            if alt >= 0.0 and not hidden and _unit_random(alias_seed, (a * channels + ch) * sectors + s) < aliasing:
+                out[a, ch, s] = alt
 
 
 @njit(cache=True)
 def _sweep(agent_xy, disc_xy, disc_channel, sensing, sectors, radius, width, height, noise, seed, out,
-           agent_channel):
+           agent_channel, occlusion, aliasing, alias_seed, disc_channels):
     grid = _index(agent_xy, disc_xy, disc_channel, radius, width, height, agent_channel)
+    degraded = occlusion or aliasing > 0.0
     for a in range(agent_xy.shape[0]):
         if sensing[a]:
-            _scan(a, agent_xy, disc_xy.shape[0], grid, radius, sectors, noise, seed, out)
+            if degraded:
+                _scan_degraded(a, agent_xy, disc_xy.shape[0], grid, radius, sectors, noise, seed, out, occlusion,
+                               aliasing, alias_seed, disc_channels)
+            else:
+                _scan(a, agent_xy, disc_xy.shape[0], grid, radius, sectors, noise, seed, out)
 
 
 @njit(cache=True, parallel=True)
 def _sweep_parallel(agent_xy, disc_xy, disc_channel, sensing, sectors, radius, width, height, noise, seed, out,
-                    agent_channel):
+                    agent_channel, occlusion, aliasing, alias_seed, disc_channels):
     """`_sweep` with the agents shared among the cores (rows of different agents never overlap)."""
     grid = _index(agent_xy, disc_xy, disc_channel, radius, width, height, agent_channel)
+    degraded = occlusion or aliasing > 0.0
     for a in prange(agent_xy.shape[0]):
         if sensing[a]:
-            _scan(a, agent_xy, disc_xy.shape[0], grid, radius, sectors, noise, seed, out)
+            if degraded:
+                _scan_degraded(a, agent_xy, disc_xy.shape[0], grid, radius, sectors, noise, seed, out, occlusion,
+                               aliasing, alias_seed, disc_channels)
+            else:
+                _scan(a, agent_xy, disc_xy.shape[0], grid, radius, sectors, noise, seed, out)
 
 
 # Below this many agents, starting threads costs more than it saves.
@@ -175,12 +276,15 @@ PARALLEL_FROM = 128
 
 def sense(agent_xy: np.ndarray, sensing: np.ndarray, disc_xy: np.ndarray, disc_channel: np.ndarray,
           sectors: int, radius: float, size: tuple[float, float], *, noise: float = 0.0,
-          seed: int = 0) -> np.ndarray:
+          seed: int = 0, occlusion: bool = False, aliasing: float = 0.0, alias_seed: int = 0) -> np.ndarray:
     """Sector ranges, shape (agents, len(CHANNELS), sectors); noise-free unless `noise` > 0.
 
     `disc_xy`/`disc_channel` list only discs present in the world (carried bricks are
     invisible, so the caller leaves them out). Agents sense each other on AGENT_CHANNEL.
     Rows of agents whose `sensing` is False stay NO_READING. `seed` keys the noise.
+    With `occlusion` a sector reports only the nearest object of any channel; with
+    `aliasing` > 0 a disc channel's sector holding two discs reports the second nearest
+    with that probability (`alias_seed` keys the draws). Both off cost nothing.
     """
     n = agent_xy.shape[0]
     out = np.full((n, len(CHANNELS), sectors), NO_READING)
@@ -188,7 +292,8 @@ def sense(agent_xy: np.ndarray, sensing: np.ndarray, disc_xy: np.ndarray, disc_c
         kernel = _sweep_parallel if n >= PARALLEL_FROM else _sweep
         kernel(np.ascontiguousarray(agent_xy, np.float64), np.ascontiguousarray(disc_xy, np.float64).reshape(-1, 2),
                np.asarray(disc_channel, np.int64), np.asarray(sensing, np.bool_), sectors,
-               float(radius), float(size[0]), float(size[1]), float(noise), int(seed), out, AGENT_CHANNEL)
+               float(radius), float(size[0]), float(size[1]), float(noise), int(seed), out, AGENT_CHANNEL,
+               bool(occlusion), float(aliasing), int(alias_seed), DISC_CHANNELS)
     return out
 
 

@@ -3,8 +3,9 @@
 No bus here: the server decodes commands, calls `set_command`, `step`, `frames`, and
 encodes what comes back. One tick: apply each agent's one-shot action (grab, drop, eat,
 drink) where it stands, turn, close part of the gap to the commanded speed (inertia),
-step the physics, measure odometry, sense. Randomness (sensor and odometry noise) comes
-from the injected generator, so the same seed and the same commands give the same run.
+step the physics, measure odometry, sense. Randomness (sensor and odometry noise, odometry
+slip, perceptual aliasing: docs/noise.md) comes from the injected generator, so the same
+seed and the same commands give the same run.
 """
 
 from __future__ import annotations
@@ -349,13 +350,27 @@ class World:
         moved = new_pos - pos
         self.distance += np.hypot(moved[:, 0], moved[:, 1])
         self.odometry = moved
+        if (self.cfg.odometry_distance_slip > 0 or self.cfg.odometry_heading_slip > 0) and len(moved):
+            self.odometry = self._slipped(moved)
         if self.cfg.odometry_noise > 0 and len(moved):
             step_len = np.hypot(moved[:, 0], moved[:, 1])[:, None]
-            self.odometry = moved + self.rng.standard_normal(moved.shape) * self.cfg.odometry_noise * step_len
+            self.odometry = self.odometry + self.rng.standard_normal(moved.shape) * self.cfg.odometry_noise * step_len
         self._release_dropped(new_pos)
         self.tick += 1
         self._remove_expired()
         self._sense(new_pos)
+
+    def _slipped(self, moved: np.ndarray) -> np.ndarray:
+        """What the wheels report of each body's step `moved`: its length off by a relative
+        error of std `odometry_distance_slip`, its direction turned by an angle of std
+        `odometry_heading_slip` radians (both normal, zero mean, drawn per step), so the
+        error along and across the motion grows with the distance moved."""
+        e = self.rng.standard_normal(moved.shape)
+        stretch = 1.0 + self.cfg.odometry_distance_slip * e[:, 0]
+        angle = self.cfg.odometry_heading_slip * e[:, 1]
+        c, s = np.cos(angle), np.sin(angle)
+        turned = np.column_stack([c * moved[:, 0] - s * moved[:, 1], s * moved[:, 0] + c * moved[:, 1]])
+        return turned * stretch[:, None]
 
     def _remove_expired(self) -> None:
         """Dead bodies whose grace period is over leave the world."""
@@ -368,11 +383,13 @@ class World:
             pos, _ = self.physics.state()
         disc_xy, disc_kind = self._sensed_objects()
         seed = int(self.rng.integers(2**63)) if self.cfg.sensor_noise > 0 else 0
+        alias_seed = int(self.rng.integers(2**63)) if self.cfg.aliasing > 0 else 0
         if not self.solid.all():
             # A body that has left the world is out of every sensor's range.
             pos = np.where(self.solid[:, None], pos, -1e9)
         self._ranges = sense(pos, self.alive, disc_xy, disc_kind, self.cfg.sensor_sectors,
-                             self.cfg.sensor_range, self.size, noise=self.cfg.sensor_noise, seed=seed)
+                             self.cfg.sensor_range, self.size, noise=self.cfg.sensor_noise, seed=seed,
+                             occlusion=self.cfg.occlusion, aliasing=self.cfg.aliasing, alias_seed=alias_seed)
 
     def _sensed_objects(self) -> tuple[np.ndarray, np.ndarray]:
         """Positions and sensor channels of the present discs and the fixed obstacle points.

@@ -13,6 +13,7 @@ from dataclasses import replace
 import numpy as np
 
 from conag.common import bus_args, bus_options, stop_on_signals
+from conag.noise_flags import from_note
 from conag.recording.mcap_log import read_recording
 from conag.recording.replay import LockstepScript
 from conag.recording.replayer import DriveError, drive_world, entries_for, publish_recording
@@ -86,6 +87,8 @@ def _script(args: argparse.Namespace, rec, entries) -> LockstepScript:
 def _fresh_world(rec, world_id: str) -> tuple[World, CheckpointPlan | None]:
     """The recorded scenario's world from its seed, and the checkpoint interval it stepped with."""
     scenario = parse_scenario(rec.info["scenario"], rec.info.get("scenario_path", "<recording>"))
+    if "noise" in rec.info:  # the noise flags of the recorded `conag run`
+        scenario = from_note(rec.info["noise"]).apply(scenario)
     # The script stands in for every command the recorded world stepped without: this one
     # never times out itself (a busy machine makes the replay slower, not different).
     scenario = replace(scenario, world=replace(scenario.world, lockstep_timeout=VERIFY_TIMEOUT))

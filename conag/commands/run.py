@@ -19,6 +19,7 @@ from conag.agent_settings import AgentSettings, add_kind_args
 from conag.argtypes import non_negative, positive
 from conag.common import PRIORITIES, RECORDER_PRIORITY, stop_on_signals
 from conag.exit_codes import EXIT_ERROR, EXIT_INCOMPLETE, EXIT_INTERRUPTED, EXIT_STALLED, EXIT_USAGE
+from conag.noise_flags import add_noise_args, noise_settings
 from conag.recording.mcap_log import read_end, world_cut_short
 from conag.run import RunOptions
 from conag.runs import check_name, endpoint_in_use, free_endpoint, register, unregister
@@ -84,6 +85,7 @@ def configure(u: argparse.ArgumentParser) -> None:
     u.add_argument("--nearest-first", action="store_true",
                    help="agents without goal sequencing (paper §4), for comparison with ConAg-TS (§6)")
     add_kind_args(u)
+    add_noise_args(u)
     g = u.add_argument_group("learning (paper §5.1)")
     g.add_argument("--teacher", action="store_true", help="start a teacher process too")
     g.add_argument("--learn", action="store_true", help="agents are students with random weights (conag agent --learn)")
@@ -119,7 +121,8 @@ def run_options(args: argparse.Namespace) -> RunOptions:
     if args.per_process < 1 or (args.per_process > 1 and (args.learn or args.secure is not None)):
         raise ValueError("--per-process must be >= 1, and 1 for learning agents (each saves its own weights) "
                          "and on a secure bus (each agent has its own credential)")
-    scenario = load_scenario(args.scenario)
+    noise = noise_settings(args)
+    scenario = noise.apply(load_scenario(args.scenario))
     if args.name is not None:
         check_name(args.name)
     if args.listen and endpoint_in_use(args.listen[0]):
@@ -134,7 +137,7 @@ def run_options(args: argparse.Namespace) -> RunOptions:
                       unbuildable=unbuildable, record=args.record, record_priority=args.record_priority,
                       view=args.view, maps_every=args.maps_every, secure=args.secure,
                       checkpoint_every=args.checkpoint_every, profile=args.profile,
-                      per_process=args.per_process, agent_mode=args.agent_mode)
+                      per_process=args.per_process, agent_mode=args.agent_mode, noise=noise)
 
 
 def warn_if_unbuildable(path: str, scenario: Scenario, agents: int | None = None) -> str:

@@ -11,6 +11,7 @@ import numpy as np
 
 from conag.argtypes import positive
 from conag.common import bus_args, bus_options, status_line, stop_on_signals
+from conag.noise_flags import add_noise_args, noise_settings
 from protocol.bus import is_client, open_session
 from world_server.checkpoint import DEFAULT_EVERY, CheckpointPlan, load_state, restore_world, resumed_epoch
 from world_server.scenario import load_scenario
@@ -49,12 +50,15 @@ def configure(w: argparse.ArgumentParser) -> None:
     c.add_argument("--resume", metavar="FILE",
                    help="continue the world saved in checkpoint FILE from its tick (and go on checkpointing to FILE "
                         "unless --checkpoint says otherwise); a truncated or corrupt FILE is refused")
+    add_noise_args(w)
     bus_args(w)
 
 
 def run(args: argparse.Namespace) -> int:
     plan = None
     if args.resume:
+        if not noise_settings(args).changes_nothing:
+            raise ValueError("the checkpoint holds the world's noise settings: leave the noise flags out with --resume")
         world, every = _resumed_world(args)
         scenario = world.scenario
         path = args.checkpoint or args.resume  # a resumed world goes on checkpointing where it came from
@@ -62,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         if args.scenario is None:
             raise ValueError("conag world needs a SCENARIO file (or --resume CHECKPOINT)")
-        scenario = load_scenario(args.scenario)
+        scenario = noise_settings(args).apply(load_scenario(args.scenario))
         seed = scenario.seed if args.seed is None else args.seed
         world = World(scenario, np.random.default_rng(seed), world_id=args.world_id)
         if args.checkpoint:

@@ -22,6 +22,7 @@ from agent_runtime.brain import Brain, Step
 from agent_runtime.config import AgentConfig
 from protocol.messages import SITE_OPS, Perturbation, PerturbResult
 from world_server.buildability import check_layout
+from world_server.noise import NoiseSettings
 from world_server.scenario import Scenario
 from world_server.stall import StallClock, stall_report
 from world_server.world import World
@@ -150,9 +151,12 @@ class FirstCompletion:
 
 
 def start(scenario: Scenario, agents: int | None = None, seed: int | None = None,
-          cfg: AgentConfig | None = None, network=None) -> SimRun:
-    """A world and its brains; `network` (one for every agent) replaces the Fig. 8 network."""
+          cfg: AgentConfig | None = None, network=None, noise: NoiseSettings | None = None) -> SimRun:
+    """A world and its brains; `network` (one for every agent) replaces the Fig. 8 network;
+    `noise` overrides the scenario's noise settings (docs/noise.md)."""
     seed = scenario.seed if seed is None else seed
+    if noise is not None:
+        scenario = noise.apply(scenario)
     world = World(scenario, np.random.default_rng(seed))
     run = SimRun(world)
     run._record_fills()  # sites filled from the start count as filled at tick 0
