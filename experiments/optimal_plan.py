@@ -36,7 +36,6 @@ import itertools
 from dataclasses import dataclass
 
 import numpy as np
-
 from numba import njit
 
 from agent_runtime.spreading import distance_field, seeded_distance_field
@@ -295,7 +294,7 @@ def optimal_plan(bricks: np.ndarray, sites: np.ndarray, obstacles: np.ndarray, s
                     cost = costs[s]
                     if filled >> s & 1 or cost == np.inf:
                         continue
-                    nxt = (filled | 1 << s, taken | 1 << b, where[:agent] + (m.site_cells[s],) + where[agent + 1:])
+                    nxt = (filled | 1 << s, taken | 1 << b, (*where[:agent], m.site_cells[s], *where[agent + 1:]))
                     g2 = g + cost
                     if g2 < best.get(nxt, np.inf) - 1e-9:
                         best[nxt] = g2

@@ -118,8 +118,9 @@ def run_live(sc: Scenario, seed: int, starts: list[tuple[int, int]]) -> Live:
     """Build once; keep the distance per behaviour and the trips (brick, site) made."""
     run = sim.start(sc, seed=seed, cfg=AgentConfig(hunger_rate=0.0, thirst_rate=0.0))
     world = run.world
+    is_brick = world.discs.kind == BRICK_DISC
     brick_cell = {int(i): tuple(int(v) for v in c[::-1])
-                  for i, c in zip(np.flatnonzero(world.discs.kind == BRICK_DISC), sc.to_cell(world.discs.xy[world.discs.kind == BRICK_DISC]))}
+                  for i, c in zip(np.flatnonzero(is_brick), sc.to_cell(world.discs.xy[is_brick]))}
     status = world.status()
     ids = status.agent_ids
     last = {"distance": list(status.agent_distance), "grabs": list(status.agent_grabs),
@@ -211,8 +212,8 @@ def _f(v: float | None, fmt: str = ".2f") -> str:
 
 
 def table(results: list[Result]) -> str:
-    lines = ["| layout | agents | sites | bricks | optimum (cells) | ideal order / optimum | ConAg / optimum "
-             "(median of seeds) | completed | own trips / optimum |",
+    lines = [("| layout | agents | sites | bricks | optimum (cells) | ideal order / optimum | ConAg / optimum "
+              "(median of seeds) | completed | own trips / optimum |"),
              "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in results:
         done = [lv for lv in r.runs if lv.completed]
@@ -226,8 +227,8 @@ def table(results: list[Result]) -> str:
 
 
 def summary_table(s: dict) -> str:
-    lines = ["| agents | layouts (solved) | runs completed | ConAg / optimum: median (quartiles) "
-             "| ideal order / optimum: median | excess: order | explore | approach | other | path |",
+    lines = [("| agents | layouts (solved) | runs completed | ConAg / optimum: median (quartiles) "
+              "| ideal order / optimum: median | excess: order | explore | approach | other | path |"),
              "|---:|---|---|---|---:|---:|---:|---:|---:|---:|"]
     for agents, v in s.items():
         q = v["conag_quartiles"]

@@ -4,6 +4,7 @@ the two layouts the issue found the agent losing on are built (slow tier)."""
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 
 import numpy as np
@@ -56,7 +57,7 @@ def test_a_large_block_fills_its_core_before_its_rim_closes():
 def test_a_spiral_is_one_cell_wide_with_a_free_cell_between_its_arms(n):
     cells = spiral_cells(n)
     assert len(set(cells)) == len(cells)
-    assert all(abs(a[0] - b[0]) + abs(a[1] - b[1]) == 1 for a, b in zip(cells, cells[1:]))  # one path
+    assert all(abs(a[0] - b[0]) + abs(a[1] - b[1]) == 1 for a, b in itertools.pairwise(cells))  # one path
     grid = np.zeros((n, n), bool)
     for r, c in cells:
         grid[r, c] = True

@@ -35,8 +35,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from world_server.buildability import check_layout
-from world_server.layout_options import (FAMILIES, MAX_AGENTS, MAX_SIZE, MIN_SIZE, SIZE_BANDS, SOURCES,
-                                         SUITE_FAMILIES)
+from world_server.layout_options import FAMILIES, MAX_AGENTS, MAX_SIZE, MIN_SIZE, SIZE_BANDS, SOURCES, SUITE_FAMILIES
 from world_server.scenario import Scenario, parse_scenario
 
 # The generator's version: bump it with any change that makes a different file for the same
@@ -670,15 +669,13 @@ def spiral_cells(n: int) -> list[tuple[int, int]]:
     cells = [(n - 1, 0)]
     r, c = n - 1, 0
     turns = ((-1, 0), (0, 1), (1, 0), (0, -1))  # north, east, south, west
-    length, i = n - 1, 0
     # the first three arms span the box; then each pair of arms is 2 shorter
     lengths = [n - 1, n - 1, n - 1] + [x for k in range(n - 3, 0, -2) for x in (k, k)]
-    for length in lengths:
+    for i, length in enumerate(lengths):
         dr, dc = turns[i % 4]
         for _ in range(length):
             r, c = r + dr, c + dc
             cells.append((r, c))
-        i += 1
     return cells
 
 
@@ -733,3 +730,11 @@ def _solid_hollow_stamp(rng, budget: int, span: int) -> np.ndarray:
     s[:, -1] = "+"
     s = np.rot90(s, int(rng.integers(4)))
     return s if rng.random() < 0.5 else s.T
+
+
+def word_sites(word: str) -> np.ndarray:
+    """bool [row, col]: `word` in the generator's 5 x 7 block letters, one free column
+    between letters (a hand-made layout's structure, e.g. experiments/team_size.py's)."""
+    glyphs = [np.array([list(r) for r in _FONT[ch].split("|")]) == "#" for ch in word.upper()]
+    gap = np.zeros((7, 1), bool)
+    return np.hstack([x for g in glyphs for x in (g, gap)][:-1])
