@@ -17,6 +17,7 @@ agent-ticks (every agent's behaviour on every tick, summed over the team).
                                                # writes out/team_size-quick/
     python3 -m experiments.team_size           # every layout and team, 3 seeds (hours on 2 cores)
     python3 -m experiments.team_size --plot    # the curves of experiments/team_size.json -> out/team_size.png
+    python3 -m experiments.team_size --report-only --out DIR   # the tables again from DIR/team_size.json
 
 Writes team_size.json and team_size.md (experiments/ for the full run, --out otherwise)
 and, for the full run, the team-size section of docs/results/experiments.md. Every run is
@@ -58,6 +59,7 @@ GENERATED = (("wall", 40, 80), ("ring", 45, 80), ("nested_rings", 40, 80), ("poc
              ("letter", 50, 120), ("polyomino", 40, 80), ("multi", 60, 160), ("block", 35, 100),
              ("spiral", 40, 90), ("corridor", 45, 80), ("solid_hollow", 40, 80), ("multi", 90, 200))
 SHOWN = ("explore", "brick_nav", "config_nav", "approach_red", "grab", "drop", "avoid", "unstick")
+FOOD_AND_WATER = ("approach_food", "approach_water", "eat", "drink")  # hunger and thirst, one column
 
 
 # ------------------------------------------------------------------ the layouts
@@ -192,23 +194,29 @@ def tables(rows: list[dict]) -> str:
         lines.append(f"| {name} | " + " | ".join(_f(at[name, n]["distance_bound"], ".2f") if (name, n) in at else ""
                                                  for n in teams) + " |")
     lines += ["", "Share of agent-ticks per behaviour (all layouts, each layout weighted equally):", "",
-              "| agents | " + " | ".join(SHOWN) + " | other |", "|---:|" + "---:|" * (len(SHOWN) + 1)]
+              "| agents | " + " | ".join(SHOWN) + " | food and water | other |",
+              "|---:|" + "---:|" * (len(SHOWN) + 2)]
     for n in teams:
         rs = [r for r in rows if r["agents"] == n]
         share = {b: float(np.mean([r["shares"].get(b, 0.0) for r in rs])) for b in BEHAVIOURS}
-        other = 1.0 - sum(share[b] for b in SHOWN)
-        lines.append(f"| {n} | " + " | ".join(f"{100 * share[b]:.0f}%" for b in SHOWN) + f" | {100 * other:.0f}% |")
+        food = sum(share[b] for b in FOOD_AND_WATER)
+        other = max(1.0 - sum(share[b] for b in SHOWN) - food, 0.0)
+        lines.append(f"| {n} | " + " | ".join(f"{100 * share[b]:.0f}%" for b in SHOWN)
+                     + f" | {100 * food:.0f}% | {100 * other:.0f}% |")
     return "\n".join(lines)
 
 
 def report(rows: list[dict], command: str, note: str) -> str:
+    subset = "" if not note else (f"\nA subset of the study: the full run, `python3 -m experiments.team_size` "
+                                  f"({len(layouts())} layouts x {len(TEAMS)} teams x {len(SEEDS)} seeds), takes "
+                                  "hours on 2 cores and has not been run for this table.\n")
     return f"""## Team size: 1 to 64 agents (issue 36) {{#team-size}}
 
 `{command}`{note}. The default agent, in-process and lockstep; a run stops when complete,
 stalled (no site filled for {DEFAULT_STALL} ticks, or the world's cells per agent if more) or at
 the layout's `max_ticks`. Speed-up = mean ticks with 1 agent / mean ticks with N (ideal: N).
 The curves: `python3 -m experiments.team_size --plot` (out/team_size.png, not committed).
-
+{subset}
 {tables(rows)}
 """
 
@@ -251,7 +259,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=None, help="folder for team_size.json and .md")
     ap.add_argument("--plot", action="store_true", help="draw the curves of team_size.json (in --out, default "
                     "experiments/) into out/team_size.png, running nothing")
+    ap.add_argument("--report-only", action="store_true", help="write team_size.md again from team_size.json "
+                    "(in --out, default experiments/; there also the docs section), running nothing")
     args = ap.parse_args(argv)
+    if args.report_only:
+        folder = args.out or ROOT / "experiments"
+        data = json.loads((folder / "team_size.json").read_text(encoding="utf-8"))
+        text = report(data["rows"], data["command"], data["note"])
+        (folder / "team_size.md").write_text(text, encoding="utf-8")
+        if folder.resolve() == (ROOT / "experiments").resolve():
+            write_section(RESULTS_DOC, "team-size", text)
+        print(text)
+        return 0
     if args.plot:
         src = (args.out or ROOT / "experiments") / "team_size.json"
         target = ROOT / "out" / "team_size.png"
@@ -280,12 +299,14 @@ def main(argv: list[str] | None = None) -> int:
     order = {n: i for i, n in enumerate(names)}
     runs.sort(key=lambda r: (order[r.layout], r.agents, r.seed))
     rows = summarise(runs)
-    argv_text = " ".join(argv if argv is not None else sys.argv[1:])
-    command = f"python3 -m experiments.team_size {argv_text}".strip()
+    picked = [("--layouts", args.layouts), ("--teams", args.teams), ("--seeds", args.seeds)]
+    command = " ".join(["python3 -m experiments.team_size", *(["--quick"] if args.quick else []),
+                        *(f"{flag} {' '.join(map(str, v))}" for flag, v in picked if v)])
     note = "" if full else (f" (layouts {', '.join(names)}; teams {', '.join(map(str, teams))}; seeds "
                             f"{', '.join(map(str, seeds))})")
-    (out / "team_size.json").write_text(json.dumps(dict(command=command, rows=rows, runs=[asdict(r) for r in runs]),
-                                                   indent=1) + "\n", encoding="utf-8")
+    (out / "team_size.json").write_text(json.dumps(dict(command=command, note=note, rows=rows,
+                                                        runs=[asdict(r) for r in runs]), indent=1) + "\n",
+                                        encoding="utf-8")
     text = report(rows, command, note)
     (out / "team_size.md").write_text(text, encoding="utf-8")
     if full:
