@@ -22,6 +22,8 @@ stopped in (experiments/generalisation/failures/, drawn by the run or by --pictu
     python3 -m experiments.generalisation --pictures   # draw the failures of generalisation.json again
     python3 -m experiments.generalisation --report-only   # the tables again from generalisation.json
     python3 -m experiments.generalisation --resume     # go on with an interrupted run (same options)
+    python3 -m experiments.generalisation --families   # make the candidate suite with the solid
+                                                       # families (layouts_families.json), print its folder
 
 Writes experiments/generalisation.json (every run), experiments/generalisation.md and the
 generalisation section of docs/results/experiments.md (not with --quick, which writes to --out).
@@ -61,6 +63,12 @@ SUITE_SIZE = 200
 UNSEEN_LAYOUTS = ((30, 1125, (24,)), (30, 1126, (25,)))
 UNSEEN = SUITE / "unseen"
 UNSEEN_MANIFEST = SUITE / "unseen.json"
+# Issue 36's candidate suite: the same size, with the solid shapes and corridors at about a
+# quarter (generator.SUITE_MIXES["solid"]); made into FAMILIES_LAYOUTS (gitignored). Not the
+# benchmark yet: run it with --only FAMILIES_LAYOUTS/*.toml --out DIR.
+FAMILIES_SEED, FAMILIES_MIX = 2036, "solid"
+FAMILIES_LAYOUTS = SUITE / "families"
+FAMILIES_MANIFEST = SUITE / "layouts_families.json"
 MODES = (("goal sequencing", True), ("nearest-first", False))
 BANDS = ((15, 30), (31, 60), (61, 120))
 DEFAULT_STALL = 3000
@@ -387,6 +395,15 @@ def generate_layouts(count: int, seed: int) -> None:
                   file=sys.stderr)
 
 
+def families_layouts(write: bool = False) -> list[Path]:
+    """The candidate suite's layout files (made from FAMILIES_MANIFEST; with `write`, the
+    manifest made anew first from what the generator makes now)."""
+    if write:
+        m, _ = suite.manifest_of([(SUITE_SIZE, FAMILIES_SEED, None, FAMILIES_MIX)])
+        FAMILIES_MANIFEST.write_text(m.to_json(), encoding="utf-8")
+    return suite.materialise(FAMILIES_MANIFEST, FAMILIES_LAYOUTS)
+
+
 def materialise() -> list[Path]:
     """The suite's layout files (made from MANIFEST where missing), in the suite's order;
     the unseen layouts kept for the record too."""
@@ -454,6 +471,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--generate", action="store_true",
                     help=f"a new {MANIFEST.name} (and unseen.json) from the generator as it is now, and the "
                          f"{SUITE_SIZE} layout files: only after a deliberate change to the generator")
+    ap.add_argument("--families", action="store_true",
+                    help=f"make the candidate suite with the solid families from {FAMILIES_MANIFEST.name} "
+                         "(--generate: write that manifest anew) and print its folder")
     ap.add_argument("--pictures", action="store_true",
                     help="run again the runs of generalisation.json that did not complete, drawing the "
                          "state each stopped in (failures/), and check they stop as recorded")
@@ -471,6 +491,10 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.jobs < 1 or args.stall < 1:
         ap.error("--jobs and --stall must be >= 1")
+    if args.families:
+        families_layouts(write=args.generate)
+        print(FAMILIES_LAYOUTS)
+        return 0
     if args.generate:
         generate_layouts(SUITE_SIZE, SUITE_SEED)
         return 0

@@ -7,7 +7,12 @@ TOML) and returns it with the parameters it chose. What varies:
 * the blueprint family: `wall` (straight or L), `ring`, `nested_rings`, `pocket` (dead-end
   corridors that must be filled from the inside out, paper Fig. 18), `letter` (block
   letters of a built-in 5 x 7 font, scaled), `polyomino` (a random connected blob) and
-  `multi` (several of those at once); in any family some sites may already hold a brick;
+  `multi` (several of those at once); and, asked for by name (an unset family and a suite
+  draw from the first seven, as generator version 1 did): `block` (a solid rectangle or a
+  compact filled blob, up to 10 x 10), `spiral` (a square spiral of sites one cell wide,
+  one free cell between its arms), `corridor` (a winding one-cell path of sites, sometimes
+  walled in: filled from its dead end) and `solid_hollow` (a solid block joined to a hollow
+  frame); in any family some sites may already hold a brick;
 * the brick source: one compact `pile`, `scattered` single bricks, or several `sources`
   far apart; always every open site's brick plus a few spare, all obtainable;
 * obstacles: `#` walls with gaps, food and water walls and fields, world edges close to
@@ -30,7 +35,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from world_server.buildability import check_layout
-from world_server.layout_options import FAMILIES, MAX_AGENTS, MAX_SIZE, MIN_SIZE, SIZE_BANDS, SOURCES
+from world_server.layout_options import FAMILIES, MAX_AGENTS, MAX_SIZE, MIN_SIZE, SIZE_BANDS, SOURCES, SUITE_FAMILIES
 from world_server.scenario import Scenario, parse_scenario
 
 # The generator's version: bump it with any change that makes a different file for the same
@@ -41,9 +46,16 @@ SUITE_MAX_SITES = (32, 40, 40)        # open sites per layout in a suite, per si
 # Agent counts a suite cycles through: every count from 1 to 12 is there, small teams
 # (the common case, and the cheap one to simulate on one core) more often.
 SUITE_AGENTS = (1, 1, 2, 2, 3, 3, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12)
+# Family mixes a suite may draw from, by name ("": generator version 1's). In "solid" the
+# later families are about a quarter of the layouts (5 of 19 draws; blocks twice: solid
+# blocks and compact blobs).
+SUITE_MIXES = {"": SUITE_FAMILIES,
+               "solid": SUITE_FAMILIES * 2 + ("block", "block", "spiral", "corridor", "solid_hollow")}
 DEFAULT_MAX_SITES = (40, 80, 120)     # the same for a single `generate` call
 MIN_TICKS = 20000
 NESTED_MIN_SITES = 32                 # a 7 x 7 ring around a 3 x 3 one
+SPIRAL_MIN_SITES = 13                 # the least spiral: 5 x 5 cells, two turns in
+MAX_BLOCK_SIDE = 10                   # solid blocks and blobs: at most 10 x 10 sites
 ATTEMPTS = 40                         # layouts drawn per call before giving up
 
 
@@ -88,11 +100,13 @@ def generate(seed: int, family: str | None = None, size: int | tuple[int, int] |
     """One buildable scenario. Unset choices are drawn from `seed`; `size` is N or (cols, rows)."""
     _validate(seed, family, size, agents, source, max_sites)
     pick = np.random.default_rng([seed, 0])
-    family = family or str(pick.choice(FAMILIES))
+    family = family or str(pick.choice(SUITE_FAMILIES))
     cols, rows = _pick_size(pick, size)
     agents = agents or _pick_agents(pick)
     source = source or str(pick.choice(SOURCES))
     cap = max_sites or DEFAULT_MAX_SITES[_band(max(cols, rows))]
+    if family == "spiral" and cap < SPIRAL_MIN_SITES:
+        raise ValueError(f"spiral needs max_sites >= {SPIRAL_MIN_SITES} (a 5 x 5 spiral)")
     if family == "nested_rings" and cap < NESTED_MIN_SITES:
         raise ValueError(f"nested_rings needs max_sites >= {NESTED_MIN_SITES} (two rings around a 3 x 3 one)")
     last = ""
@@ -113,7 +127,7 @@ def generate_suite(count: int, seed: int, **options) -> Iterator[GeneratedScenar
 
 
 def suite_plan(count: int, seed: int, sizes: tuple[tuple[int, int], ...] = SIZE_BANDS,
-               shares: tuple[float, ...] = SUITE_SHARES, families: tuple[str, ...] = FAMILIES,
+               shares: tuple[float, ...] = SUITE_SHARES, families: tuple[str, ...] = SUITE_FAMILIES,
                agents: tuple[int, ...] = SUITE_AGENTS, sources: tuple[str, ...] = SOURCES,
                max_sites: tuple[int, ...] = SUITE_MAX_SITES) -> list[dict]:
     """The `generate` arguments of a balanced suite: families, agent counts and brick
@@ -279,7 +293,7 @@ class _World:
 
     def compose(self, rng, family: str, source: str, agents: int, near: bool, cap: int) -> str:
         """Structure, obstacles, bricks and agents, in that order; '' or why it failed."""
-        low = NESTED_MIN_SITES if family == "nested_rings" else 6
+        low = {"nested_rings": NESTED_MIN_SITES, "spiral": SPIRAL_MIN_SITES, "block": 9}.get(family, 6)
         if not self.place_structure(rng, family, int(rng.integers(max(low, cap // 3), cap + 1))):
             return "the structure did not fit"
         self.add_obstacles(rng)
@@ -476,7 +490,9 @@ def _bfs_cells(free: np.ndarray, first: tuple[int, int], k: int) -> list[tuple[i
 def _stamp(rng, family: str, budget: int, shape: tuple[int, int]) -> np.ndarray:
     span = min(shape) - 2  # leave room for the margin
     return {"wall": _wall_stamp, "ring": _ring_stamp, "nested_rings": _nested_stamp,
-            "pocket": _pocket_stamp, "letter": _letter_stamp, "polyomino": _polyomino_stamp}[family](
+            "pocket": _pocket_stamp, "letter": _letter_stamp, "polyomino": _polyomino_stamp,
+            "block": _block_stamp, "spiral": _spiral_stamp, "corridor": _corridor_stamp,
+            "solid_hollow": _solid_hollow_stamp}[family](
         rng, max(budget, 4), span)
 
 
@@ -623,3 +639,102 @@ def _polyomino_stamp(rng, budget: int, span: int) -> np.ndarray:
     for r, c in cells:
         s[r - min(rs), c - min(cs)] = "+"
     return s
+
+
+def _block_stamp(rng, budget: int, span: int) -> np.ndarray:
+    """A solid rectangle of sites (half the time), else a compact blob: a filled ellipse
+    or a rectangle with its corners bitten off; at most MAX_BLOCK_SIDE a side."""
+    side = min(MAX_BLOCK_SIDE, span)
+    dims = [(w, h) for w in range(3, side + 1) for h in range(3, side + 1)
+            if w * h <= budget and max(w, h) <= 2 * min(w, h)]
+    w, h = dims[int(rng.integers(len(dims)))] if dims else (3, 3)
+    if rng.random() < 0.5:
+        return np.full((h, w), "+")
+    r, c = np.mgrid[0:h, 0:w]
+    if rng.random() < 0.5:  # an ellipse through the middles of the box's sides
+        inside = ((r - (h - 1) / 2) / (h / 2)) ** 2 + ((c - (w - 1) / 2) / (w / 2)) ** 2 <= 1.0
+    else:  # corners cut by 1 or 2 cells
+        k = int(rng.integers(1, 3)) if min(w, h) >= 5 else 1
+        inside = np.minimum(r, h - 1 - r) + np.minimum(c, w - 1 - c) >= k
+    s = np.where(inside, "+", ".")
+    keep = np.flatnonzero(inside.any(axis=1))
+    cols = np.flatnonzero(inside.any(axis=0))
+    return s[keep[0]:keep[-1] + 1, cols[0]:cols[-1] + 1]
+
+
+def spiral_cells(n: int) -> list[tuple[int, int]]:
+    """(row, col) cells of a square spiral one cell wide in an n x n box (n odd >= 5),
+    one free cell between its arms: along the west side from the south-west corner up,
+    then clockwise inwards. Its corridor opens at the south-west corner."""
+    cells = [(n - 1, 0)]
+    r, c = n - 1, 0
+    turns = ((-1, 0), (0, 1), (1, 0), (0, -1))  # north, east, south, west
+    # the first three arms span the box; then each pair of arms is 2 shorter
+    lengths = [n - 1, n - 1, n - 1] + [x for k in range(n - 3, 0, -2) for x in (k, k)]
+    for i, length in enumerate(lengths):
+        dr, dc = turns[i % 4]
+        for _ in range(length):
+            r, c = r + dr, c + dc
+            cells.append((r, c))
+    return cells
+
+
+def _spiral_stamp(rng, budget: int, span: int) -> np.ndarray:
+    """A square spiral of sites one cell wide, 5 x 5 to as large as the budget and the world
+    allow, turned and mirrored at random."""
+    sizes = [n for n in range(5, span + 1, 2) if len(spiral_cells(n)) <= budget]
+    n = sizes[int(rng.integers(len(sizes)))] if sizes else 5
+    s = np.full((n, n), ".")
+    for r, c in spiral_cells(n):
+        s[r, c] = "+"
+    s = np.rot90(s, int(rng.integers(4)))
+    return s if rng.random() < 0.5 else s.T
+
+
+def _corridor_stamp(rng, budget: int, span: int) -> np.ndarray:
+    """A winding path of sites one cell wide: runs of 3 or more cells, two cells apart,
+    joined alternately at either end (a serpentine). Half the time walled in with `#` or
+    food and water, one mouth open at its start: then it is filled from its dead end."""
+    runs = int(rng.integers(2, 6))
+    length = int(np.clip(budget // runs, 3, max(3, span - 2)))
+    while runs > 2 and runs * length + runs - 1 > budget:
+        runs -= 1
+    length = int(np.clip((budget - (runs - 1)) // runs, 3, max(3, span - 2)))
+    h, w = 2 * runs - 1, length
+    s = np.full((h, w), ".")
+    for k in range(runs):
+        s[2 * k, :] = "+"
+        if k < runs - 1:
+            s[2 * k + 1, w - 1 if k % 2 == 0 else 0] = "+"
+    if rng.random() < 0.5:
+        wall = np.full((h + 2, w + 2), " ")
+        chars = rng.choice(list(str(rng.choice(["#", "F", "W", "FW"]))), size=wall.shape)
+        wall[:, :] = chars
+        wall[1:-1, 1:-1] = np.where(s == "+", "+", chars[1:-1, 1:-1])
+        wall[1, 0] = "."  # the mouth, at the start of the first run
+        s = wall
+    s = np.rot90(s, int(rng.integers(4)))
+    return s if rng.random() < 0.5 else s.T
+
+
+def _solid_hollow_stamp(rng, budget: int, span: int) -> np.ndarray:
+    """A solid block of sites and a hollow frame of sites side by side, sharing an edge:
+    the block is filled from its core, the frame's inside stays empty."""
+    side = min(MAX_BLOCK_SIDE, span)
+    options = [(h, a, b) for h in range(3, side + 1) for a in range(2, side) for b in range(3, side + 1)
+               if a + b <= side and h * a + 2 * b + 2 * (h - 2) - (2 if b else 0) <= budget and b >= 3]
+    h, a, b = options[int(rng.integers(len(options)))] if options else (3, 2, 3)
+    s = np.full((h, a + b), ".")
+    s[:, :a] = "+"
+    s[[0, -1], a:] = "+"
+    s[:, -1] = "+"
+    s = np.rot90(s, int(rng.integers(4)))
+    return s if rng.random() < 0.5 else s.T
+
+
+def word_sites(word: str) -> np.ndarray:
+    """bool [row, col]: `word` in the generator's 5 x 7 block letters, one free column
+    between letters (a hand-made layout's structure, e.g. experiments/team_size.py's)."""
+    glyphs = [np.array([list(r) for r in _FONT[ch].split("|")]) == "#" for ch in word.upper()]
+    gap = np.zeros((7, 1), bool)
+    return np.hstack([x for g in glyphs for x in (g, gap)][:-1])

@@ -13,7 +13,9 @@ refuses, naming the file, when the generator no longer makes what the manifest s
        "sha256": "..."},
       ...]}
 
-A file is named `{index:03d}-{scenario name}.toml` (`file_name`).
+A file is named `{index:03d}-{scenario name}.toml` (`file_name`). An entry may name a
+family `mix` (`generator.SUITE_MIXES`: "solid" adds the solid shapes and corridors); none
+is the version 1 mix, and its line then has no `mix` key.
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ from collections.abc import Iterable, Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from world_server.generator import GENERATOR_VERSION, GeneratedScenario, generate, suite_plan
+from world_server.generator import GENERATOR_VERSION, SUITE_MIXES, GeneratedScenario, generate, suite_plan
 
 
 class SuiteError(RuntimeError):
@@ -42,6 +44,11 @@ class SuiteEntry:
     suite_seed: int
     index: int
     sha256: str
+    mix: str = ""                     # the family mix of the suite (generator.SUITE_MIXES)
+
+    def as_json(self) -> dict:
+        """The entry as its manifest line holds it (no `mix` key for the version 1 mix)."""
+        return {k: v for k, v in asdict(self).items() if k != "mix" or v}
 
 
 @dataclass(frozen=True)
@@ -57,7 +64,7 @@ class Manifest:
 
     def to_json(self) -> str:
         """The manifest file's text: one layout a line, so a change shows as the lines it changes."""
-        rows = ",\n".join("  " + json.dumps(asdict(e)) for e in self.layouts)
+        rows = ",\n".join("  " + json.dumps(e.as_json()) for e in self.layouts)
         return f'{{"generator": {self.generator},\n "layouts": [\n{rows}\n ]}}\n'
 
     @classmethod
@@ -80,22 +87,26 @@ def sha256(text: str) -> str:
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
 
-def generated(count: int, seed: int, indices: Iterable[int] | None = None) -> Iterator[tuple[int, GeneratedScenario]]:
-    """(index, layout) of `generate_suite(count, seed)`, only those at `indices` if given
-    (each is drawn on its own: layout i does not depend on the others)."""
-    plan = suite_plan(count, seed)
+def generated(count: int, seed: int, indices: Iterable[int] | None = None,
+              mix: str = "") -> Iterator[tuple[int, GeneratedScenario]]:
+    """(index, layout) of `generate_suite(count, seed)` (with the families of `mix`), only
+    those at `indices` if given (each is drawn on its own: layout i does not depend on the others)."""
+    if mix not in SUITE_MIXES:
+        raise SuiteError(f"unknown family mix {mix!r}; known: {', '.join(map(repr, SUITE_MIXES))}")
+    plan = suite_plan(count, seed, families=SUITE_MIXES[mix])
     for i in range(count) if indices is None else indices:
         yield i, generate(**plan[i])
 
 
-def manifest_of(suites: Iterable[tuple[int, int, Iterable[int] | None]]) -> tuple[Manifest, dict[str, str]]:
+def manifest_of(suites: Iterable[tuple]) -> tuple[Manifest, dict[str, str]]:
     """A manifest of the layouts the generator makes now, and their texts by file name:
-    `suites` holds (count, seed, indices or None for all)."""
+    `suites` holds (count, seed, indices or None for all[, family mix])."""
     entries, texts = [], {}
-    for count, seed, indices in suites:
-        for i, g in generated(count, seed, indices):
+    for count, seed, indices, *rest in suites:
+        mix = rest[0] if rest else ""
+        for i, g in generated(count, seed, indices, mix):
             name = file_name(i, g)
-            entries.append(SuiteEntry(name, count, seed, i, sha256(g.text)))
+            entries.append(SuiteEntry(name, count, seed, i, sha256(g.text), mix))
             texts[name] = g.text
     return Manifest(GENERATOR_VERSION, tuple(entries)), texts
 
@@ -139,11 +150,11 @@ def materialise(manifest: str | Path | Manifest, folder: str | Path) -> list[Pat
     if missing and m.generator != GENERATOR_VERSION:
         raise SuiteError(f"the manifest was made by generator version {m.generator}, this is version "
                          f"{GENERATOR_VERSION}: its layouts cannot be made again")
-    by_suite: dict[tuple[int, int], list[SuiteEntry]] = {}
+    by_suite: dict[tuple[int, int, str], list[SuiteEntry]] = {}
     for e in missing:
-        by_suite.setdefault((e.count, e.suite_seed), []).append(e)
-    for (count, seed), entries in by_suite.items():
-        for e, (i, g) in zip(entries, generated(count, seed, [e.index for e in entries])):
+        by_suite.setdefault((e.count, e.suite_seed, e.mix), []).append(e)
+    for (count, seed, mix), entries in by_suite.items():
+        for e, (i, g) in zip(entries, generated(count, seed, [e.index for e in entries], mix)):
             if file_name(i, g) != e.file or sha256(g.text) != e.sha256:
                 raise SuiteError(f"{e.file}: the generator (version {GENERATOR_VERSION}) now makes "
                                  f"{file_name(i, g)} with sha256 {sha256(g.text)[:12]}..., the manifest says "
