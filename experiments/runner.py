@@ -139,10 +139,10 @@ def connect(address: str) -> Any:
 
 def _cluster(fn: Callable[[J], R], jobs: Sequence[J], address: str,
              seen: Callable[[int], None] | None) -> Iterator[Done[J, R]]:
-    from distributed import as_completed as dask_completed
-
     mine = fingerprint()
     client = connect(address)
+    from distributed import as_completed as dask_completed
+
     futures: dict[Any, J] = {}
     try:
         if seen is not None:
