@@ -146,7 +146,7 @@ def _cluster(fn: Callable[[J], R], jobs: Sequence[J], address: str,
     futures: dict[Any, J] = {}
     try:
         if seen is not None:
-            seen(len(client.scheduler_info(n_workers=-1)["workers"]))
+            seen(len(client.nthreads()))
         name = getattr(fn, "__name__", None) or getattr(getattr(fn, "func", None), "__name__", "run")
         sweep = uuid.uuid4().hex[:8]
         # pure=False and a key per run: two equal jobs are two runs, as in the local pool.
