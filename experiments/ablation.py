@@ -2,6 +2,7 @@
 
     python3 -m experiments.ablation --quick             # three small layouts: ablation_quick.md
     python3 -m experiments.ablation --sample 60 --jobs 2  # the 60-layout table: ablation.md
+    python3 -m experiments.ablation --cluster tcp://HOST:8786   # on a Dask cluster (experiments/runner.py)
 
 Each layout of a sample of the generated suite (every `--every`-th file, so every family
 and size comes in) is built in process (`conag.sim`, goal sequencing on) by several
@@ -23,16 +24,24 @@ import argparse
 import json
 import statistics
 import sys
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from agent_runtime.config import ADDITIONS, AgentConfig
+from experiments import runner
 from experiments.generalisation import DEFAULT_STALL, LAYOUTS, distance_bound, family_of, materialise, stall_limit
-from experiments.workers import pool
-from world_server.scenario import load_scenario
+from world_server.scenario import parse_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
 QUICK = ("000-gen-wall-20260000.toml", "001-gen-nested_rings-20260001.toml", "002-gen-polyomino-20260002.toml")
+
+
+@dataclass(frozen=True)
+class Job:
+    layout: str        # file name under LAYOUTS
+    agent: str         # a name of `variants()`
+    stall: int
+    text: str = field(default="", repr=False)   # the layout file's text: a task needs no file of the suite
 
 
 @dataclass(frozen=True)
@@ -54,16 +63,21 @@ def variants() -> dict[str, AgentConfig]:
     return out
 
 
-def run_one(layout: str, agent: str, stall: int) -> Run:
+def job_of(layout: str, agent: str, stall: int) -> Job:
+    """The job of one run, with the layout's text read here (a cluster's workers have no suite files)."""
+    return Job(layout, agent, stall, (LAYOUTS / layout).read_text(encoding="utf-8"))
+
+
+def run_one(job: Job) -> Run:
     from conag import sim
 
-    sc = load_scenario(LAYOUTS / layout)
-    run = sim.start(sc, cfg=variants()[agent])
+    sc = parse_scenario(job.text, job.layout)
+    run = sim.start(sc, cfg=variants()[job.agent])
     starts = [tuple(int(v) for v in cell[::-1]) for cell in sc.to_cell(run.world.agent_poses()[:, :2])]
-    result = run.run(sc.max_ticks, stall_ticks=stall_limit(sc, stall))
+    result = run.run(sc.max_ticks, stall_ticks=stall_limit(sc, job.stall))
     status = run.world.status()
-    return Run(layout=layout, family=family_of(sc), agent=agent, completed=result.completed, ticks=result.ticks,
-               distance=float(sum(status.agent_distance)), bound=distance_bound(sc, starts))
+    return Run(layout=job.layout, family=family_of(sc), agent=job.agent, completed=result.completed,
+               ticks=result.ticks, distance=float(sum(status.agent_distance)), bound=distance_bound(sc, starts))
 
 
 def table(runs: list[Run]) -> str:
@@ -87,6 +101,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true", help=f"the layouts {', '.join(QUICK)} only")
     ap.add_argument("--sample", type=int, default=60, help="layouts from the suite (default 60)")
     ap.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
+    runner.add_cluster_argument(ap)
     ap.add_argument("--stall", type=int, default=DEFAULT_STALL, help="ticks with no site filled that stop a run")
     ap.add_argument("--agents", help="only these agents, comma separated (default: every one)")
     ap.add_argument("--out", type=Path, default=ROOT / "experiments",
@@ -98,15 +113,17 @@ def main(argv: list[str] | None = None) -> int:
     unknown = [a for a in agents if a not in variants()]
     if unknown:
         ap.error(f"unknown agent(s) {', '.join(unknown)}; known: {', '.join(variants())}")
-    jobs = [(layout, agent) for layout in layouts for agent in agents]
-    runs: list[Run] = []
-    with pool(args.jobs) as workers:
-        futures = [workers.submit(run_one, layout, agent, args.stall) for layout, agent in jobs]
-        for k, future in enumerate(futures, 1):
-            runs.append(future.result())
-            r = runs[-1]
+    jobs = [job_of(layout, agent, args.stall) for layout in layouts for agent in agents]
+    done: dict[Job, Run] = {}
+    try:
+        for k, d in enumerate(runner.run(run_one, jobs, runner.where_of(args, args.jobs)), 1):
+            r = done[d.job] = d.result
             print(f"[{k}/{len(jobs)}] {r.layout} {r.agent}: {'complete' if r.completed else 'not complete'} "
-                  f"in {r.ticks} ticks", file=sys.stderr, flush=True)
+                  f"in {r.ticks} ticks ({d.worker})", file=sys.stderr, flush=True)
+    except runner.ClusterError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    runs = [done[j] for j in jobs]
     args.out.mkdir(parents=True, exist_ok=True)
     stem = "ablation_quick" if args.quick else "ablation"
     (args.out / f"{stem}.json").write_text(json.dumps([asdict(r) for r in runs], indent=1) + "\n", encoding="utf-8")
@@ -117,4 +134,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(runner.by_name(main)())

@@ -18,12 +18,12 @@ errors per trial) and fig9_student.json (a trained student: `conag agent --weigh
 
     python3 -m experiments.fig9_learning           # full run (about 25 min on 2 cores)
     python3 -m experiments.fig9_learning --quick   # seconds-long smoke run (to a temp dir)
+    python3 -m experiments.fig9_learning --cluster tcp://HOST:8786   # on a Dask cluster (experiments/runner.py)
 """
 from __future__ import annotations
 
 import argparse
 import json
-import multiprocessing as mp
 import os
 import sys
 import tempfile
@@ -38,6 +38,7 @@ from agent_runtime.learning import Student
 from agent_runtime.network import engineered
 from agent_runtime.qlearning import QLearner
 from conag.sim.trials import run_learning, run_trial, trial_seed
+from experiments import runner
 from teacher.core import Teacher
 from world_server.scenario import load_scenario
 
@@ -150,20 +151,20 @@ def novel_trial(learner, path: str, plan: Plan, run: int, eta: float | None = No
                       sites_filled=r.sites_filled, sites_total=r.sites_total)
 
 
-def run_all(plan: Plan, workers: int) -> tuple[list[LearningRun], float]:
+def run_all(plan: Plan, where: runner.Where) -> tuple[list[LearningRun], float]:
     jobs = [(kind, eta, run, plan) for run in range(plan.runs) for kind, eta in plan.curves()]
     total_trials = len(jobs) * plan.trials
     started = time.monotonic()
     done: list[LearningRun] = []
-    with mp.get_context("spawn").Pool(workers) as pool:
-        for out in pool.imap_unordered(one_run, jobs):
-            done.append(out)
-            elapsed = time.monotonic() - started
-            left = elapsed / len(done) * (len(jobs) - len(done))
-            print(f"[fig9] {len(done)}/{len(jobs)} runs, {len(done) * plan.trials}/{total_trials} trials done | "
-                  f"{label(out.kind, out.eta, plan)}, run {out.run}: errors per trial "
-                  f"{' '.join(map(str, out.errors))} (current {out.errors[-1]}) | "
-                  f"{elapsed / 60:.1f} min, about {left / 60:.1f} min left", file=sys.stderr, flush=True)
+    for finished in runner.run(one_run, jobs, where):
+        out = finished.result
+        done.append(out)
+        elapsed = time.monotonic() - started
+        left = elapsed / len(done) * (len(jobs) - len(done))
+        print(f"[fig9] {len(done)}/{len(jobs)} runs, {len(done) * plan.trials}/{total_trials} trials done | "
+              f"{label(out.kind, out.eta, plan)}, run {out.run}: errors per trial "
+              f"{' '.join(map(str, out.errors))} (current {out.errors[-1]}) | "
+              f"{elapsed / 60:.1f} min, about {left / 60:.1f} min left", file=sys.stderr, flush=True)
     done.sort(key=lambda o: (o.kind != "delta", o.eta, o.run))
     return done, time.monotonic() - started
 
@@ -216,12 +217,12 @@ def plot(curves, plan: Plan, path: Path) -> None:
     plt.close(fig)
 
 
-def report(curves, baseline, plan: Plan, seconds: float, workers: int, quick: bool) -> str:
+def report(curves, baseline, plan: Plan, seconds: float, where: str, quick: bool) -> str:
     keys = list(curves)
     names = [label(*k, plan) for k in keys]
     lines = [f"# L3, L4 — learning the construction sequence (Fig. 9){' — QUICK smoke run' if quick else ''}", "",
              (f"Written by `python3 -m experiments.{STEM}{' --quick' if quick else ''}` in {seconds / 60:.1f} min "
-              f"on {workers} worker processes. Training environment `{TRAINING}` with one agent; {plan.runs} runs per "
+              f"on {where}. Training environment `{TRAINING}` with one agent; {plan.runs} runs per "
              f"curve, {plan.trials} trials of {plan.ticks:,} steps; before each trial the environment is reset "
               "and the agent put at its start (fresh maps, weights kept). Error = a step where the student's "
               "arm or motor output differs from the teacher's (the engineered network of Fig. 8 on the same "
@@ -283,17 +284,22 @@ def main(argv=None) -> int:
     parser.add_argument("--runs", type=int, help="runs per curve (default 50)")
     parser.add_argument("--trials", type=int, help="trials per run (default 20)")
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 2, help="worker processes")
+    runner.add_cluster_argument(parser)
     args = parser.parse_args(argv)
     plan = Plan(etas=(0.05, 0.2, 0.5), runs=2, trials=3, ticks=200, novel_students=1, novel_ticks=400) \
         if args.quick else Plan()
     plan = Plan(**{**asdict(plan), **{k: v for k, v in (("runs", args.runs), ("trials", args.trials)) if v}})
     out = args.out or (Path(tempfile.gettempdir()) if args.quick else ROOT / "experiments")
     out.mkdir(parents=True, exist_ok=True)
-    done, seconds = run_all(plan, args.workers)
+    try:
+        done, seconds = run_all(plan, runner.where_of(args, args.workers))
+    except runner.ClusterError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     curves = curves_of(done, plan)
     baseline = engineered_baseline(plan)
     plot(curves, plan, out / f"{STEM}.png")
-    text = report(curves, baseline, plan, seconds, args.workers, args.quick)
+    text = report(curves, baseline, plan, seconds, runner.where_of(args, args.workers).describe(), args.quick)
     (out / f"{STEM}.md").write_text(text, encoding="utf-8")
     raw = dict(plan=asdict(plan), seconds=seconds, runs=[o.to_json() for o in done])
     (out / f"{STEM}.json").write_text(json.dumps(raw) + "\n", encoding="utf-8")
@@ -307,4 +313,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(runner.by_name(main)())

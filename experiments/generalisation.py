@@ -24,6 +24,7 @@ stopped in (experiments/generalisation/failures/, drawn by the run or by --pictu
     python3 -m experiments.generalisation --resume     # go on with an interrupted run (same options)
     python3 -m experiments.generalisation --families   # make the candidate suite with the solid
                                                        # families (layouts_families.json), print its folder
+    python3 -m experiments.generalisation --cluster tcp://HOST:8786   # on a Dask cluster (experiments/runner.py)
 
 Writes experiments/generalisation.json (every run), experiments/generalisation.md and the
 generalisation section of docs/results/experiments.md (not with --quick, which writes to --out).
@@ -37,20 +38,21 @@ import os
 import re
 import subprocess
 import sys
+import tempfile
 import time
-from concurrent.futures import as_completed
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
 from agent_runtime.config import AgentConfig
 from conag import sim
+from experiments import runner
 from experiments.journal import Journal
 from experiments.report import RESULTS_DOC, write_section
-from experiments.workers import pool
 from world_server import suite
-from world_server.scenario import Scenario, load_scenario
+from world_server.scenario import Scenario, load_scenario, parse_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
 SUITE = ROOT / "experiments" / "generalisation"
@@ -81,6 +83,7 @@ class Job:
     mode: str
     stall: int
     code: str = ""     # the code version the run is for (see _code_version)
+    text: str = field(default="", repr=False)   # the layout file's text: a task needs no file of the suite
 
 
 @dataclass(frozen=True)
@@ -130,27 +133,35 @@ def layout_path(name: str) -> Path:
     return p if p.suffix == ".toml" and p.exists() else LAYOUTS / name
 
 
-def run_job(job: Job, pictures: Path | None) -> Outcome:
-    """Build one layout with one agent; stop when complete, stalled or out of ticks."""
-    sc = load_scenario(layout_path(job.layout))
+def job_of(name: str, mode: str, stall: int, code: str = "") -> Job:
+    """The job of one run of layout `name`, its text read here (a cluster's workers have no suite files)."""
+    return Job(name, mode, stall, code, layout_path(name).read_text(encoding="utf-8"))
+
+
+def run_job(job: Job, draw: bool = False) -> tuple[Outcome, bytes]:
+    """Build one layout with one agent; stop when complete, stalled or out of ticks.
+
+    With `draw`, a run that did not complete comes back with the PNG of the state it stopped
+    in (`picture_name`), else b"": the run writes nothing where it runs."""
+    sc = parse_scenario(job.text, job.layout) if job.text else load_scenario(layout_path(job.layout))
     run = sim.start(sc, cfg=AgentConfig(goal_sequencing=dict(MODES)[job.mode]))
     starts = [tuple(int(v) for v in cell[::-1]) for cell in sc.to_cell(run.world.agent_poses()[:, :2])]
     bricks_start = run.world.discs.bricks_total()
     began = time.perf_counter()
     result = run.run(sc.max_ticks, stall_ticks=stall_limit(sc, job.stall))
     status = run.world.status()
-    report, picture = (), ""
+    report, png = (), b""
     if not result.completed:
         report = tuple(run.stall_report())
-        if pictures is not None:
-            picture = str(_picture(run, sc, job, pictures).resolve())
-    return Outcome(layout=Path(job.layout).name, family=family_of(sc), cols=sc.cols, rows=sc.rows,
+        if draw:
+            png = _picture(run, sc, job)
+    outcome = Outcome(layout=Path(job.layout).name, family=family_of(sc), cols=sc.cols, rows=sc.rows,
                    agents=len(starts), mode=job.mode, completed=result.completed, stalled=result.stalled,
                    ticks=result.ticks, max_ticks=sc.max_ticks, sites_filled=status.sites_filled,
                    sites_total=status.sites_total, bricks_total_start=bricks_start,
                    bricks_total_end=status.bricks_total, distance=float(sum(status.agent_distance)),
-                   bound=distance_bound(sc, starts), seconds=time.perf_counter() - began, report=report,
-                   picture=picture)
+                   bound=distance_bound(sc, starts), seconds=time.perf_counter() - began, report=report)
+    return outcome, png
 
 
 def distance_bound(sc: Scenario, starts: list[tuple[int, int]]) -> float:
@@ -162,40 +173,49 @@ def distance_bound(sc: Scenario, starts: list[tuple[int, int]]) -> float:
                        AgentConfig().drop_centering) * sc.world.cell_size
 
 
-def _picture(run: sim.SimRun, sc: Scenario, job: Job, folder: Path) -> Path:
-    """The world as the run left it: discs where they are now, agents where they stand."""
+def picture_name(job: Job) -> str:
+    """The file name of a run's picture: the layout's stem and the agent."""
+    return f"{Path(job.layout).stem}-{'nearest' if job.mode == 'nearest-first' else 'ts'}.png"
+
+
+def _picture(run: sim.SimRun, sc: Scenario, job: Job) -> bytes:
+    """The world as the run left it, as PNG: discs where they are now, agents where they stand."""
     from protocol.messages import DISC_KINDS
     from world_server.render import render_scenario
 
     _, xy, kind = run.world.discs.present_arrays()
     discs = [(x, y, DISC_KINDS[k]) for (x, y), k in zip(xy.tolist(), kind.tolist())]
     st = run.world.status()
-    slug = "nearest" if job.mode == "nearest-first" else "ts"
-    return render_scenario(sc, folder / f"{Path(job.layout).stem}-{slug}.png", agents=run.world.agent_poses().tolist(),
-                           discs=discs, title=f"{sc.name} ({job.mode}): {st.sites_filled}/{st.sites_total} "
-                                              f"at tick {st.tick}", max_pixels=1200)
+    with tempfile.TemporaryDirectory() as folder:
+        path = render_scenario(sc, Path(folder) / picture_name(job), agents=run.world.agent_poses().tolist(),
+                               discs=discs, title=f"{sc.name} ({job.mode}): {st.sites_filled}/{st.sites_total} "
+                                                  f"at tick {st.tick}", max_pixels=1200)
+        return path.read_bytes()
 
 
-def run_all(jobs: list[Job], workers: int, pictures: Path | None, journal: Journal | None = None,
-            earlier: list[Outcome] | None = None) -> list[Outcome]:
-    """Every job on `workers` processes (spawned: nothing crosses a fork), with progress;
-    each outcome goes to `journal` as it comes. `earlier` outcomes (a resumed run's) count
-    in the progress and the result."""
+def run_all(jobs: list[Job], where: runner.Where, pictures: Path | None, journal: Journal | None = None,
+            earlier: list[Outcome] | None = None, seen=None) -> list[Outcome]:
+    """Every job where `where` says (experiments/runner.py), with progress; the pictures of
+    the runs that did not complete into `pictures` (none if None), each outcome to `journal`
+    as it comes. `earlier` outcomes (a resumed run's) count in the progress and the result."""
     out: list[Outcome] = list(earlier or ())
     total = len(out) + len(jobs)
     began = time.monotonic()
-    with pool(workers) as executor:
-        futures = {executor.submit(run_job, j, pictures): j for j in jobs}
-        for fut in as_completed(futures):
-            o = fut.result()
-            if journal is not None:
-                journal.append(_job_key(futures[fut]), asdict(o))
-            out.append(o)
-            what = (f"complete in {o.ticks} ticks" if o.completed else
-                    f"{'STALLED' if o.stalled else 'OUT OF TICKS'} at {o.sites_filled}/{o.sites_total}")
-            print(f"[{len(out)}/{total} {time.monotonic() - began:6.0f} s] {o.layout} ({o.family}, "
-                  f"{o.cols}x{o.rows}, {o.agents} agents) {o.mode}: {what} ({o.seconds:.0f} s)",
-                  file=sys.stderr, flush=True)
+    for done in runner.run(partial(run_job, draw=pictures is not None), jobs, where, seen=seen):
+        o, png = done.result
+        if png and pictures is not None:
+            pictures.mkdir(parents=True, exist_ok=True)
+            path = pictures / picture_name(done.job)
+            path.write_bytes(png)
+            o = replace(o, picture=str(path.resolve()))
+        if journal is not None:
+            journal.append(_job_key(done.job), asdict(o))
+        out.append(o)
+        what = (f"complete in {o.ticks} ticks" if o.completed else
+                f"{'STALLED' if o.stalled else 'OUT OF TICKS'} at {o.sites_filled}/{o.sites_total}")
+        print(f"[{len(out)}/{total} {time.monotonic() - began:6.0f} s] {o.layout} ({o.family}, "
+              f"{o.cols}x{o.rows}, {o.agents} agents) {o.mode}: {what} ({o.seconds:.0f} s, {done.worker})",
+              file=sys.stderr, flush=True)
     return sorted(out, key=lambda o: (o.layout, o.mode))
 
 
@@ -350,7 +370,7 @@ with goal sequencing and nearest-first in the same run, in-process (conag/sim/lo
 {args.stall} ticks with no site filled (stalled; on large worlds the world's cells per agent if
 that is more, the time to sweep it for a supply), or at the layout's `max_ticks`. Distance / bound:
 the distance all agents walked over `experiments/replay.lower_bound` on the initial map (completed runs).
-Wall time of this run: {seconds / 60:.0f} min on {args.jobs} worker processes.
+Wall time of this run: {seconds / 60:.0f} min on {args.where}.
 
 ### Goals
 
@@ -433,6 +453,7 @@ def rewrite_report(args: argparse.Namespace) -> int:
                 for r in rows]
     meta = json.loads((out / "generalisation.meta.json").read_text(encoding="utf-8"))
     args.jobs, args.stall = meta["jobs"], meta["stall"]
+    args.where = meta.get("where", f"{args.jobs} worker processes")
     (out / "generalisation.md").write_text(markdown(outcomes, args, meta["seconds"], out.resolve()), encoding="utf-8")
     write_section(RESULTS_DOC, "generalisation", markdown(outcomes, args, meta["seconds"], RESULTS_DOC.parent))
     print((out / "generalisation.md").read_text(encoding="utf-8"))
@@ -451,7 +472,8 @@ def draw_failures(args: argparse.Namespace) -> int:
     rows = [r for r in rows if (not names or r["layout"] in names) and args.mode in (None, r["mode"])]
     pictures = args.out / "generalisation" / "failures" if args.out else SUITE / "failures"
     print(f"drawing {len(rows)} pictures into {pictures}", file=sys.stderr, flush=True)
-    outcomes = run_all([Job(r["layout"], r["mode"], stall) for r in rows], args.jobs, pictures)
+    outcomes = run_all([job_of(r["layout"], r["mode"], stall) for r in rows], runner.where_of(args, args.jobs),
+                       pictures)
     recorded = {(r["layout"], r["mode"]): r for r in rows}
     same = ("completed", "stalled", "ticks", "sites_filled")
     differ = [o for o in outcomes if any(getattr(o, k) != recorded[o.layout, o.mode][k] for k in same)]
@@ -479,6 +501,7 @@ def main(argv: list[str] | None = None) -> int:
                          "state each stopped in (failures/), and check they stop as recorded")
     ap.add_argument("--only", nargs="+", metavar="LAYOUT", help="these layout files (names under the suite, or paths)")
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="worker processes")
+    runner.add_cluster_argument(ap)
     ap.add_argument("--stall", type=int, default=DEFAULT_STALL, help="ticks with no site filled that stop a run")
     ap.add_argument("--out", type=Path, default=None, help="folder for the json and md (default experiments/)")
     ap.add_argument("--mode", choices=[m for m, _ in MODES], default=None,
@@ -508,8 +531,17 @@ def main(argv: list[str] | None = None) -> int:
     if args.layouts:
         print(LAYOUTS)
         return 0
-    if args.pictures:
-        return draw_failures(args)
+    try:
+        if args.pictures:
+            return draw_failures(args)
+        return sweep(ap, args, files)
+    except runner.ClusterError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+
+
+def sweep(ap: argparse.ArgumentParser, args: argparse.Namespace, files: list[str]) -> int:
+    """The runs the options name, their journal, tables and files."""
     names = args.only or (quick_files(4) if args.quick else files)
     out = args.out or (None if args.quick else ROOT / "experiments")
     if out is None:
@@ -521,20 +553,23 @@ def main(argv: list[str] | None = None) -> int:
         old.unlink()
     journal = Journal(out / JOURNAL, resume=args.resume)
     code = _code_version()
-    earlier, jobs = resumed(journal, [Job(name, mode, args.stall, code) for name in names for mode, _ in MODES
+    earlier, jobs = resumed(journal, [job_of(name, mode, args.stall, code) for name in names for mode, _ in MODES
                                       if args.mode in (None, mode)])
     earlier = [in_folder(o, pictures) for o in earlier]
     if args.resume:
         print(f"resuming: {len(earlier)} of {len(earlier) + len(jobs)} runs already done "
               f"({out / JOURNAL})", file=sys.stderr, flush=True)
     began = time.monotonic()
-    outcomes = run_all(jobs, args.jobs, pictures, journal, earlier)
+    where = runner.where_of(args, args.jobs)
+    args.where = where.describe()
+    outcomes = run_all(jobs, where, pictures, journal, earlier,
+                       seen=lambda n: setattr(args, "where", where.describe(n)))
     seconds = journal.earlier_seconds() + time.monotonic() - began
     text = markdown(outcomes, args, seconds, out.resolve())
     rows = [asdict(o) | {"picture": os.path.relpath(o.picture, out.resolve()) if o.picture else ""} for o in outcomes]
     (out / "generalisation.json").write_text(json.dumps(rows, indent=1), encoding="utf-8")
-    (out / "generalisation.meta.json").write_text(json.dumps({"jobs": args.jobs, "stall": args.stall,
-                                                              "seconds": seconds}), encoding="utf-8")
+    meta = {"jobs": args.jobs, "stall": args.stall, "seconds": seconds, "where": args.where}
+    (out / "generalisation.meta.json").write_text(json.dumps(meta), encoding="utf-8")
     (out / "generalisation.md").write_text(text, encoding="utf-8")
     if not (args.quick or args.only or args.out):
         write_section(RESULTS_DOC, "generalisation", markdown(outcomes, args, seconds, RESULTS_DOC.parent))
@@ -544,4 +579,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(runner.by_name(main)())

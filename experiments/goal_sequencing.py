@@ -17,6 +17,7 @@ docs/results/experiments.md; prints the table.
 
     python3 -m experiments.goal_sequencing            # full run (a few minutes)
     python3 -m experiments.goal_sequencing --quick    # smoke run (seconds)
+    python3 -m experiments.goal_sequencing --cluster tcp://HOST:8786   # on a Dask cluster (experiments/runner.py)
 """
 
 from __future__ import annotations
@@ -26,7 +27,6 @@ import json
 import os
 import sys
 import time
-from concurrent.futures import as_completed
 from dataclasses import asdict, dataclass
 from functools import cache
 from pathlib import Path
@@ -35,9 +35,9 @@ import numpy as np
 
 from agent_runtime.config import AgentConfig
 from conag import sim
+from experiments import runner
 from experiments.replay import lower_bound, replay
 from experiments.report import RESULTS_DOC, write_section
-from experiments.workers import pool
 from world_server.scenario import Scenario, load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -142,19 +142,17 @@ def ideal(name: str) -> tuple[float, bool]:
     return r.distance * sc.world.cell_size, r.completed
 
 
-def run_all(jobs: list[Job], workers: int) -> list[JobResult]:
-    results = []
-    with pool(workers) as executor:
-        futures = [executor.submit(run_job, j) for j in jobs]
-        for k, fut in enumerate(as_completed(futures), 1):
-            r = fut.result()
-            j = r.job
-            outcome = (f"complete in {r.ticks} ticks" if r.completed else
-                       f"{'stalled' if r.stalled else 'out of ticks'} at {r.filled}/{r.total}")
-            print(f"[{k}/{len(jobs)}] {j.scenario} {j.agents} agent(s) {j.mode} seed {j.seed}: {outcome}, "
-                  f"distance {r.distance:.1f} ({r.seconds:.1f} s)", file=sys.stderr, flush=True)
-            results.append(r)
-    return results
+def run_all(jobs: list[Job], where: runner.Where, seen=None) -> list[JobResult]:
+    """Every job where `where` says (experiments/runner.py), with progress; in the order of `jobs`."""
+    results = {}
+    for k, done in enumerate(runner.run(run_job, jobs, where, seen=seen), 1):
+        r, j = done.result, done.job
+        outcome = (f"complete in {r.ticks} ticks" if r.completed else
+                   f"{'stalled' if r.stalled else 'out of ticks'} at {r.filled}/{r.total}")
+        print(f"[{k}/{len(jobs)}] {j.scenario} {j.agents} agent(s) {j.mode} seed {j.seed}: {outcome}, "
+              f"distance {r.distance:.1f} ({r.seconds:.1f} s, {done.worker})", file=sys.stderr, flush=True)
+        results[j] = r
+    return [results[j] for j in jobs]
 
 
 def summarise(results: list[JobResult]) -> list[dict]:
@@ -235,6 +233,7 @@ def main(argv: list[str] | None = None) -> str:
     ap.add_argument("--seeds", type=int, default=3, help="seeds per case (full run)")
     ap.add_argument("--stall", type=int, default=5000, help="stop a run after this many ticks without a new fill")
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="worker processes")
+    runner.add_cluster_argument(ap)
     ap.add_argument("--out", default=str(ROOT / "experiments"), help="directory for the table and chart")
     ap.add_argument("--doc", default=str(RESULTS_DOC), help="markdown report to update (G3 section)")
     args = ap.parse_args(argv)
@@ -246,7 +245,12 @@ def main(argv: list[str] | None = None) -> str:
     jobs = [Job(n, m, a, s, 3000 if args.quick else scenario(n).max_ticks, stall)
             for n in names for a in agent_counts for m, _ in MODES for s in seeds]
     started = time.perf_counter()
-    results = run_all(jobs, args.jobs)
+    where = runner.where_of(args, args.jobs)
+    args.where = where.describe()
+    try:
+        results = run_all(jobs, where, seen=lambda n: setattr(args, "where", where.describe(n)))
+    except runner.ClusterError as exc:
+        raise SystemExit(f"error: {exc}") from None
     rows = summarise(results)
     tab = table(rows)
     print(tab)
@@ -271,8 +275,8 @@ Re-run (from the repository root):
     python3 -m experiments.goal_sequencing           # full run, writes this section, the table and the chart
     python3 -m experiments.goal_sequencing --quick   # smoke run (seconds)
 
-This section was written by {'a `--quick`' if args.quick else 'the full'} run ({seconds:.0f} s on {args.jobs}
-worker processes): seeds {seeds}, {' and '.join(map(str, agent_counts))} agent(s), hunger and thirst off,
+This section was written by {'a `--quick`' if args.quick else 'the full'} run ({seconds:.0f} s on
+{args.where}): seeds {seeds}, {' and '.join(map(str, agent_counts))} agent(s), hunger and thirst off,
 lockstep, stopped after {args.stall} ticks without a new fill. Distances are in world units
 (one cell = one disc diameter), summed over the agents. The lower bound
 (experiments/replay.lower_bound), by shortest paths on the initial map, is the larger of
@@ -337,4 +341,4 @@ def _dist(ts: list[dict], nf: list[dict], name: str) -> str:
 
 
 if __name__ == "__main__":
-    main()
+    runner.by_name(main)()

@@ -4,6 +4,7 @@
     python3 -m experiments.noise --jobs 2       # the sample x every setting: noise.md, noise.png (about an hour)
     python3 -m experiments.noise --report-only  # the tables and the plot again from noise.json
     python3 -m experiments.noise --pictures     # docs/noise.md's picture (as experiments.pictures noise_maps)
+    python3 -m experiments.noise --cluster tcp://HOST:8786   # on a Dask cluster (experiments/runner.py)
 
 The sample: the first SAMPLE layouts, in the suite's order, of the generated suite of
 `experiments.generalisation` (made from its committed manifest) whose longer side is at
@@ -33,17 +34,16 @@ import math
 import statistics
 import sys
 import time
-from concurrent.futures import as_completed
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from agent_runtime.config import AgentConfig
 from conag import sim
+from experiments import runner
 from experiments.generalisation import DEFAULT_STALL, LAYOUTS, family_of, materialise, stall_limit
 from experiments.report import RESULTS_DOC, write_section
-from experiments.workers import pool
 from world_server.discs import BRICK_DISC
 from world_server.noise import NoiseSettings
 from world_server.scenario import Scenario, load_scenario, parse_scenario
@@ -188,14 +188,23 @@ class Outcome:
     seconds: float            # wall time of the run (left out of the tables: not reproducible)
 
 
-def run_one(layout: str, setting: str, stall: int) -> Outcome:
+@dataclass(frozen=True)
+class Job:
+    layout: str        # file name under LAYOUTS
+    setting: str       # a name of SETTINGS
+    stall: int
+    text: str = field(default="", repr=False)   # the layout file's text: a task needs no file of the suite
+
+
+def run_one(job: Job) -> Outcome:
     """Build one layout under one setting; stop when complete, stalled or out of ticks."""
-    sc = load_scenario(LAYOUTS / layout)
+    layout, setting = job.layout, job.setting
+    sc = parse_scenario(job.text, layout) if job.text else load_scenario(LAYOUTS / layout)
     began = time.perf_counter()
     run = sim.start(sc, cfg=AgentConfig(), noise=BY_NAME[setting].noise)
     start_cells = sc.to_cell(run.world.discs.xy)
     errors = MapError(run)
-    result = run.run(sc.max_ticks, stall_ticks=stall_limit(sc, stall), observers=[errors])
+    result = run.run(sc.max_ticks, stall_ticks=stall_limit(sc, job.stall), observers=[errors])
     status = run.world.status()
     samples = errors.samples
     return Outcome(layout=layout, family=family_of(sc), cols=sc.cols, rows=sc.rows, agents=len(run.brains),
@@ -230,20 +239,19 @@ def quick_sample(names: list[str], n: int = QUICK_LAYOUTS) -> list[str]:
     return [name for name in names if name in cheapest]
 
 
-def run_all(jobs: list[tuple[str, str]], workers: int, stall: int) -> list[Outcome]:
-    """Every (layout, setting) on `workers` processes, with progress on stderr."""
+def run_all(jobs: list[tuple[str, str]], where: runner.Where, stall: int, seen=None) -> list[Outcome]:
+    """Every (layout, setting) where `where` says (experiments/runner.py), with progress on stderr."""
     out: list[Outcome] = []
     began = time.monotonic()
-    with pool(workers) as executor:
-        futures = [executor.submit(run_one, layout, setting, stall) for layout, setting in jobs]
-        for fut in as_completed(futures):
-            o = fut.result()
-            out.append(o)
-            what = (f"complete in {o.ticks} ticks" if o.completed else
-                    f"{'STALLED' if o.stalled else 'OUT OF TICKS'} at {o.sites_filled}/{o.sites_total}")
-            print(f"[{len(out)}/{len(jobs)} {time.monotonic() - began:6.0f} s] {o.layout} {o.setting}: {what}, "
-                  f"map error {o.map_error:.2f}, misplaced {o.misplaced} ({o.seconds:.0f} s)",
-                  file=sys.stderr, flush=True)
+    tasks = [Job(layout, setting, stall, (LAYOUTS / layout).read_text(encoding="utf-8")) for layout, setting in jobs]
+    for done in runner.run(run_one, tasks, where, seen=seen):
+        o = done.result
+        out.append(o)
+        what = (f"complete in {o.ticks} ticks" if o.completed else
+                f"{'STALLED' if o.stalled else 'OUT OF TICKS'} at {o.sites_filled}/{o.sites_total}")
+        print(f"[{len(out)}/{len(jobs)} {time.monotonic() - began:6.0f} s] {o.layout} {o.setting}: {what}, "
+              f"map error {o.map_error:.2f}, misplaced {o.misplaced} ({o.seconds:.0f} s, {done.worker})",
+              file=sys.stderr, flush=True)
     order = {s.name: i for i, s in enumerate(SETTINGS)}
     return sorted(out, key=lambda o: (order[o.setting], o.layout))
 
@@ -287,7 +295,8 @@ def markdown(outcomes: list[Outcome], args: argparse.Namespace, seconds: float |
     layouts = sorted({o.layout for o in outcomes})
     settings = sorted({o.setting for o in outcomes}, key=[s.name for s in SETTINGS].index)
     agents = sorted({o.agents for o in outcomes})
-    wall = (f" Wall time: {seconds / 60:.0f} min on {args.jobs} worker processes (niced, on a shared 2-core "
+    where = getattr(args, "where", None) or f"{args.jobs} worker processes"
+    wall = (f" Wall time: {seconds / 60:.0f} min on {where} (niced, on a shared 2-core "
             "machine)." if seconds is not None else "")
     command = "python3 -m experiments.noise " + ("--quick" if args.quick else f"--jobs {args.jobs}")
     which = f"the {QUICK_LAYOUTS} cheapest to build of" if args.quick else "all of"
@@ -454,6 +463,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true",
                     help=f"{QUICK_LAYOUTS} small layouts x {len(QUICK_SETTINGS)} settings: noise_quick.json/md")
     ap.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
+    runner.add_cluster_argument(ap)
     ap.add_argument("--stall", type=int, default=DEFAULT_STALL, help="ticks with no site filled that stop a run")
     ap.add_argument("--out", type=Path, default=OUT, help="folder for the json, md and png (default experiments/)")
     ap.add_argument("--report-only", action="store_true", help="the tables and plot again from noise.json")
@@ -474,19 +484,27 @@ def main(argv: list[str] | None = None) -> int:
         if meta.exists():
             m = json.loads(meta.read_text(encoding="utf-8"))
             args.jobs, args.stall, seconds = m["jobs"], m["stall"], m["seconds"]
+            args.where = m.get("where")
     else:
         names = sample()
         if args.quick:
             names = quick_sample(names)
         settings = QUICK_SETTINGS if args.quick else [s.name for s in SETTINGS]
         began = time.monotonic()
-        outcomes = run_all([(n, s) for s in settings for n in names], args.jobs, args.stall)
+        where = runner.where_of(args, args.jobs)
+        args.where = where.describe()
+        try:
+            outcomes = run_all([(n, s) for s in settings for n in names], where, args.stall,
+                               seen=lambda n: setattr(args, "where", where.describe(n)))
+        except runner.ClusterError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
         rows = [asdict(o) | ({"seconds": 0.0} if args.quick else {}) for o in outcomes]
         (args.out / f"{stem}.json").write_text(json.dumps(rows, indent=1) + "\n", encoding="utf-8")
         if not args.quick:
             seconds = time.monotonic() - began
-            (args.out / f"{stem}.meta.json").write_text(json.dumps({"jobs": args.jobs, "stall": args.stall,
-                                                                    "seconds": seconds}) + "\n", encoding="utf-8")
+            info = {"jobs": args.jobs, "stall": args.stall, "seconds": seconds, "where": args.where}
+            (args.out / f"{stem}.meta.json").write_text(json.dumps(info) + "\n", encoding="utf-8")
     text = markdown(outcomes, args, seconds, plot_path="" if args.quick else "noise.png")
     (args.out / f"{stem}.md").write_text(text, encoding="utf-8")
     if not args.quick:
@@ -499,4 +517,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(runner.by_name(main)())

@@ -46,7 +46,7 @@ def test_errors_per_trial_fall_to_zero_on_fig6(kind, eta):
 
 
 def test_the_quick_experiment_writes_table_plot_data_and_a_reusable_student(tmp_path):
-    r = subprocess.run([sys.executable, "experiments/fig9_learning.py", "--quick", "--out", str(tmp_path)], cwd=ROOT,
+    r = subprocess.run([sys.executable, "-m", "experiments.fig9_learning", "--quick", "--out", str(tmp_path)], cwd=ROOT,
                        capture_output=True, text=True, timeout=180)
     assert r.returncode == 0, r.stderr
     progress = [line for line in r.stderr.splitlines() if line.startswith("[fig9]")]
