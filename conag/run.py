@@ -85,6 +85,7 @@ class RunOptions:
     record: str | None = None         # record the run to this MCAP file (`conag record`)
     record_priority: str = RECORDER_PRIORITY  # the recorder's CPU priority (`conag record --priority`)
     view: int | None = None           # serve the browser viewer on this port (`conag view`)
+    foxglove: int | None = None       # serve the Foxglove WebSocket on this port (`conag view --foxglove`)
     maps_every: int = 0               # the recorder and viewer ask for the agents' maps every N ticks
     profile: str | None = None        # the world writes its loop's times here (conag world --profile)
     per_process: int = 1              # agents per agent process; > 1: `conag agents` hosts
@@ -401,7 +402,7 @@ def _run(opts: RunOptions, stop: threading.Event, tmp: Path) -> dict:
     fleet = Fleet(opts)
     watch = StallWatch(opts.stall_ticks, opts.unbuildable)
     tty = sys.stdout.isatty() and not opts.headless
-    recorder = viewer = None
+    recorder = viewer = foxglove = None
     with RunBus(opts, fleet, watch, tty) as run_bus:
         try:
             if opts.record:
@@ -411,6 +412,8 @@ def _run(opts: RunOptions, stop: threading.Event, tmp: Path) -> dict:
                     raise RuntimeError(f"the recorder exited ({recorder.returncode}) before the run started")
             if opts.view is not None:
                 viewer = _start_viewer(opts)
+            if opts.foxglove is not None:
+                foxglove = _start_viewer(opts, foxglove=True)
             k = max(opts.per_process, 1)
             for first in range(1, n_agents + 1, k):
                 if k == 1:
@@ -438,8 +441,9 @@ def _run(opts: RunOptions, stop: threading.Event, tmp: Path) -> dict:
             fleet.stop_all()
             if teacher is not None:
                 _stop(teacher)
-            if viewer is not None:
-                _stop(viewer)
+            for observer in (viewer, foxglove):
+                if observer is not None:
+                    _stop(observer)
             if recorder is not None:
                 _stop(recorder, grace=60.0)  # last: it writes what is queued, the summary and the footer
     if tty and not watch.stalled:
@@ -519,13 +523,14 @@ def _start_recorder(opts: RunOptions) -> subprocess.Popen:
     return subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
 
 
-def _start_viewer(opts: RunOptions) -> subprocess.Popen:
-    """`conag view` on the run's bus; it prints the page's address (stdout is the run's)."""
+def _start_viewer(opts: RunOptions, foxglove: bool = False) -> subprocess.Popen:
+    """`conag view` on the run's bus (with `foxglove`: `conag view --foxglove`); it prints the
+    page's (the WebSocket's) address (stdout is the run's)."""
     cmd = [sys.executable, "-m", "conag", "view", "--world-id", opts.world_id, *bus_flags(opts, OBSERVER),
-           "--port", str(opts.view)]
+           *(("--foxglove", str(opts.foxglove)) if foxglove else ("--port", str(opts.view)))]
     if opts.maps_every:
         cmd += ["--maps-every", str(opts.maps_every)]  # else the viewer's default
-    if not opts.headless and sys.stdout.isatty():
+    if not foxglove and not opts.headless and sys.stdout.isatty():
         cmd.append("--open")
     return subprocess.Popen(cmd, stdin=subprocess.DEVNULL)
 

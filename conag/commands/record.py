@@ -35,6 +35,9 @@ def configure(r: argparse.ArgumentParser) -> None:
     r.add_argument("--maps-every", type=int, default=0, metavar="N",
                    help="ask the agents for their maps (ESMs, NMs, Matching grid) every N ticks, to record them "
                         "(default 0: off)")
+    r.add_argument("--msgpack-only", action="store_true",
+                   help="write the bus's msgpack channels only, without the Foxglove channels beside them "
+                        "(docs/how-to/foxglove.md)")
     r.add_argument("--priority", choices=PRIORITIES, default=RECORDER_PRIORITY,
                    help="the recorder's CPU priority, so the run it records gets the CPU first: idle (the default) "
                         "runs it only when a core would otherwise idle (Linux SCHED_IDLE), low raises its nice "
@@ -58,7 +61,8 @@ def run(args: argparse.Namespace) -> int:
         try:
             print(f"recording world {args.world_id} to {args.out}", flush=True)
             run_recorder(session, args.world_id, args.out, stop, metadata=meta, tick_ns=_tick_ns(args.scenario),
-                         recorder_id=args.id, report=report, maps_every=max(args.maps_every, 0))
+                         recorder_id=args.id, report=report, maps_every=max(args.maps_every, 0),
+                         foxglove=not args.msgpack_only)
         finally:
             session.close()
     print(f"wrote {report.path}: {report.messages} messages, last tick {report.last_tick}", flush=True)

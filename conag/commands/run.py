@@ -19,6 +19,7 @@ from conag.agent_settings import AgentSettings, add_kind_args
 from conag.argtypes import non_negative, positive
 from conag.common import PRIORITIES, RECORDER_PRIORITY, stop_on_signals
 from conag.exit_codes import EXIT_ERROR, EXIT_INCOMPLETE, EXIT_INTERRUPTED, EXIT_STALLED, EXIT_USAGE
+from conag.foxglove.live import DEFAULT_PORT as FOXGLOVE_PORT
 from conag.noise_flags import add_noise_args, noise_settings
 from conag.recording.mcap_log import read_end, world_cut_short
 from conag.run import RunOptions
@@ -65,6 +66,9 @@ def configure(u: argparse.ArgumentParser) -> None:
                         "see conag record --priority)")
     u.add_argument("--view", nargs="?", type=int, const=DEFAULT_PORT, metavar="PORT",
                    help=f"watch the run in the browser: starts `conag view` on PORT (default {DEFAULT_PORT})")
+    u.add_argument("--foxglove", nargs="?", type=int, const=FOXGLOVE_PORT, metavar="PORT",
+                   help=f"watch the run in Foxglove or Lichtblick: starts `conag view --foxglove` on PORT (default "
+                        f"{FOXGLOVE_PORT}), a Foxglove WebSocket server (docs/how-to/foxglove.md)")
     u.add_argument("--maps-every", type=non_negative, default=0, metavar="N",
                    help="the agents publish their maps every N ticks for --record (default 0: off); for --view, "
                         "the shown agent at most every N (default: conag view's), about once a second")
@@ -135,7 +139,7 @@ def run_options(args: argparse.Namespace) -> RunOptions:
                       headless=args.headless, quiet=args.quiet, agent=agent,
                       teacher=args.teacher, weights_dir=args.weights_dir, stall_ticks=args.stall_ticks,
                       unbuildable=unbuildable, record=args.record, record_priority=args.record_priority,
-                      view=args.view, maps_every=args.maps_every, secure=args.secure,
+                      view=args.view, foxglove=args.foxglove, maps_every=args.maps_every, secure=args.secure,
                       checkpoint_every=args.checkpoint_every, profile=args.profile,
                       per_process=args.per_process, agent_mode=args.agent_mode, noise=noise)
 

@@ -2,9 +2,10 @@
 
     conag view [--port P]               serve http://127.0.0.1:P/ showing the world on the bus, live
     conag view FILE.mcap [--port P]     the same page over a recording, with a timeline to scrub and play
+    conag view --foxglove [PORT]        serve the live world to Foxglove or Lichtblick instead (ws://127.0.0.1:PORT)
 
-The shell is conag/viewer/server.py, the pure part conag/viewer/. `conag run --view` starts
-`conag view` beside the run.
+The shell is conag/viewer/server.py, the pure part conag/viewer/; with --foxglove,
+conag/foxglove/live.py. `conag run --view` (`--foxglove`) starts `conag view` (`--foxglove`) beside the run.
 """
 
 from __future__ import annotations
@@ -14,6 +15,8 @@ import sys
 import webbrowser
 
 from conag.common import PRIORITIES, bus_args, bus_options, lower_priority, restore_priority, stop_on_signals
+from conag.foxglove.live import DEFAULT_PORT as FOXGLOVE_PORT
+from conag.foxglove.live import serve_foxglove
 from conag.recording.mcap_log import read_recording
 from conag.viewer.scene import DISPLAY_HZ, Timeline, wanted
 from conag.viewer.server import DEFAULT_PORT, serve_live, serve_timeline
@@ -38,6 +41,10 @@ def configure(v: argparse.ArgumentParser) -> None:
     v.add_argument("--priority", choices=PRIORITIES, default=VIEWER_PRIORITY,
                    help=f"live: the viewer's CPU priority, so a run on the same cores gets the CPU first "
                         f"(default {VIEWER_PRIORITY}: nice +10; idle: only when a core would idle; normal)")
+    v.add_argument("--foxglove", nargs="?", type=int, const=FOXGLOVE_PORT, metavar="PORT",
+                   help="live: serve the world's Foxglove channels over the Foxglove WebSocket protocol on PORT "
+                        f"(default {FOXGLOVE_PORT}; 0: any free) instead of the page, for Foxglove or Lichtblick "
+                        "(docs/how-to/foxglove.md); a recording opens in them as it is")
     bus_args(v, find_run=True)  # live only: a recording needs no bus
 
 
@@ -52,6 +59,9 @@ def _display_hz(text: str) -> float:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.foxglove is not None:
+        return _serve_foxglove(args)
+
     def ready(url: str) -> None:
         print(f"viewer at {url}", flush=True)
         if args.open:
@@ -70,6 +80,22 @@ def run(args: argparse.Namespace) -> int:
         try:
             serve_live(session, args.world_id, stop, host=args.host, port=args.port, on_ready=ready,
                        maps_every=max(args.maps_every, 0), display_hz=args.display_hz)
+        finally:
+            session.close()
+    return 0
+
+
+def _serve_foxglove(args: argparse.Namespace) -> int:
+    """`conag view --foxglove`: the live world over the Foxglove WebSocket protocol."""
+    if args.file:
+        raise ValueError(f"--foxglove serves a live world; open {args.file} in Foxglove or Lichtblick as it is")
+    with stop_on_signals(on_stop=lambda: restore_priority(args.priority)) as stop:
+        lower_priority(args.priority)  # before the session opens, so zenoh's threads have it too
+        session = open_session(bus_options(args))
+        try:
+            serve_foxglove(session, args.world_id, stop, host=args.host, port=args.foxglove,
+                           display_hz=args.display_hz, maps_every=max(args.maps_every, 0),
+                           on_ready=lambda url: print(f"foxglove at {url}", flush=True))
         finally:
             session.close()
     return 0

@@ -16,7 +16,13 @@ travelled (the one msgpack codec of `protocol`), so a replay re-publishes them u
   field; a message without one (none is published today) gets the newest tick seen;
 * a metadata record `conag` (scenario text, seed, configs, project and schema versions,
   whatever the recorder was told) written first, and `conag.end` (message counts, last
-  tick) written on close.
+  tick) written on close;
+* with `derive` (the recorder passes `conag.foxglove.convert.Translator.feed`), more
+  channels beside those, made from the messages as they are added: Foxglove's well-known
+  schemas (protobuf) and JSON with a JSON schema, each channel with its schema, the same
+  `log_time` as the message it came from, `publish_time` its tick and its own sequence.
+  Reading a recording (`read_recording`) takes the msgpack channels only: a replay never
+  sees the others.
 
 `McapRecorder` writes to `OUT.part` and renames it to `OUT` once the summary and footer
 are written, so `OUT` is always a complete file. A recorder killed outright (SIGKILL)
@@ -31,10 +37,10 @@ from __future__ import annotations
 import dataclasses
 import functools
 import os
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO
+from typing import IO, Protocol
 
 import msgpack
 from mcap.exceptions import McapError
@@ -51,6 +57,35 @@ METADATA = "conag"          # the metadata record written first
 END_METADATA = "conag.end"  # the one written on close
 DEFAULT_TICK_NS = 20_000_000  # one tick of simulated time at the default 50 ticks per second
 CHUNK_SIZE = 256 * 1024       # bytes of messages per chunk: what a SIGKILL can lose at most
+
+
+class DerivedSchema(Protocol):
+    """A derived channel's schema (`conag.foxglove.convert.SchemaDef`)."""
+
+    @property
+    def name(self) -> str: ...
+    @property
+    def encoding(self) -> str: ...
+    @property
+    def data(self) -> bytes: ...
+    @property
+    def message_encoding(self) -> str: ...
+
+
+class DerivedMessage(Protocol):
+    """A message made from a bus message (`conag.foxglove.convert.Derived`)."""
+
+    @property
+    def topic(self) -> str: ...
+    @property
+    def schema(self) -> DerivedSchema: ...
+    @property
+    def tick(self) -> int: ...
+    @property
+    def data(self) -> bytes: ...
+
+
+Derive = Callable[[str, bytes, int], Iterable[DerivedMessage]]  # (key, bytes, log time) -> derived messages
 
 
 @functools.cache
@@ -80,19 +115,24 @@ def peek(data: bytes) -> tuple[str, int | None]:
 class McapRecorder:
     """Writes bus messages to an MCAP file (see the module): `add` each, then `close`.
 
-    `metadata` goes into the file's `conag` metadata record. Not thread-safe: one thread
-    adds (the recorder process's loop).
+    `metadata` goes into the file's `conag` metadata record; `derive(key, data, log_time)`
+    gives the messages to write beside each one (see the module). Not thread-safe: one
+    thread adds (the recorder process's loop).
     """
 
     def __init__(self, out: str | Path, metadata: Mapping[str, str] | None = None, *,
                  tick_ns: int = DEFAULT_TICK_NS, chunk_size: int = CHUNK_SIZE,
-                 compression: CompressionType = CompressionType.ZSTD):
+                 compression: CompressionType = CompressionType.ZSTD, derive: Derive | None = None):
         self.path = Path(out)
         self.part = self.path.with_name(self.path.name + ".part")
         self.tick_ns = tick_ns
         self.tick = 0                       # the newest tick seen
         self.counts: dict[str, int] = {}    # messages per key (their sequence numbers so far)
         self._channels: dict[str, int] = {}
+        self.derive = derive
+        self.derived: dict[str, int] = {}   # derived messages per topic (their sequence numbers so far)
+        self._derived_channels: dict[str, int] = {}
+        self._schemas: dict[str, int] = {}
         self._file: IO[bytes] = open(self.part, "wb")  # noqa: SIM115 -- closed by close()
         self._writer = Writer(self._file, chunk_size=chunk_size, compression=compression)
         self._writer.start(profile=PROFILE, library=f"conag via {_mcap_library()}")
@@ -121,6 +161,23 @@ class McapRecorder:
         self.counts[key] = seq
         self._writer.add_message(channel, log_time=log_time_ns, data=data, publish_time=tick * self.tick_ns,
                                  sequence=seq & 0xFFFFFFFF)
+        if self.derive is not None:
+            for d in self.derive(key, data, log_time_ns):
+                self._add_derived(d, log_time_ns)
+
+    def _add_derived(self, d: DerivedMessage, log_time_ns: int) -> None:
+        channel = self._derived_channels.get(d.topic)
+        if channel is None:
+            schema = self._schemas.get(d.schema.name)
+            if schema is None:
+                schema = self._writer.register_schema(d.schema.name, d.schema.encoding, d.schema.data)
+                self._schemas[d.schema.name] = schema
+            channel = self._writer.register_channel(d.topic, d.schema.message_encoding, schema)
+            self._derived_channels[d.topic] = channel
+        seq = self.derived.get(d.topic, 0) + 1
+        self.derived[d.topic] = seq
+        self._writer.add_message(channel, log_time=log_time_ns, data=d.data, publish_time=d.tick * self.tick_ns,
+                                 sequence=seq & 0xFFFFFFFF)
 
     def flush(self) -> None:
         """End the chunk in progress and flush the file: what was added so far survives
@@ -135,6 +192,8 @@ class McapRecorder:
         self._closed = True
         try:
             meta = {"messages": str(self.messages), "last_tick": str(self.tick), "channels": str(len(self.counts))}
+            if self.derive is not None:
+                meta.update(derived_messages=str(sum(self.derived.values())), derived_channels=str(len(self.derived)))
             meta.update({k: str(v) for k, v in (end or {}).items()})
             self._writer.add_metadata(END_METADATA, meta)
             self._writer.finish()
@@ -273,7 +332,8 @@ def _read_indexed(f: IO[bytes], keep: Callable[[str], bool] | None) -> Recording
     rec = Recording()
     rec.metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
     tick_ns = int(rec.info.get("tick_ns", DEFAULT_TICK_NS))
-    topics = None if keep is None else [c.topic for c in summary.channels.values() if keep(c.topic)]
+    topics = [c.topic for c in summary.channels.values()
+              if c.message_encoding == MESSAGE_ENCODING and (keep is None or keep(c.topic))]
     rec.entries = [_entry(channel, message, tick_ns)
                    for _, channel, message in reader.iter_messages(topics=topics, log_time_order=False)]
     return rec
@@ -294,7 +354,7 @@ def _read_stream(f: IO[bytes], keep: Callable[[str], bool] | None) -> Recording:
                     tick_ns = int(record.metadata.get("tick_ns", DEFAULT_TICK_NS))
             elif isinstance(record, Message):
                 channel = channels[record.channel_id]
-                if keep is None or keep(channel.topic):
+                if channel.message_encoding == MESSAGE_ENCODING and (keep is None or keep(channel.topic)):
                     rec.entries.append(_entry(channel, record, tick_ns))
     except Exception as exc:  # noqa: BLE001 -- a truncated record ends the readable part, whatever mcap raises
         rec.problem += f" ({type(exc).__name__}: {exc})"

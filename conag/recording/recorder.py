@@ -14,6 +14,8 @@ then, so the recording holds the run from its first tick. The newest status goes
 the file's closing metadata (scenario name, seed, tick mode, ticks, completed).
 With `maps_every` N, it asks the agents for their map snapshots every N ticks (a maps
 request token, see agent_runtime/feeds.py), so they are recorded too.
+With `foxglove` (the default), each message also goes through a
+`conag.foxglove.convert.Translator`, whose Foxglove channels are written beside the bus's.
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from pathlib import Path
 
 import zenoh
 
+from conag.foxglove.convert import Translator
 from conag.recording.mcap_log import DEFAULT_TICK_NS, McapRecorder
 from protocol import keys
 from protocol.bus import Declarations
@@ -55,11 +58,12 @@ class RecordReport:
 def run_recorder(session: zenoh.Session, world_id: str, out: str | Path, stop: threading.Event, *,
                  metadata: Mapping[str, str] | None = None, tick_ns: int = DEFAULT_TICK_NS,
                  recorder_id: str = "recorder", flush_every: float = 1.0, maps_every: int = 0,
-                 clock: Callable[[], int] = time.time_ns, report: RecordReport | None = None) -> RecordReport:
+                 clock: Callable[[], int] = time.time_ns, report: RecordReport | None = None,
+                 foxglove: bool = True) -> RecordReport:
     """Record world `world_id` into `out` until `stop` is set; returns (and fills in) `report`."""
     report = report if report is not None else RecordReport()
     status_key = keys.status(world_id)
-    recorder = McapRecorder(out, metadata, tick_ns=tick_ns)
+    recorder = McapRecorder(out, metadata, tick_ns=tick_ns, derive=Translator().feed if foxglove else None)
     try:
         with Declarations() as declared:
             # A FIFO channel drained by this thread, not a Python callback: the callback's

@@ -1,0 +1,198 @@
+"""The live Foxglove server (`conag view --foxglove`, `conag run --foxglove`): the zenoh shell
+that serves a running world's Foxglove channels (`conag.foxglove.convert`) over the Foxglove
+WebSocket protocol, with the `foxglove-sdk` package's server. Foxglove and Lichtblick connect
+to `ws://HOST:PORT`.
+
+What it costs the run is bounded by the display rate, not by the run's speed:
+
+* zenoh keeps what comes in its own queues (ring channels for the views and the sensor
+  frames: only the newest are kept; FIFO channels for the rare messages: states, attaches,
+  perturbations, timeouts, maps); no Python callback runs per message;
+* `display_hz` times a second the server takes what came, and translates the newest view,
+  the sensor frames of its tick, and the rest; with no client subscribed it translates nothing;
+* the agents' maps are asked for (a maps request token for every agent) only while a
+  client is subscribed, about once a second per agent whatever the run's speed
+  (`conag.viewer.scene.maps_interval`), never more often than every `maps_every` ticks.
+  The world publishes its views every 10 ticks while the server listens, as for `conag view`.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+
+import foxglove
+import zenoh
+
+from conag.foxglove.convert import Derived, SchemaDef, Translator, agent_topics, world_topics
+from conag.viewer.scene import DISPLAY_HZ, maps_interval
+from protocol import keys
+from protocol.bus import Declarations, undeclare
+
+log = logging.getLogger("conag.foxglove")
+
+DEFAULT_PORT = 8766  # beside `conag view`'s 8765 (Foxglove's own default: a user may pass 8765 with --view off)
+RING = 512           # sensor frames kept between two display periods (all agents together)
+RARE = ("state", "welcome", "maps")                  # per-agent keys taken whole (FIFO)
+WORLD_RARE = ("perturbed", "lockstep_timeout")       # the world's, taken whole
+
+
+class Listener(foxglove.websocket.ServerListener):
+    """Counts the clients' subscriptions (the server works only while there is one) and
+    notes a new one (the walls, sent once, are sent again for it)."""
+
+    def __init__(self) -> None:
+        self.subscriptions = 0
+        self.new = threading.Event()
+        self._lock = threading.Lock()
+
+    def on_subscribe(self, client, channel) -> None:  # noqa: ARG002 -- the SDK's signature
+        with self._lock:
+            self.subscriptions += 1
+        self.new.set()
+
+    def on_unsubscribe(self, client, channel) -> None:  # noqa: ARG002 -- the SDK's signature
+        with self._lock:
+            self.subscriptions = max(self.subscriptions - 1, 0)
+
+
+class FoxgloveBridge:
+    """One world's bus to Foxglove channels on a WebSocket server (see the module)."""
+
+    def __init__(self, session: zenoh.Session, world_id: str, *, host: str = "127.0.0.1", port: int = DEFAULT_PORT,
+                 display_hz: float = DISPLAY_HZ, maps_every: int = 10, requester: str | None = None,
+                 clock: Callable[[], float] = time.monotonic):
+        self.session = session
+        self.world_id = world_id
+        self.display_hz = display_hz
+        self.maps_every = maps_every
+        self.requester = requester or f"foxglove-{id(self) & 0xFFFFFF:x}"
+        self.clock = clock
+        self.translator = Translator()
+        self.context = foxglove.Context()
+        self.listener = Listener()
+        self.server = foxglove.start_server(name=f"conag world {world_id}", host=host, port=port,
+                                            context=self.context, server_listener=self.listener)
+        self.channels: dict[str, foxglove.Channel] = {}
+        self.sent = 0
+        self._declared = Declarations()
+        self._inboxes: list = []
+        self._maps_token = None
+        self._maps_asked = 0
+        self._speed: tuple[float, int] | None = None  # (clock, tick) when the maps interval was last set
+        self._agents: set[str] = set()
+        self._advertise(world_topics())
+
+    @property
+    def port(self) -> int:
+        """The port the WebSocket server listens on."""
+        return self.server.port
+
+    def start(self) -> FoxgloveBridge:
+        """Subscribe to the world's keys (each into a zenoh channel, drained by `step`)."""
+        w = self.world_id
+        root = keys.world_root(w)
+        subs = [(keys.all_agents(w, "sensors"), zenoh.handlers.RingChannel(RING)),
+                (keys.view(w), zenoh.handlers.RingChannel(4))]
+        subs += [(keys.all_agents(w, leaf), zenoh.handlers.FifoChannel(4096)) for leaf in RARE]
+        subs += [(f"{root}/{leaf}", zenoh.handlers.FifoChannel(256)) for leaf in WORLD_RARE]
+        for key, handler in subs:
+            self._inboxes.append(self._declared.add(self.session.declare_subscriber(key, handler)).handler)
+        return self
+
+    def step(self) -> int:
+        """Take what came since the last step; translate and send it while a client listens.
+        Returns how many Foxglove messages were sent."""
+        samples = [s for inbox in self._inboxes for s in _drain(inbox)]
+        for agent in {keys.agent_of(str(s.key_expr)) for s in samples} - self._agents:
+            if agent:
+                self._advertise(agent_topics(agent))
+                self._agents.add(agent)
+        if self.listener.new.is_set():
+            self.listener.new.clear()
+            self.translator.resend_walls()
+        watched = self.listener.subscriptions > 0
+        self._ask_maps(watched)
+        if not watched:
+            return 0
+        views = [s for s in samples if str(s.key_expr).endswith("/view")]
+        rest = [s for s in samples if not str(s.key_expr).endswith("/view")]
+        now = time.time_ns()
+        sent = 0
+        for s in rest + views[-1:]:  # the frames before the view of their tick; only the newest view
+            for d in self.translator.feed(str(s.key_expr), s.payload.to_bytes(), now):
+                self._send(d, now)
+                sent += 1
+        self.sent += sent
+        return sent
+
+    def _advertise(self, topics: dict[str, SchemaDef]) -> None:
+        """Open a channel per topic not open yet: the server advertises it to its clients."""
+        for topic, sd in topics.items():
+            if topic not in self.channels:
+                schema = foxglove.Schema(name=sd.name, encoding=sd.encoding, data=sd.data)
+                self.channels[topic] = foxglove.Channel(topic, schema=schema, message_encoding=sd.message_encoding,
+                                                        context=self.context)
+
+    def _send(self, d: Derived, now: int) -> None:
+        if d.topic not in self.channels:
+            self._advertise({d.topic: d.schema})
+        self.channels[d.topic].log(d.data, log_time=now)
+
+    def _ask_maps(self, watched: bool) -> None:
+        """Every agent's maps about once a second while a client listens (see the module)."""
+        every = 0
+        if watched and self.maps_every:
+            v, now = self.translator.view, self.clock()
+            tick = v.tick if v is not None else 0
+            every = self._maps_asked or self.maps_every
+            if self._speed is None:
+                self._speed = (now, tick)
+            elif now - self._speed[0] >= 2.0:
+                rate = (tick - self._speed[1]) / (now - self._speed[0])
+                every = maps_interval(max(rate, 0.0), self.maps_every)
+                self._speed = (now, tick)
+        if every == self._maps_asked:
+            return
+        old = self._maps_token
+        self._maps_token = self.session.liveliness().declare_token(
+            keys.maps_request_token(self.world_id, self.requester, every)) if every else None
+        self._maps_asked = every
+        undeclare(old)
+
+    def close(self) -> None:
+        """Undeclare everything and stop the server (the session is the caller's)."""
+        undeclare(self._maps_token)
+        self._maps_token = None
+        self._declared.close()
+        self.server.stop()
+
+
+def _drain(inbox) -> list:
+    out = []
+    while True:
+        try:
+            sample = inbox.try_recv()
+        except zenoh.ZError:
+            return out
+        if sample is None:
+            return out
+        out.append(sample)
+
+
+def serve_foxglove(session: zenoh.Session, world_id: str, stop: threading.Event, *, host: str = "127.0.0.1",
+                   port: int = DEFAULT_PORT, display_hz: float = DISPLAY_HZ, maps_every: int = 10,
+                   on_ready: Callable[[str], None] | None = None) -> FoxgloveBridge:
+    """Serve world `world_id`'s Foxglove channels on ws://host:port until `stop` is set."""
+    bridge = FoxgloveBridge(session, world_id, host=host, port=port, display_hz=display_hz,
+                            maps_every=maps_every).start()
+    try:
+        if on_ready:
+            on_ready(f"ws://{host}:{bridge.port}")
+        while not stop.wait(1.0 / display_hz):
+            bridge.step()
+    finally:
+        bridge.close()
+    return bridge
