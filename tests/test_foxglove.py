@@ -1,0 +1,387 @@
+"""Runs that Foxglove and Lichtblick open (issue 34), checked by readers nobody here wrote:
+
+* a recording holds Foxglove channels beside the bus's: Foxglove's MCAP protobuf decoder
+  (`mcap-protobuf-support`, which builds its classes from the schema in the file) finds the
+  world's discs, sites and agents where the world's WorldView of the same tick has them,
+  the maps as the agent's grid, the sensors, the log and the progress; a replay reads the
+  bus's channels only;
+* a live world is served over the Foxglove WebSocket protocol: a client (the `websockets`
+  package, decoding with Foxglove's precompiled schemas, `foxglove-schemas-protobuf`)
+  subscribes and decodes a SceneUpdate of the world;
+* slow: `conag run scenarios/fig19.toml --record` writes a file whose world and map
+  channels decode to what the world and the agents published, and `conag run --foxglove`
+  serves a client; the Node readers (`@mcap/core` with protobufjs, `@foxglove/ws-protocol`)
+  check the same when tests/node has its packages (`npm ci` there; .ci/run does it).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import struct
+import subprocess
+import threading
+import time
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+
+from conag.foxglove.convert import Translator
+from conag.recording.mcap_log import McapRecorder, read_recording
+from protocol import keys
+from protocol.codec import decode, encode
+from protocol.messages import (
+    CHANNELS,
+    MAP_LAYERS,
+    AgentMap,
+    AgentState,
+    SensorFrame,
+    Welcome,
+    WorldView,
+)
+from tests.conftest import SCENARIOS, Process, conag, free_port
+
+W = "w0"
+NODE_DIR = Path(__file__).resolve().parent / "node"
+SUBPROTOCOL = "foxglove.sdk.v1"  # the SDK's server's name for the Foxglove WebSocket protocol (same as .websocket.v1)
+
+
+# --- readers from outside -----------------------------------------------------------------------
+
+def read_foxglove(path: Path) -> dict[str, list[tuple[int, object]]]:
+    """topic -> [(tick, decoded message)] of every non-msgpack channel: protobuf through
+    Foxglove's MCAP decoder (classes built from the file's own schemas), JSON as JSON."""
+    from mcap_protobuf.decoder import DecoderFactory
+
+    out: dict[str, list[tuple[int, object]]] = {}
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        tick_ns = int(next(m for m in reader.iter_metadata() if m.name == "conag").metadata["tick_ns"])
+        channels = reader.get_summary().channels.values()
+        protobuf = [c.topic for c in channels if c.message_encoding == "protobuf"]
+        for schema, channel, message, msg in reader.iter_decoded_messages(topics=protobuf):
+            assert schema.encoding == "protobuf" and schema.name.startswith("foxglove.")
+            out.setdefault(channel.topic, []).append((message.publish_time // tick_ns, msg))
+        for schema, channel, message in reader.iter_messages(topics=[c.topic for c in channels
+                                                                     if c.message_encoding == "json"]):
+            assert schema.encoding == "jsonschema" and json.loads(schema.data)["type"] == "object"
+            out.setdefault(channel.topic, []).append((message.publish_time // tick_ns, json.loads(message.data)))
+    return out
+
+
+def yaw(q) -> float:
+    return 2 * math.atan2(q.z, q.w)
+
+
+def entities(update) -> dict[str, object]:
+    return {e.id: e for e in update.entities}
+
+
+def assert_scene_matches(update, v: WorldView) -> None:
+    """The SceneUpdate shows what the WorldView says: each disc, site and body where it is."""
+    es = entities(update)
+    for kind in ("food", "water", "brick"):
+        got = sorted((round(c.pose.position.x, 6), round(c.pose.position.y, 6)) for c in es[f"discs/{kind}"].cylinders)
+        want = sorted((round(x, 6), round(y, 6)) for x, y, k in zip(v.disc_xs, v.disc_ys, v.disc_kinds) if k == kind)
+        assert got == want, kind
+    sites = es["sites"].cubes
+    assert [(round(c.pose.position.x, 6), round(c.pose.position.y, 6)) for c in sites] == \
+        [(round(x, 6), round(y, 6)) for x, y in zip(v.site_xs, v.site_ys)]
+    filled = {(c.color.r, c.color.g, c.color.b) for c, f in zip(sites, v.site_filled) if f}
+    empty = {(c.color.r, c.color.g, c.color.b) for c, f in zip(sites, v.site_filled) if not f}
+    assert not filled & empty
+    for i, aid in enumerate(v.agent_ids):
+        e = es[f"agents/{aid}"]
+        body = e.cylinders[0].pose.position
+        assert (body.x, body.y) == pytest.approx((v.agent_x[i], v.agent_y[i]), abs=1e-9)
+        assert math.remainder(yaw(e.arrows[0].pose.orientation) - v.agent_heading[i], 2 * math.pi) == \
+            pytest.approx(0, abs=1e-6)
+        assert (len(e.cylinders) == 2) == v.agent_holding[i]  # the body, and the brick it holds
+        assert {m.key: m.value for m in e.metadata}["tick"] == str(v.tick)
+
+
+def assert_grid_matches(grid, m: AgentMap) -> None:
+    """The Grid decodes to the agent's map: row 0 of the AgentMap (north) is the grid's last row."""
+    assert grid.column_count == m.size and grid.row_stride == m.size and grid.cell_stride == 1
+    assert [(f.name, f.offset) for f in grid.fields] == [("value", 0)]
+    rows = [list(grid.data[r * m.size:(r + 1) * m.size]) for r in range(m.size)]
+    assert [c for row in reversed(rows) for c in row] == list(m.cells)
+
+
+# --- a recording ---------------------------------------------------------------------------------
+
+def _view(tick: int, holding: bool = False) -> WorldView:
+    return WorldView(W, tick, 12.0, 10.0, (1.5, 2.5, 7.25), (1.5, 8.5, 3.75), ("food", "brick", "water"),
+                     (4.5, 5.5), (5.5, 5.5), (True, False), ("a1", "a2"), (True, False), (3.2, 9.1), (4.4, 2.0),
+                     (0.7, -2.5), (holding, False), (0.5, 11.5), (0.5, 9.5))
+
+
+def _map(tick: int, layer: str = "brick", size: int = 5) -> AgentMap:
+    return AgentMap("a1", tick, layer, size, tuple((7 * i + tick) % 128 for i in range(size * size)))
+
+
+def test_a_recording_holds_foxglove_channels_that_an_outside_reader_decodes_as_the_world_says(tmp_path):
+    out = tmp_path / "r.mcap"
+    ranges = tuple(float(c) + 0.25 * s if s != 2 else -1.0 for c in range(len(CHANNELS)) for s in range(4))
+    messages = [
+        (keys.welcome(W, "a1"), Welcome(W, "a1", 0, 0, 3.2, 4.4, 0.7, False, 0, 4, 6.0, 1.0, (4.5,), (5.5,),
+                                        disc_radius=0.5, agent_radius=0.3)),
+        (keys.sensors(W, "a1"), SensorFrame("a1", 10, 0.7, 0.0, 0.0, 4, ranges, True)),
+        (keys.sensors(W, "a1"), SensorFrame("a1", 11, 0.7, 0.0, 0.0, 4, ranges, True)),  # not a view's tick
+        (keys.view(W), _view(10, holding=True)),
+        (keys.agent_maps(W, "a1"), _map(10)),
+        (keys.agent_maps(W, "a1"), _map(10, "matching")),
+        (keys.agent_state(W, "a1"), AgentState("a1", 12, "brick_nav", True, 1, "no open site in reach", (0,) * 14)),
+        (keys.view(W), _view(20)),
+    ]
+    with McapRecorder(out, {"seed": "1"}, derive=Translator().feed) as rec:
+        for i, (key, msg) in enumerate(messages):
+            rec.add(key, encode(msg), 1_000 + i)
+
+    got = read_foxglove(out)
+    scenes = got["/world/scene"]
+    assert [t for t, _ in scenes] == [10, 20]
+    assert_scene_matches(scenes[0][1], _view(10, holding=True))
+    assert_scene_matches(scenes[1][1], _view(20))
+    walls = got["/world/walls"]
+    assert len(walls) == 1 and sorted((c.pose.position.x, c.pose.position.y)
+                                      for c in entities(walls[0][1])["walls"].cubes) == [(0.5, 0.5), (11.5, 9.5)]
+    tf = {t.child_frame_id: t for t in got["/tf"][0][1].transforms}
+    assert tf["a2"].parent_frame_id == "world" and (tf["a2"].translation.x, tf["a2"].translation.y) == (9.1, 2.0)
+    assert yaw(tf["a2"].rotation) == pytest.approx(-2.5)
+    # the maps: the agent's grid, cell for cell, centred on its body
+    grid_tick, grid = got["/agents/a1/maps/brick"][0]
+    assert grid_tick == 10
+    assert_grid_matches(grid, _map(10))
+    assert (grid.pose.position.x, grid.pose.position.y) == pytest.approx((3.2 - 2.5, 4.4 - 2.5))
+    assert_grid_matches(got["/agents/a1/maps/matching"][0][1], _map(10, "matching"))
+    # the sensors of the view's tick: one scan per colour, a point per sector, inf where nothing is seen
+    for c, channel in enumerate(CHANNELS):
+        [(tick, scan)] = got[f"/agents/a1/scan/{channel}"]
+        assert tick == 10 and (scan.pose.position.x, scan.pose.position.y) == (3.2, 4.4)
+        assert list(scan.ranges) == [c, c + 0.25, math.inf, c + 0.75]
+        assert scan.end_angle - scan.start_angle == pytest.approx(1.5 * math.pi)
+    logs = [m for _, m in got["/log"]]
+    assert "attached" in logs[0].message and logs[0].level == 2  # INFO
+    assert "no open site in reach" in logs[1].message and logs[1].level == 3  # WARNING
+    assert [m for _, m in got["/progress"]] == [
+        {"tick": 10, "sites_filled": 1, "sites_total": 2, "agents_alive": 1},
+        {"tick": 20, "sites_filled": 1, "sites_total": 2, "agents_alive": 1}]
+    # a replay sees the bus's messages only, as before
+    assert [e.key for e in read_recording(out).entries] == [k for k, _ in messages]
+
+
+def test_a_recording_without_foxglove_channels_has_the_bus_channels_only(tmp_path):
+    out = tmp_path / "r.mcap"
+    with McapRecorder(out) as rec:
+        rec.add(keys.view(W), encode(_view(10)), 1)
+    assert read_foxglove(out) == {} and len(read_recording(out).entries) == 1
+
+
+# --- live ----------------------------------------------------------------------------------------
+
+class FoxgloveClient:
+    """A Foxglove WebSocket protocol client on the `websockets` package (the protocol: JSON ops
+    as text, message data as binary: opcode 1, subscription id, receive time, payload)."""
+
+    def __init__(self, url: str, timeout: float = 20.0):
+        from websockets.sync.client import connect
+
+        self.ws = connect(url, subprotocols=[SUBPROTOCOL], open_timeout=timeout, legacy=True)
+        self.channels: dict[str, dict] = {}
+        self.subscriptions = 0
+
+    def next_message(self, topic: str, timeout: float = 30.0) -> bytes:
+        """Subscribe to `topic` once it is advertised; the payload of its first message."""
+        deadline, sub = time.monotonic() + timeout, None
+        while time.monotonic() < deadline:
+            if sub is None and topic in self.channels:
+                self.subscriptions += 1
+                sub = self.subscriptions
+                self.ws.send(json.dumps({"op": "subscribe", "subscriptions": [
+                    {"id": sub, "channelId": self.channels[topic]["id"]}]}))
+            m = self.ws.recv(timeout=max(deadline - time.monotonic(), 0.01))
+            if isinstance(m, str):
+                op = json.loads(m)
+                if op["op"] == "advertise":
+                    self.channels.update({c["topic"]: c for c in op["channels"]})
+            elif m[0] == 1 and struct.unpack_from("<I", m, 1)[0] == sub:
+                return m[13:]
+        raise TimeoutError(f"no message on {topic} within {timeout:g} s")
+
+    def close(self) -> None:
+        self.ws.close()
+
+
+def test_a_live_world_is_served_to_a_foxglove_websocket_client(bus):
+    from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
+
+    from conag.foxglove.live import FoxgloveBridge
+
+    world = bus.server_session()
+    bridge = FoxgloveBridge(bus.client_session(), W, port=0, maps_every=0).start()
+    stop = threading.Event()
+
+    def serve() -> None:  # the world publishes a view, the bridge takes it (the display period)
+        tick = 0
+        while not stop.wait(0.05):
+            tick += 10
+            world.put(keys.view(W), encode(_view(tick)))
+            bridge.step()
+
+    thread = threading.Thread(target=serve, daemon=True)
+    thread.start()
+    client = None
+    try:
+        client = FoxgloveClient(f"ws://127.0.0.1:{bridge.port}")
+        update = SceneUpdate.FromString(client.next_message("/world/scene"))
+        tick = int({m.key: m.value for m in entities(update)["sites"].metadata}["tick"])
+        assert_scene_matches(update, _view(tick))
+        assert client.channels["/world/scene"]["schemaName"] == "foxglove.SceneUpdate"
+        assert client.channels["/world/scene"]["encoding"] == "protobuf"
+        # the walls were sent before this client came: they are sent again for it
+        walls = SceneUpdate.FromString(client.next_message("/world/walls"))
+        assert len(entities(walls)["walls"].cubes) == 2
+    finally:
+        if client is not None:
+            client.close()
+        stop.set()
+        thread.join(5)
+        bridge.close()
+
+
+def test_a_bridge_nobody_watches_translates_nothing(bus):
+    from conag.foxglove.live import FoxgloveBridge
+
+    world = bus.server_session()
+    bridge = FoxgloveBridge(bus.client_session(), W, port=0).start()
+    try:
+        world.put(keys.view(W), encode(_view(10)))
+        time.sleep(0.3)
+        assert bridge.step() == 0 and bridge.translator.view is None
+        # nor does it ask the agents for their maps
+        asked = list(world.liveliness().get(f"{keys.world_root(W)}/alive/maps/**", timeout=1.0))
+        assert [r for r in asked if r.ok is not None] == []
+    finally:
+        bridge.close()
+
+
+# --- the commands (slow) ---------------------------------------------------------------------------
+
+def _bus_truth(path: Path) -> tuple[dict[int, WorldView], dict[tuple[str, int, str], AgentMap]]:
+    """What the world and the agents published, from the recording's msgpack channels."""
+    views, maps = {}, {}
+    for e in read_recording(path).entries:
+        if e.key.endswith("/view"):
+            views[e.tick] = decode(e.data, WorldView)
+        elif e.key.endswith("/maps"):
+            m = decode(e.data, AgentMap)
+            maps[(m.agent_id, m.tick, m.layer)] = m
+    return views, maps
+
+
+@pytest.fixture(scope="module")
+def fig19_recording(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("fig19") / "r.mcap"
+    run = conag("run", SCENARIOS / "fig19.toml", "--headless", "--quiet", "--max-ticks", "400", "--stall-ticks", "0",
+                "--maps-every", "50", "--record", out, "--listen", f"tcp/127.0.0.1:{free_port()}", timeout=240)
+    assert run.returncode in (0, 3), run.stdout + run.stderr
+    return out
+
+
+@pytest.mark.slow
+def test_conag_run_record_writes_world_and_maps_an_outside_reader_checks(fig19_recording):
+    views, maps = _bus_truth(fig19_recording)
+    got = read_foxglove(fig19_recording)
+    scenes = got["/world/scene"]
+    assert len(scenes) >= 30 and {t for t, _ in scenes} <= set(views)
+    for tick, update in scenes:
+        assert_scene_matches(update, views[tick])
+    grids = [(topic, tick, g) for topic, ms in got.items() if "/maps/" in topic for tick, g in ms]
+    assert len(grids) >= len(MAP_LAYERS[:6]) * 4  # the six ESMs of four snapshots at least (every 50 ticks)
+    for topic, tick, grid in grids:
+        _, _, agent, _, layer = topic.split("/")
+        assert_grid_matches(grid, maps[(agent, tick, layer)])
+    assert got["/progress"][-1][1]["tick"] == max(views)
+
+
+@pytest.mark.slow
+def test_conag_run_foxglove_serves_a_live_run_to_a_client(tmp_path):
+    from foxglove_schemas_protobuf.Grid_pb2 import Grid
+    from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
+
+    port = free_port()
+    run = Process("run", str(SCENARIOS / "fig19.toml"), "--headless", "--max-ticks", "20000", "--stall-ticks", "0",
+                  "--listen", f"tcp/127.0.0.1:{free_port()}", "--foxglove", str(port))
+    client = None
+    try:
+        run.wait_for("foxglove at ws://", 60)
+        client = FoxgloveClient(f"ws://127.0.0.1:{port}")
+        update = SceneUpdate.FromString(client.next_message("/world/scene", 60))
+        es = entities(update)
+        assert {"discs/brick", "sites"} <= set(es) and any(k.startswith("agents/") for k in es)
+        assert len(es["sites"].cubes) > 0
+        grid = Grid.FromString(client.next_message("/agents/a1/maps/brick", 60))  # asked for while watched
+        assert grid.column_count > 0 and len(grid.data) == grid.column_count ** 2
+    finally:
+        if client is not None:
+            client.close()
+        run.stop(timeout=30)
+        run.kill()
+
+
+# --- Node readers (slow; skipped without node and tests/node's packages) ------------------------------
+
+def _node(script: str, *args: str, timeout: float = 120) -> dict:
+    node = shutil.which("node")
+    if node is None:
+        pytest.skip("no node on this machine")
+    if not (NODE_DIR / "node_modules" / "@mcap" / "core").is_dir():
+        pytest.skip("tests/node has no packages (cd tests/node && npm ci; .ci/run does it)")
+    done = subprocess.run([node, str(NODE_DIR / script), *args], capture_output=True, text=True, timeout=timeout)
+    assert done.returncode == 0, done.stdout + done.stderr
+    return json.loads(done.stdout)
+
+
+@pytest.mark.slow
+def test_node_mcap_core_with_protobufjs_reads_the_world_and_a_map(fig19_recording):
+    views, maps = _bus_truth(fig19_recording)
+    got = _node("read_recording.mjs", str(fig19_recording))
+    assert got["schemas"]["/world/scene"] == "foxglove.SceneUpdate"
+    assert len(got["scenes"]) >= 30
+    for scene in got["scenes"]:
+        v = views[scene["tick"]]
+        bodies = {a: (x, y) for a, x, y in scene["agents"]}
+        assert bodies == pytest.approx({a: (x, y) for a, x, y in zip(v.agent_ids, v.agent_x, v.agent_y)})
+        assert sorted(map(tuple, scene["bricks"])) == pytest.approx(
+            sorted((x, y) for x, y, k in zip(v.disc_xs, v.disc_ys, v.disc_kinds) if k == "brick"))
+    grid = got["grid"]
+    m = maps[(grid["agent"], grid["tick"], grid["layer"])]
+    rows = [grid["cells"][r * m.size:(r + 1) * m.size] for r in range(m.size)]
+    assert [c for row in reversed(rows) for c in row] == list(m.cells)
+
+
+@pytest.mark.slow
+def test_node_foxglove_ws_protocol_client_decodes_a_scene_of_a_live_run():
+    port = free_port()
+    run = Process("run", str(SCENARIOS / "fig19.toml"), "--headless", "--max-ticks", "20000", "--stall-ticks", "0",
+                  "--listen", f"tcp/127.0.0.1:{free_port()}", "--foxglove", str(port))
+    try:
+        run.wait_for("foxglove at ws://", 60)
+        got = _node("live_client.mjs", f"ws://127.0.0.1:{port}", "/world/scene", timeout=90)
+        assert got["schemaName"] == "foxglove.SceneUpdate"
+        assert "sites" in got["entities"] and any(e.startswith("agents/") for e in got["entities"])
+    finally:
+        run.stop(timeout=30)
+        run.kill()
+
+
+def test_node_scripts_and_their_lockfile_are_there():
+    # the Node tests skip without packages, never without their scripts
+    for name in ("package.json", "package-lock.json", "read_recording.mjs", "live_client.mjs"):
+        assert (NODE_DIR / name).is_file(), name
+    assert {"@mcap/core", "@foxglove/ws-protocol", "protobufjs"} <= set(
+        json.loads((NODE_DIR / "package.json").read_text())["dependencies"])
+
