@@ -2,6 +2,7 @@
 
     python3 -m bench.bench_view                          # scale.toml, 10 agents, 1500 ticks, 4 repetitions
     python3 -m bench.bench_view --reps 6 --select a1     # the page also shows a1's details and maps
+    python3 -m bench.bench_view --foxglove               # `conag view --foxglove` and a client watching everything
 
 As bench/bench_record.py, alternating builds without and with a viewer. With it, `conag
 view` (started here, connected to the run) serves the page and a headless Chromium
@@ -15,6 +16,11 @@ in both builds of a repetition: what is measured is following a run, not startin
 `scenarios/large/scale.toml`, keeps 10 agents building for all 1,500 ticks (fig6, the
 old default, is complete after about 230 ticks with 10 agents: builds of 3 s).
 
+With `--foxglove`, the viewer is `conag view --foxglove` (the Foxglove WebSocket server, at
+the same display rate; it asks every agent for its maps about once a second) and the page is
+bench/foxglove_client.py, a client subscribed to every channel (world, poses, every agent's
+scans and maps, log, progress) for the whole build.
+
 The figure is the paired slowdown (the median over repetitions of each viewed build's
 rate against its own repetition's plain build; see bench/bench_record.py), beside the CPU
 the viewer and the page (Chromium and all its processes) used over the timed stretch, read
@@ -25,6 +31,7 @@ from __future__ import annotations
 
 import argparse
 import shutil
+import socket
 import statistics
 import subprocess
 import sys
@@ -34,9 +41,18 @@ from bench.bench_record import ROOT, BuildClock, paired_slowdown, slowdown, tree
 from conag.viewer.scene import DISPLAY_HZ
 
 
+def free_port() -> int:
+    """A port no one listens on now (runs of others share the machine)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
 def one_run(scenario: str, agents: int, ticks: int, port: int, view_port: int | None, select: str | None,
-            from_tick: int, display_hz: float = DISPLAY_HZ, page: bool = True) -> tuple[float, float, float, float]:
+            from_tick: int, display_hz: float = DISPLAY_HZ, page: bool = True,
+            foxglove: bool = False) -> tuple[float, float, float, float]:
     """(ticks per second, wall seconds of the timed build, CPU seconds of the viewer, of the page)."""
+    port = port or free_port()
     cmd = [sys.executable, "-m", "conag", "run", scenario, "--headless", "--agents", str(agents), "--max-ticks",
            str(ticks), "--stall-ticks", "0", "--listen", f"tcp/127.0.0.1:{port}"]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, text=True)
@@ -49,12 +65,17 @@ def one_run(scenario: str, agents: int, ticks: int, port: int, view_port: int | 
         for line in proc.stdout:
             if view_port is not None and viewer is None:
                 viewer = subprocess.Popen([sys.executable, "-m", "conag", "view", "--connect", f"tcp/127.0.0.1:{port}",
-                                           "--port", str(view_port), "--display-hz", str(display_hz)],
+                                           *(("--foxglove",) if foxglove else ("--port",)), str(view_port),
+                                           "--display-hz", str(display_hz)],
                                           cwd=ROOT, stdout=subprocess.PIPE, text=True)
                 url = viewer.stdout.readline().split()[-1]
                 if select:
                     url += f"#select={select}"
-                browser = None if not page else subprocess.Popen([
+                if foxglove:
+                    browser = None if not page else subprocess.Popen(
+                        [sys.executable, "-m", "bench.foxglove_client", url], cwd=ROOT, stdout=subprocess.DEVNULL)
+                else:
+                    browser = None if not page else subprocess.Popen([
                                             shutil.which("chromium") or "/usr/bin/chromium", "--headless=new",
                                             "--no-sandbox", "--disable-gpu", "--no-first-run",
                                             "--disable-background-networking", "--disable-component-update",
@@ -87,13 +108,15 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--from-tick", type=int, default=300, metavar="T",
                    help="time each build from its progress line of tick T on (default 300)")
     p.add_argument("--reps", type=int, default=4)
-    p.add_argument("--port", type=int, default=17611)
-    p.add_argument("--view-port", type=int, default=17612)
+    p.add_argument("--port", type=int, default=0, help="the runs' bus port (default 0: a free one for each run)")
+    p.add_argument("--view-port", type=int, default=0, help="the viewer's port (default 0: any free one)")
     p.add_argument("--select", metavar="ID", help="the page shows this agent (its details and maps)")
     p.add_argument("--display-hz", type=float, default=DISPLAY_HZ, metavar="HZ",
                    help=f"conag view --display-hz: pictures a second sent to the page "
                         f"(default {DISPLAY_HZ:g}, the viewer's)")
     p.add_argument("--no-page", action="store_true", help="the viewer alone, no browser (its own share)")
+    p.add_argument("--foxglove", action="store_true",
+                   help="conag view --foxglove and a client subscribed to every channel, instead of the page")
     args = p.parse_args(argv)
     if args.from_tick >= args.ticks:
         p.error(f"--from-tick {args.from_tick} leaves nothing to time in --ticks {args.ticks}")
@@ -101,7 +124,8 @@ def main(argv: list[str] | None = None) -> int:
     for rep in range(args.reps):
         plain.append(one_run(args.scenario, args.agents, args.ticks, args.port, None, None, args.from_tick)[0])
         rate, wall, cpu_view, cpu_page = one_run(args.scenario, args.agents, args.ticks, args.port, args.view_port,
-                                                 args.select, args.from_tick, args.display_hz, not args.no_page)
+                                                 args.select, args.from_tick, args.display_hz, not args.no_page,
+                                                 args.foxglove)
         viewed.append(rate)
         share.append((cpu_view + cpu_page) / wall)
         print(f"rep {rep + 1}: {plain[-1]:.1f} ticks/s without, {rate:.1f} with the viewer and a page "
@@ -111,7 +135,8 @@ def main(argv: list[str] | None = None) -> int:
     a, b = statistics.median(plain), statistics.median(viewed)
     print(f"{args.scenario}, {args.agents} agents, ticks {args.from_tick}-{args.ticks}, {args.reps} repetitions"
           f"{', page showing ' + args.select if args.select else ''}, {args.display_hz:g} pictures a second"
-          f"{', no page' if args.no_page else ''}: paired slowdown "
+          f"{', no page' if args.no_page else ''}{', Foxglove server and client' if args.foxglove else ''}: "
+          "paired slowdown "
           f"{100 * paired_slowdown(plain, viewed):.1f}% (median {a:.1f} ticks/s without, {b:.1f} with: "
           f"{100 * slowdown(a, b):.1f}% unpaired; ranges {min(plain):.1f}-{max(plain):.1f} and "
           f"{min(viewed):.1f}-{max(viewed):.1f}); viewer and page used {100 * statistics.median(share):.1f}% of "
