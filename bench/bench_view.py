@@ -3,6 +3,7 @@
     python3 -m bench.bench_view                          # scale.toml, 10 agents, 1500 ticks, 4 repetitions
     python3 -m bench.bench_view --reps 6 --select a1     # the page also shows a1's details and maps
     python3 -m bench.bench_view --foxglove               # `conag view --foxglove` and a client watching everything
+    python3 -m bench.bench_view --foxglove world         # ... a client watching the world's topics only
 
 As bench/bench_record.py, alternating builds without and with a viewer. With it, `conag
 view` (started here, connected to the run) serves the page and a headless Chromium
@@ -19,7 +20,8 @@ old default, is complete after about 230 ticks with 10 agents: builds of 3 s).
 With `--foxglove`, the viewer is `conag view --foxglove` (the Foxglove WebSocket server, at
 the same display rate; it asks every agent for its maps about once a second) and the page is
 bench/foxglove_client.py, a client subscribed to every channel (world, poses, every agent's
-scans and maps, log, progress) for the whole build.
+scans and maps, log, progress) for the whole build; with `--foxglove world`, to the world's
+channels only (no agent's scans or maps, which the server then neither subscribes to nor asks for).
 
 The figure is the paired slowdown (the median over repetitions of each viewed build's
 rate against its own repetition's plain build; see bench/bench_record.py), beside the CPU
@@ -40,6 +42,8 @@ import tempfile
 from bench.bench_record import ROOT, BuildClock, paired_slowdown, slowdown, tree_cpu
 from conag.viewer.scene import DISPLAY_HZ
 
+FOXGLOVE_CLIENTS = {"all": "every topic", "world": "the world's topics"}
+
 
 def free_port() -> int:
     """A port no one listens on now (runs of others share the machine)."""
@@ -50,7 +54,7 @@ def free_port() -> int:
 
 def one_run(scenario: str, agents: int, ticks: int, port: int, view_port: int | None, select: str | None,
             from_tick: int, display_hz: float = DISPLAY_HZ, page: bool = True,
-            foxglove: bool = False) -> tuple[float, float, float, float]:
+            foxglove: str = "") -> tuple[float, float, float, float]:
     """(ticks per second, wall seconds of the timed build, CPU seconds of the viewer, of the page)."""
     port = port or free_port()
     cmd = [sys.executable, "-m", "conag", "run", scenario, "--headless", "--agents", str(agents), "--max-ticks",
@@ -73,7 +77,8 @@ def one_run(scenario: str, agents: int, ticks: int, port: int, view_port: int | 
                     url += f"#select={select}"
                 if foxglove:
                     browser = None if not page else subprocess.Popen(
-                        [sys.executable, "-m", "bench.foxglove_client", url], cwd=ROOT, stdout=subprocess.DEVNULL)
+                        [sys.executable, "-m", "bench.foxglove_client", url,
+                         *(("--world-only",) if foxglove == "world" else ())], cwd=ROOT, stdout=subprocess.DEVNULL)
                 else:
                     browser = None if not page else subprocess.Popen([
                                             shutil.which("chromium") or "/usr/bin/chromium", "--headless=new",
@@ -115,8 +120,9 @@ def main(argv: list[str] | None = None) -> int:
                    help=f"conag view --display-hz: pictures a second sent to the page "
                         f"(default {DISPLAY_HZ:g}, the viewer's)")
     p.add_argument("--no-page", action="store_true", help="the viewer alone, no browser (its own share)")
-    p.add_argument("--foxglove", action="store_true",
-                   help="conag view --foxglove and a client subscribed to every channel, instead of the page")
+    p.add_argument("--foxglove", nargs="?", const="all", default="", choices=("all", "world"),
+                   help="conag view --foxglove and a client subscribed to every channel (all, the default) or to "
+                        "the world's only (world), instead of the page")
     args = p.parse_args(argv)
     if args.from_tick >= args.ticks:
         p.error(f"--from-tick {args.from_tick} leaves nothing to time in --ticks {args.ticks}")
@@ -135,7 +141,8 @@ def main(argv: list[str] | None = None) -> int:
     a, b = statistics.median(plain), statistics.median(viewed)
     print(f"{args.scenario}, {args.agents} agents, ticks {args.from_tick}-{args.ticks}, {args.reps} repetitions"
           f"{', page showing ' + args.select if args.select else ''}, {args.display_hz:g} pictures a second"
-          f"{', no page' if args.no_page else ''}{', Foxglove server and client' if args.foxglove else ''}: "
+          f"{', no page' if args.no_page else ''}"
+          f"{', Foxglove server and a client of ' + FOXGLOVE_CLIENTS[args.foxglove] if args.foxglove else ''}: "
           "paired slowdown "
           f"{100 * paired_slowdown(plain, viewed):.1f}% (median {a:.1f} ticks/s without, {b:.1f} with: "
           f"{100 * slowdown(a, b):.1f}% unpaired; ranges {min(plain):.1f}-{max(plain):.1f} and "

@@ -41,7 +41,7 @@ from protocol.messages import (
     Welcome,
     WorldView,
 )
-from tests.conftest import SCENARIOS, Process, conag, free_port
+from tests.conftest import SCENARIOS, Process, conag, free_port, wait_until
 
 W = "w0"
 NODE_DIR = Path(__file__).resolve().parent / "node"
@@ -193,23 +193,34 @@ class FoxgloveClient:
         self.channels: dict[str, dict] = {}
         self.subscriptions = 0
 
+    def subscribe(self, topic: str, timeout: float = 30.0) -> int:
+        """Subscribe to `topic` once it is advertised; the subscription's id."""
+        deadline = time.monotonic() + timeout
+        while topic not in self.channels:
+            self._receive(deadline)
+        self.subscriptions += 1
+        self.ws.send(json.dumps({"op": "subscribe", "subscriptions": [
+            {"id": self.subscriptions, "channelId": self.channels[topic]["id"]}]}))
+        return self.subscriptions
+
     def next_message(self, topic: str, timeout: float = 30.0) -> bytes:
-        """Subscribe to `topic` once it is advertised; the payload of its first message."""
-        deadline, sub = time.monotonic() + timeout, None
-        while time.monotonic() < deadline:
-            if sub is None and topic in self.channels:
-                self.subscriptions += 1
-                sub = self.subscriptions
-                self.ws.send(json.dumps({"op": "subscribe", "subscriptions": [
-                    {"id": sub, "channelId": self.channels[topic]["id"]}]}))
-            m = self.ws.recv(timeout=max(deadline - time.monotonic(), 0.01))
-            if isinstance(m, str):
-                op = json.loads(m)
-                if op["op"] == "advertise":
-                    self.channels.update({c["topic"]: c for c in op["channels"]})
-            elif m[0] == 1 and struct.unpack_from("<I", m, 1)[0] == sub:
+        """Subscribe to `topic`; the payload of its first message."""
+        deadline = time.monotonic() + timeout
+        sub = self.subscribe(topic, timeout)
+        while True:
+            m = self._receive(deadline)
+            if isinstance(m, bytes) and m[0] == 1 and struct.unpack_from("<I", m, 1)[0] == sub:
                 return m[13:]
-        raise TimeoutError(f"no message on {topic} within {timeout:g} s")
+
+    def _receive(self, deadline: float) -> str | bytes:
+        if time.monotonic() >= deadline:
+            raise TimeoutError("nothing came in time")
+        m = self.ws.recv(timeout=max(deadline - time.monotonic(), 0.01))
+        if isinstance(m, str):
+            op = json.loads(m)
+            if op["op"] == "advertise":
+                self.channels.update({c["topic"]: c for c in op["channels"]})
+        return m
 
     def close(self) -> None:
         self.ws.close()
@@ -221,7 +232,7 @@ def test_a_live_world_is_served_to_a_foxglove_websocket_client(bus):
     from conag.foxglove.live import FoxgloveBridge
 
     world = bus.server_session()
-    bridge = FoxgloveBridge(bus.client_session(), W, port=0, maps_every=0).start()
+    bridge = FoxgloveBridge(bus.client_session(), W, port=0, maps_every=10).start()
     stop = threading.Event()
 
     def serve() -> None:  # the world publishes a view, the bridge takes it (the display period)
@@ -244,12 +255,22 @@ def test_a_live_world_is_served_to_a_foxglove_websocket_client(bus):
         # the walls were sent before this client came: they are sent again for it
         walls = SceneUpdate.FromString(client.next_message("/world/walls"))
         assert len(entities(walls)["walls"].cubes) == 2
+        # the agents are asked for their maps only while their map topics are watched, each for its own
+        assert maps_asked(world) == set()
+        client.subscribe("/agents/a1/maps/brick")
+        wait_until(lambda: maps_asked(world) == {"a1"}, what="a maps request for a1 alone")
     finally:
         if client is not None:
             client.close()
         stop.set()
         thread.join(5)
         bridge.close()
+
+
+def maps_asked(session) -> set[str]:
+    """The agents some maps request token asks now."""
+    replies = session.liveliness().get(f"{keys.world_root(W)}/alive/maps/**", timeout=1.0)
+    return {str(r.ok.key_expr).split("/")[-2] for r in replies if r.ok is not None}
 
 
 def test_a_bridge_nobody_watches_translates_nothing(bus):
@@ -261,9 +282,7 @@ def test_a_bridge_nobody_watches_translates_nothing(bus):
         world.put(keys.view(W), encode(_view(10)))
         time.sleep(0.3)
         assert bridge.step() == 0 and bridge.translator.view is None
-        # nor does it ask the agents for their maps
-        asked = list(world.liveliness().get(f"{keys.world_root(W)}/alive/maps/**", timeout=1.0))
-        assert [r for r in asked if r.ok is not None] == []
+        assert maps_asked(world) == set()  # nor does it ask the agents for their maps
     finally:
         bridge.close()
 

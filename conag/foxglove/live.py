@@ -3,17 +3,19 @@ that serves a running world's Foxglove channels (`conag.foxglove.convert`) over 
 WebSocket protocol, with the `foxglove-sdk` package's server. Foxglove and Lichtblick connect
 to `ws://HOST:PORT`.
 
-What it costs the run is bounded by the display rate, not by the run's speed:
+What it costs the run follows what the clients look at, and the display rate, not the run's speed:
 
 * zenoh keeps what comes in its own queues (ring channels for the views and the sensor
   frames: only the newest are kept; FIFO channels for the rare messages: states, attaches,
   perturbations, timeouts, maps); no Python callback runs per message;
-* `display_hz` times a second the server takes what came, and translates the newest view,
-  the sensor frames of its tick, and the rest; with no client subscribed it translates nothing;
-* the agents' maps are asked for (a maps request token for every agent) only while a
-  client is subscribed, about once a second per agent whatever the run's speed
-  (`conag.viewer.scene.maps_interval`), never more often than every `maps_every` ticks.
-  The world publishes its views every 10 ticks while the server listens, as for `conag view`.
+* `display_hz` times a second the server takes what came, and translates the newest view
+  and the rest; with no client subscribed it translates nothing;
+* an agent's sensor frames are subscribed to only while a client is subscribed to one of
+  its scan topics (one ring per agent), and its maps are asked for (a maps request token
+  for that agent) only while a client is subscribed to one of its map topics: about once a
+  second whatever the run's speed (`conag.viewer.scene.maps_interval`), never more often
+  than every `maps_every` ticks. The world publishes its views every 10 ticks while the
+  server listens, as for `conag view`. Agents' topics are advertised as the views name them.
 """
 
 from __future__ import annotations
@@ -34,28 +36,42 @@ from protocol.bus import Declarations, undeclare
 log = logging.getLogger("conag.foxglove")
 
 DEFAULT_PORT = 8766  # beside `conag view`'s 8765 (Foxglove's own default: a user may pass 8765 with --view off)
-RING = 512           # sensor frames kept between two display periods (all agents together)
+RING = 64            # sensor frames of one agent kept between two display periods
 RARE = ("state", "welcome", "maps")                  # per-agent keys taken whole (FIFO)
 WORLD_RARE = ("perturbed", "lockstep_timeout")       # the world's, taken whole
 
 
 class Listener(foxglove.websocket.ServerListener):
-    """Counts the clients' subscriptions (the server works only while there is one) and
-    notes a new one (the walls, sent once, are sent again for it)."""
+    """The topics the clients are subscribed to (the server works for those only), and
+    whether a subscription is new (the walls, sent once, are sent again for it)."""
 
     def __init__(self) -> None:
-        self.subscriptions = 0
+        self.topics: dict[str, int] = {}
         self.new = threading.Event()
         self._lock = threading.Lock()
 
     def on_subscribe(self, client, channel) -> None:  # noqa: ARG002 -- the SDK's signature
         with self._lock:
-            self.subscriptions += 1
+            self.topics[channel.topic] = self.topics.get(channel.topic, 0) + 1
         self.new.set()
 
     def on_unsubscribe(self, client, channel) -> None:  # noqa: ARG002 -- the SDK's signature
         with self._lock:
-            self.subscriptions = max(self.subscriptions - 1, 0)
+            n = self.topics.get(channel.topic, 0) - 1
+            if n > 0:
+                self.topics[channel.topic] = n
+            else:
+                self.topics.pop(channel.topic, None)
+
+    def watched(self) -> set[str]:
+        """The topics some client is subscribed to now."""
+        with self._lock:
+            return set(self.topics)
+
+
+def agents_watched(topics: set[str], kind: str) -> set[str]:
+    """The agents some of whose `kind` topics (scan, maps) are among `topics`."""
+    return {t.split("/")[2] for t in topics if t.startswith("/agents/") and t.split("/")[3:4] == [kind]}
 
 
 class FoxgloveBridge:
@@ -79,8 +95,9 @@ class FoxgloveBridge:
         self.sent = 0
         self._declared = Declarations()
         self._inboxes: list = []
-        self._maps_token = None
-        self._maps_asked = 0
+        self._sensors: dict[str, tuple] = {}     # agent -> (its subscriber, its ring)
+        self._maps: dict[str, tuple] = {}        # agent -> (its maps request token, its interval)
+        self._maps_every = maps_every            # the interval asked for now, for the run's speed
         self._speed: tuple[float, int] | None = None  # (clock, tick) when the maps interval was last set
         self._agents: set[str] = set()
         self._advertise(world_topics())
@@ -94,8 +111,7 @@ class FoxgloveBridge:
         """Subscribe to the world's keys (each into a zenoh channel, drained by `step`)."""
         w = self.world_id
         root = keys.world_root(w)
-        subs = [(keys.all_agents(w, "sensors"), zenoh.handlers.RingChannel(RING)),
-                (keys.view(w), zenoh.handlers.RingChannel(4))]
+        subs = [(keys.view(w), zenoh.handlers.RingChannel(4))]
         subs += [(keys.all_agents(w, leaf), zenoh.handlers.FifoChannel(4096)) for leaf in RARE]
         subs += [(f"{root}/{leaf}", zenoh.handlers.FifoChannel(256)) for leaf in WORLD_RARE]
         for key, handler in subs:
@@ -103,28 +119,30 @@ class FoxgloveBridge:
         return self
 
     def step(self) -> int:
-        """Take what came since the last step; translate and send it while a client listens.
+        """Take what came since the last step; translate and send what a client watches.
         Returns how many Foxglove messages were sent."""
+        watched = self.listener.watched()
+        self._follow_sensors(agents_watched(watched, "scan"))
+        self._follow_maps(agents_watched(watched, "maps"))
         samples = [s for inbox in self._inboxes for s in _drain(inbox)]
-        for agent in {keys.agent_of(str(s.key_expr)) for s in samples} - self._agents:
-            if agent:
-                self._advertise(agent_topics(agent))
-                self._agents.add(agent)
+        frames = [s for _, ring in self._sensors.values() for s in _drain(ring)]
         if self.listener.new.is_set():
             self.listener.new.clear()
             self.translator.resend_walls()
-        watched = self.listener.subscriptions > 0
-        self._ask_maps(watched)
         if not watched:
             return 0
         views = [s for s in samples if str(s.key_expr).endswith("/view")]
         rest = [s for s in samples if not str(s.key_expr).endswith("/view")]
         now = time.time_ns()
         sent = 0
-        for s in rest + views[-1:]:  # the frames before the view of their tick; only the newest view
+        for s in frames + rest + views[-1:]:  # the frames before the view of their tick; only the newest view
             for d in self.translator.feed(str(s.key_expr), s.payload.to_bytes(), now):
                 self._send(d, now)
                 sent += 1
+        view = self.translator.view
+        for agent in set(view.agent_ids) - self._agents if view is not None else ():
+            self._advertise(agent_topics(agent))
+            self._agents.add(agent)
         self.sent += sent
         return sent
 
@@ -141,31 +159,46 @@ class FoxgloveBridge:
             self._advertise({d.topic: d.schema})
         self.channels[d.topic].log(d.data, log_time=now)
 
-    def _ask_maps(self, watched: bool) -> None:
-        """Every agent's maps about once a second while a client listens (see the module)."""
-        every = 0
-        if watched and self.maps_every:
-            v, now = self.translator.view, self.clock()
-            tick = v.tick if v is not None else 0
-            every = self._maps_asked or self.maps_every
-            if self._speed is None:
-                self._speed = (now, tick)
-            elif now - self._speed[0] >= 2.0:
-                rate = (tick - self._speed[1]) / (now - self._speed[0])
-                every = maps_interval(max(rate, 0.0), self.maps_every)
-                self._speed = (now, tick)
-        if every == self._maps_asked:
-            return
-        old = self._maps_token
-        self._maps_token = self.session.liveliness().declare_token(
-            keys.maps_request_token(self.world_id, self.requester, every)) if every else None
-        self._maps_asked = every
-        undeclare(old)
+    def _follow_sensors(self, agents: set[str]) -> None:
+        """Subscribe to the sensor frames of `agents` (a ring each), and of no other."""
+        for agent in set(self._sensors) - agents:
+            undeclare(self._sensors.pop(agent)[0])
+        for agent in agents - set(self._sensors):
+            sub = self.session.declare_subscriber(keys.sensors(self.world_id, agent), zenoh.handlers.RingChannel(RING))
+            self._sensors[agent] = (sub, sub.handler)
+
+    def _follow_maps(self, agents: set[str]) -> None:
+        """Ask `agents`, and no other, for their maps about once a second (see the module)."""
+        every = self._maps_interval() if agents and self.maps_every else 0
+        for agent in set(self._maps) | agents:
+            token, asked = self._maps.get(agent, (None, 0))
+            want = every if agent in agents else 0
+            if want == asked:
+                continue
+            new = self.session.liveliness().declare_token(
+                keys.maps_request_token(self.world_id, self.requester, want, agent)) if want else None
+            undeclare(token)  # after the new one is up: the agent is never left without one
+            if new is None:
+                self._maps.pop(agent, None)
+            else:
+                self._maps[agent] = (new, want)
+
+    def _maps_interval(self) -> int:
+        """The maps interval for the run's speed, measured over about 2 s (`maps_interval`)."""
+        v, now = self.translator.view, self.clock()
+        tick = v.tick if v is not None else 0
+        if self._speed is None:
+            self._speed = (now, tick)
+        elif now - self._speed[0] >= 2.0:
+            rate = (tick - self._speed[1]) / (now - self._speed[0])
+            self._maps_every = maps_interval(max(rate, 0.0), self.maps_every)
+            self._speed = (now, tick)
+        return self._maps_every
 
     def close(self) -> None:
         """Undeclare everything and stop the server (the session is the caller's)."""
-        undeclare(self._maps_token)
-        self._maps_token = None
+        self._follow_sensors(set())
+        self._follow_maps(set())
         self._declared.close()
         self.server.stop()
 
