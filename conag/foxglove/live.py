@@ -24,6 +24,7 @@ import logging
 import threading
 import time
 from collections.abc import Callable
+from typing import Any
 
 import foxglove
 import zenoh
@@ -111,7 +112,7 @@ class FoxgloveBridge:
         """Subscribe to the world's keys (each into a zenoh channel, drained by `step`)."""
         w = self.world_id
         root = keys.world_root(w)
-        subs = [(keys.view(w), zenoh.handlers.RingChannel(4))]
+        subs: list[tuple[str, Any]] = [(keys.view(w), zenoh.handlers.RingChannel(4))]
         subs += [(keys.all_agents(w, leaf), zenoh.handlers.FifoChannel(4096)) for leaf in RARE]
         subs += [(f"{root}/{leaf}", zenoh.handlers.FifoChannel(256)) for leaf in WORLD_RARE]
         for key, handler in subs:
@@ -203,8 +204,8 @@ class FoxgloveBridge:
         self.server.stop()
 
 
-def _drain(inbox) -> list:
-    out = []
+def _drain(inbox) -> list[zenoh.Sample]:
+    out: list[zenoh.Sample] = []
     while True:
         try:
             sample = inbox.try_recv()
