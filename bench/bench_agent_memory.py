@@ -28,7 +28,8 @@ SCENARIO = "scenarios/large/scale.toml"
 
 
 def own_memory() -> tuple[float, float]:
-    """(USS, PSS) of this process in MB."""
+    """(USS, PSS) of this process in MB. Not `bench_scale.smaps`: importing that module (and
+    bench_agent_step with it) would be counted in the child's first stages."""
     fields: dict[str, int] = {}
     with open("/proc/self/smaps_rollup", encoding="ascii") as f:
         for line in f:

@@ -211,12 +211,17 @@ def run_all(jobs: list[Job], where: runner.Where, pictures: Path | None, journal
         if journal is not None:
             journal.append(_job_key(done.job), asdict(o))
         out.append(o)
-        what = (f"complete in {o.ticks} ticks" if o.completed else
-                f"{'STALLED' if o.stalled else 'OUT OF TICKS'} at {o.sites_filled}/{o.sites_total}")
         print(f"[{len(out)}/{total} {time.monotonic() - began:6.0f} s] {o.layout} ({o.family}, "
-              f"{o.cols}x{o.rows}, {o.agents} agents) {o.mode}: {what} ({o.seconds:.0f} s, {done.worker})",
+              f"{o.cols}x{o.rows}, {o.agents} agents) {o.mode}: {how_it_ended(o)} ({o.seconds:.0f} s, "
+              f"{done.worker})",
               file=sys.stderr, flush=True)
     return sorted(out, key=lambda o: (o.layout, o.mode))
+
+
+def how_it_ended(o) -> str:
+    """A run's end in a few words, for progress lines: complete, stalled or out of ticks."""
+    return (f"complete in {o.ticks} ticks" if o.completed else
+            f"{'STALLED' if o.stalled else 'OUT OF TICKS'} at {o.sites_filled}/{o.sites_total}")
 
 
 def _job_key(job: Job) -> list:

@@ -42,7 +42,7 @@ import numpy as np
 from agent_runtime.config import AgentConfig
 from conag import sim
 from experiments import runner
-from experiments.generalisation import DEFAULT_STALL, LAYOUTS, family_of, materialise, stall_limit
+from experiments.generalisation import DEFAULT_STALL, LAYOUTS, family_of, how_it_ended, materialise, stall_limit
 from experiments.report import RESULTS_DOC, write_section
 from world_server.discs import BRICK_DISC
 from world_server.noise import NoiseSettings
@@ -247,9 +247,7 @@ def run_all(jobs: list[tuple[str, str]], where: runner.Where, stall: int, seen=N
     for done in runner.run(run_one, tasks, where, seen=seen):
         o = done.result
         out.append(o)
-        what = (f"complete in {o.ticks} ticks" if o.completed else
-                f"{'STALLED' if o.stalled else 'OUT OF TICKS'} at {o.sites_filled}/{o.sites_total}")
-        print(f"[{len(out)}/{len(jobs)} {time.monotonic() - began:6.0f} s] {o.layout} {o.setting}: {what}, "
+        print(f"[{len(out)}/{len(jobs)} {time.monotonic() - began:6.0f} s] {o.layout} {o.setting}: {how_it_ended(o)}, "
               f"map error {o.map_error:.2f}, misplaced {o.misplaced} ({o.seconds:.0f} s, {done.worker})",
               file=sys.stderr, flush=True)
     order = {s.name: i for i, s in enumerate(SETTINGS)}

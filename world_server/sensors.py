@@ -122,14 +122,21 @@ def _index(agent_xy, disc_xy, disc_channel, radius, width, height, agent_channel
 
 
 @njit(cache=True)
-def _scan(a, agent_xy, n_discs, grid, radius, sectors, noise, seed, out):
-    """One agent's readings into out[a]: nearest per (channel, sector), then the noise."""
-    cell, nx, ny, starts, sx, sy, sch, sid = grid
-    ax, ay = agent_xy[a, 0], agent_xy[a, 1]
+def _buckets_around(ax, ay, radius, cell, nx, ny):
+    """The grid's bucket columns x0..x1 and rows y0..y1 that a disc of `radius` round (ax, ay) touches."""
     x0 = min(max(int((ax - radius) / cell), 0), nx - 1)
     x1 = min(max(int((ax + radius) / cell), 0), nx - 1)
     y0 = min(max(int((ay - radius) / cell), 0), ny - 1)
     y1 = min(max(int((ay + radius) / cell), 0), ny - 1)
+    return x0, x1, y0, y1
+
+
+@njit(cache=True)
+def _scan(a, agent_xy, n_discs, grid, radius, sectors, noise, seed, out):
+    """One agent's readings into out[a]: nearest per (channel, sector), then the noise."""
+    cell, nx, ny, starts, sx, sy, sch, sid = grid
+    ax, ay = agent_xy[a, 0], agent_xy[a, 1]
+    x0, x1, y0, y1 = _buckets_around(ax, ay, radius, cell, nx, ny)
     me = n_discs + a
     r2 = radius * radius
     scale = sectors / (2.0 * np.pi)
@@ -193,10 +200,7 @@ def _occlude_and_alias(a, agent_xy, grid, radius, sectors, out, occlusion, alias
         # The second nearest object per (channel, sector): one more pass over the neighbours.
         cell, nx, ny, starts, sx, sy, sch, sid = grid
         ax, ay = agent_xy[a, 0], agent_xy[a, 1]
-        x0 = min(max(int((ax - radius) / cell), 0), nx - 1)
-        x1 = min(max(int((ax + radius) / cell), 0), nx - 1)
-        y0 = min(max(int((ay - radius) / cell), 0), ny - 1)
-        y1 = min(max(int((ay + radius) / cell), 0), ny - 1)
+        x0, x1, y0, y1 = _buckets_around(ax, ay, radius, cell, nx, ny)
         r2 = radius * radius
         scale = sectors / (2.0 * np.pi)
         for bx in range(x0, x1 + 1):
