@@ -133,14 +133,16 @@ def _matching_kernel(bricks, sites, obstacles):
     brick_c = np.empty(total, np.int64)
     done = 0
     while True:
-        db = _field_kernel(todo, obstacles)                     # step 2
-        # Step 3: the largest a + b, i.e. the least distance sum (a site's own value is
-        # da + 0 when it is open, and what it would be when it is closed). One pass, no
-        # temporary grids: this runs once per round.
+        # Steps 2-3: the largest a + b over the grid is the least distance sum. Through any
+        # cell x, da(x) + db(x) >= da(s) for the site s that db(x) comes from (da is a
+        # shortest-path field; moves are symmetric), and at s itself the sum is s's own
+        # value: so the best is the least value of a remaining site, and the b field of
+        # each round (one distance field per site) need not be spread to find it.
         best = np.inf
         for r in range(n):
             for c in range(m):
-                best = min(best, value[r, c] if todo[r, c] else da[r, c] + db[r, c])
+                if todo[r, c]:
+                    best = min(best, value[r, c])
         if not np.isfinite(best):
             break                                               # no remaining site reaches a brick
         for r in range(n):                                      # steps 4-5, each maximal site
