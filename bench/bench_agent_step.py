@@ -134,8 +134,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeats", type=int, default=1, help="runs per side, alternating (default 1)")
     ap.add_argument("--reference", default=REFERENCE, help=f"the commit to compare with (default {REFERENCE})")
     ap.add_argument("--reference-dir", type=Path, help="an existing checkout of the reference, instead of a worktree")
+    ap.add_argument("--layouts", help="only the layouts whose name contains one of these, comma separated")
     ap.add_argument("--json", type=Path, help="also write the rows as JSON")
     args = ap.parse_args(argv)
+    layouts = LAYOUTS
+    if args.layouts:
+        wanted = args.layouts.split(",")
+        layouts = tuple(p for p in LAYOUTS if any(w in p.stem for w in wanted))
+        if not layouts:
+            ap.error(f"no layout matches {args.layouts!r}; the layouts: {', '.join(p.stem for p in LAYOUTS)}")
     warmup, ticks = (20, 20) if args.quick else (args.warmup, args.ticks)
     maps = [int(m) for m in args.maps.split(",")]
     materialise(MANIFEST, SUITE)
@@ -144,7 +151,7 @@ def main(argv: list[str] | None = None) -> int:
               "| same decisions |")
         print("|---|---|---:|---:|---:|---:|---:|---|")
         rows = []
-        for r in compare({"this": ROOT, "reference": ref}, LAYOUTS, maps, warmup, ticks, args.repeats):
+        for r in compare({"this": ROOT, "reference": ref}, layouts, maps, warmup, ticks, args.repeats):
             rows.append(r)
             print(f"| {r['layout']} | {r['size']} | {r['agents']} | {r['map']} | {r['this_ms']:.3f} | "
                   f"{r['ref_ms']:.3f} | {r['ref_ms'] / r['this_ms']:.2f}x | {'yes' if r['same'] else 'no'} |",
