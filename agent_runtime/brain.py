@@ -36,6 +36,7 @@ from agent_runtime.far_memory import FarMemory, on_border
 from agent_runtime.field_cache import FieldCache
 from agent_runtime.matching import Matching, calculate_matching, select_goals
 from agent_runtime.motivations import Motivations
+from agent_runtime.nav_inputs import NavInputs, nav_inputs, nm_obstacles
 from agent_runtime.network import NONE, STATE_NODES, ActionNetwork, engineered
 from agent_runtime.seal_guard import SealGuard
 from agent_runtime.sealing import enclosed_sites, pocket_beside
@@ -134,6 +135,9 @@ class Brain:
         self._layers: np.ndarray | None = None  # the maps thresholded at 0.5, during a step
         self._enclosed: tuple[bytes, np.ndarray] | None = None  # (inputs, result) of the last check
         self._matching: tuple[bytes, Matching] | None = None  # (inputs, result) of the last matching
+        self._inputs: tuple[np.ndarray, NavInputs] | None = None  # (the step's marks, `nav_inputs` of them)
+        self._empty: np.ndarray | None = None   # an empty map mask, read-only
+        self._supply_kept: tuple[tuple[int, int] | None, np.ndarray, np.ndarray] | None = None  # `_supply`
         self._taken_from: np.ndarray | None = None  # (dx, dy) cells to where the held brick was taken
         self._dropped_at: np.ndarray | None = None  # odometry (cells) where it last dropped, until off it
         self._drop_unseen = False  # that drop was before this brain started (`_brick_underfoot`)
@@ -234,9 +238,21 @@ class Brain:
         else:
             self._taken_from -= (frame.odom_dx / self.cell, frame.odom_dy / self.cell)
 
-    def _source_cell(self) -> np.ndarray:
-        """The cell the held brick was taken from, as a mask (empty when not holding); when
-        it lies beyond the map, the border cell towards it.
+    def _supply(self) -> np.ndarray:
+        """The matching's extra supply, as a read-only mask: the held brick's source
+        (`_source_cell`) and the remembered bricks beyond the map (`_supply_beyond`). Kept
+        until the source's cell or the remembered bricks change (most steps neither does)."""
+        src = self.maps.cell_of(*self._taken_from) if self._taken_from is not None else None
+        far = self.far.far_bricks()   # the far memory's array, replaced whenever it changes
+        if self._supply_kept is None or self._supply_kept[0] != src or self._supply_kept[1] is not far:
+            mask = self._source_cell(src) | self._supply_beyond(far)
+            mask.setflags(write=False)
+            self._supply_kept = (src, far, mask)
+        return self._supply_kept[2]
+
+    def _source_cell(self, cell: tuple[int, int] | None) -> np.ndarray:
+        """The cell the held brick was taken from (`cell`, None when not holding), as a
+        mask; when it lies beyond the map, the border cell towards it.
 
         While an agent carries a brick it may know no free brick at all (the last one in
         view is in its hand, or another agent took it). The Matching grid then has no
@@ -245,20 +261,19 @@ class Brain:
         the supply: more bricks are likely there, and future bricks will come that way.
         """
         mask = np.zeros((self.cfg.map_size,) * 2, bool)
-        if self._taken_from is not None:
-            r, c = self.maps.cell_of(*self._taken_from)
-            mask[on_border(np.array([[r, c]]), self.cfg.map_size)] = True
+        if cell is not None:
+            mask[on_border(np.array([cell]), self.cfg.map_size)] = True
         return mask
 
-    def _supply_beyond(self) -> np.ndarray:
-        """Remembered bricks beyond the map, as the border cells towards them (a mask).
+    def _supply_beyond(self, far: np.ndarray) -> np.ndarray:
+        """Remembered bricks beyond the map (`far`, (k, 2) rows and cols), as the border
+        cells towards them (a mask).
 
         The Matching grid only holds the map: with the supply 50 cells away it would hold
         no brick, protect no path, and sites would be filled nearest-first even where that
         walls off others. Bricks beyond the border enter it at the border, as they enter
         the brick NM."""
         mask = np.zeros((self.cfg.map_size,) * 2, bool)
-        far = self.far.far_bricks()
         if len(far):
             mask[on_border(far, self.cfg.map_size)] = True
         return mask
@@ -277,33 +292,19 @@ class Brain:
         agents in sight are obstacles on both maps.
         """
         m = self.layers()
-        # Fixed obstacles (walls, the world's edge) are in the way exactly as food and water are.
-        food, water, brick, config = m[FOOD] | m[OBSTACLE] | self._recalled, m[WATER], m[BRICK], m[CONFIG]
-        # Other agents in sight are in the way too: two agents heading opposite ways down a
-        # one-cell corridor would otherwise meet, back off and meet again for ever.
-        agents = m[AGENT] if self.cfg.agents_as_obstacles else np.zeros_like(m[AGENT])
-        config_goals = config & ~brick          # sites still missing a brick
-        brick_goals = brick & ~config           # bricks not part of the structure
-        obstacles = food | water | (brick & config)
+        # Fixed obstacles (walls, the world's edge) are in the way exactly as food and water
+        # are; other agents in sight too (`agents_as_obstacles`): two agents heading opposite
+        # ways down a one-cell corridor would otherwise meet, back off and meet again for ever.
+        i = self._nav_inputs(m)
+        config_goals, brick_goals, obstacles = i.config_goals, i.brick_goals, i.obstacles
         open_sites = config_goals
-        if self.cfg.goal_sequencing:
-            if self.cfg.supply_beyond:
-                supply = (self._source_cell() | self._supply_beyond()) & ~obstacles & ~config
-                supply_bricks = brick_goals | supply
-            else:
-                supply_bricks = brick_goals
+        supply_bricks = i.supply_bricks
         # With no open site on the map the Matching grid pairs nothing and would leave no
         # brick goal at all: the brick NM then followed a remembered brick beyond the border
         # and turned back each time the sites came onto the map, for ever, a cell's step
         # either side of the map's edge (gen-polyomino 134). Any free brick blocks nothing then.
-        if sequenced and self.cfg.goal_sequencing and open_sites.any():
-            closed = config_goals & (self.maps.clear_age > self.cfg.site_memory)
-            if not self.cfg.closed_sites:
-                closed[:] = False
-            # The cells around the agent are never in doubt: it would be touching a brick there.
-            c = self.centre
-            closed[c - 1:c + 2, c - 1:c + 2] = False
-            matching = self.matching(supply_bricks, config_goals, obstacles, closed)
+        if sequenced and self.cfg.goal_sequencing and i.any_open:
+            matching = self.matching(supply_bricks, config_goals, obstacles, i.closed)
             config_goals, brick_goals = select_goals(matching, brick_goals, config_goals)
             held = open_sites & ~config_goals
             if self.cfg.mouth_side and held.any():
@@ -313,11 +314,27 @@ class Brain:
                 config_goals &= ~_mouth_side(held, config_goals, depth)
         if self.cfg.goal_sequencing and self.cfg.seal_guard:
             # Also when sequencing gives way (plan's fallback): no site that seals another.
-            config_goals &= ~self.seals.unsafe(config_goals, open_sites, obstacles, supply_bricks, self._tick)
+            unsafe = self.seals.unsafe(config_goals, open_sites, obstacles, supply_bricks, self._tick)
+            if unsafe.any():
+                config_goals = config_goals & ~unsafe
         # Bricks that are not goals (the structure's, and with sequencing the unmatched free
         # ones) are in the way: a path must not lead through one to a matched brick beyond.
-        return ((config_goals, self._free_centre(food | water | brick | agents)),
-                (brick_goals, self._free_centre(food | water | agents | (brick & ~brick_goals))))
+        config_obstacles, brick_obstacles = nm_obstacles(i.in_the_way, m[BRICK], brick_goals, self.centre)
+        return (config_goals, config_obstacles), (brick_goals, brick_obstacles)
+
+    def _nav_inputs(self, m: np.ndarray) -> NavInputs:
+        """`nav_inputs` of the marks `m`, made once per step (`m` is the step's own array)."""
+        if self._inputs is None or self._inputs[0] is not m:
+            extra = self._supply() if self.cfg.goal_sequencing and self.cfg.supply_beyond else self._no_supply()
+            self._inputs = (m, nav_inputs(m, self._recalled, extra, self.maps.clear_age, self.cfg.site_memory,
+                                          self.cfg.agents_as_obstacles, self.cfg.closed_sites, self.centre))
+        return self._inputs[1]
+
+    def _no_supply(self) -> np.ndarray:
+        if self._empty is None:
+            self._empty = np.zeros((self.cfg.map_size,) * 2, bool)
+            self._empty.setflags(write=False)
+        return self._empty
 
     def matching(self, bricks: np.ndarray, sites: np.ndarray, obstacles: np.ndarray,
                  closed: np.ndarray | None = None) -> Matching:
@@ -344,8 +361,7 @@ class Brain:
         m = self.layers()
         # Sequencing applies only with an open site on the map (`nav_masks`); without one
         # the plain masks are the very ones just made, so they are not made again.
-        sequenced = (self.cfg.goal_sequencing and self.cfg.sequencing_fallback
-                     and bool((m[CONFIG] & ~m[BRICK]).any()))
+        sequenced = self.cfg.goal_sequencing and self.cfg.sequencing_fallback and self._nav_inputs(m).any_open
         plain = None
         for k, (goals, obstacles) in enumerate(self.nav_masks()):
             field = self._field(goals, obstacles, far[k])
@@ -373,8 +389,7 @@ class Brain:
         side of the map's edge (gen-nested_rings 11260025). Any free brick blocks nothing."""
         if not np.isfinite(field[self.centre, self.centre]):
             return True
-        m = self.layers()
-        return not goals.any() and bool((m[BRICK] & ~m[CONFIG]).any())
+        return not goals.any() and bool(self._nav_inputs(self.layers()).brick_goals.any())
 
     def _field(self, goals: np.ndarray, obstacles: np.ndarray, beyond: np.ndarray) -> np.ndarray:
         """Distance field to `goals` and to the remembered cells `beyond` the map, which
@@ -404,15 +419,14 @@ class Brain:
     def state_nodes(self, frame: SensorFrame, plans: Plans) -> np.ndarray:
         """The six internal state nodes, in STATE_NODES order (0 or 1)."""
         c = self.centre
-        near_centre = float(np.hypot(*self.maps.frac)) <= self.cfg.drop_centering
-        at_site = bool(plans.config_goals[c, c]) and near_centre
+        near_centre = math.hypot(self.maps.frac[0], self.maps.frac[1]) <= self.cfg.drop_centering
         values = {
             "holding_brick": frame.holding,
-            "at_drop_site": at_site,
+            "at_drop_site": bool(plans.config_goals[c, c]) and near_centre,
             "at_brick": self._brick_within(plans, self.cfg.reach) is not None,
             "near_brick": self._brick_within(plans, self.cfg.near_brick) is not None,
-            "brick_available": bool(np.isfinite(plans.brick[c, c])),
-            "drop_site_available": bool(np.isfinite(plans.config[c, c])),
+            "brick_available": plans.brick[c, c] < math.inf,
+            "drop_site_available": plans.config[c, c] < math.inf,
         }
         return np.array([float(values[n]) for n in STATE_NODES])
 

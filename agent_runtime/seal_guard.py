@@ -35,6 +35,21 @@ class SealGuard:
     def __init__(self, maps: EgocentricMaps, far: FarMemory, centre: int):
         self.maps, self.far, self.centre = maps, far, centre
         self._found: dict[tuple[int, int], int] = {}   # far-memory cell -> tick found sealing
+        self._squares: dict[tuple[int, tuple[int, ...]], np.ndarray] = {}  # `_square`'s masks
+        self._grids: tuple[tuple, tuple[np.ndarray, ...]] | None = None  # `_remembered`: (key, grids)
+
+    def _nothing(self, shape: tuple[int, ...]) -> np.ndarray:
+        """An empty mask, read-only (most steps no goal is near: nothing is unsafe)."""
+        return self._square(-1, shape)   # the square of radius -1 holds no cell
+
+    def _square(self, radius: int, shape: tuple[int, ...]) -> np.ndarray:
+        """`around` the agent's cell, read-only: the agent is always in the centre, so the
+        few squares asked for every step are made once."""
+        mask = self._squares.get((radius, shape))
+        if mask is None:
+            mask = self._squares[(radius, shape)] = around((self.centre, self.centre), radius, shape)
+            mask.setflags(write=False)
+        return mask
 
     def unsafe(self, goals: np.ndarray, open_sites: np.ndarray, blocked: np.ndarray,
                supply: np.ndarray, tick: int) -> np.ndarray:
@@ -50,7 +65,7 @@ class SealGuard:
         fro, for ever (a one-cell slot of water whose far end it had not seen)."""
         if not self._found and not unsafe.any():
             return unsafe   # nothing remembered, nothing new: the rest would change nothing
-        judged = goals & around((self.centre, self.centre), SEAL_RADIUS, goals.shape)
+        judged = goals & self._square(SEAL_RADIUS, goals.shape)
         for cell in map(tuple, self.far.from_map(*np.nonzero(judged)).tolist()):
             self._found.pop(cell, None)
         for cell in map(tuple, self.far.from_map(*np.nonzero(unsafe)).tolist()):
@@ -73,10 +88,10 @@ class SealGuard:
         cut off from everything at the map's border (nothing checked: a site filled with
         open sites deeper in, gen-pocket 153) or, with the border counted open, open at a
         far end that was a wall (its mouth filled first, gen-pocket 117)."""
-        c = (self.centre, self.centre)
-        near = goals & around(c, SEAL_RADIUS, goals.shape)
-        if not near.any():
-            return np.zeros_like(goals)
+        c, r = self.centre, SEAL_RADIUS
+        if not goals[max(c - r, 0):c + r + 1, max(c - r, 0):c + r + 1].any():
+            return self._nothing(goals.shape)   # no goal near: nothing to judge
+        near = goals & self._square(SEAL_RADIUS, goals.shape)
         # No food or water lies on an open site: such a mark is a disc mapped a cell off
         # (a slot between water walls looked filled in its middle, gen-pocket 120).
         blocked = blocked & ~open_sites
@@ -86,7 +101,7 @@ class SealGuard:
         # The outside: the supply, and open ground seen a few cells beyond the sites that
         # are checked (the supply itself is often beyond the map, where nothing is seen).
         on_map = _Frame(open_sites, fresh, blocked, self.maps.known & ~blocked, supply,
-                        ~around(c, SEAL_RADIUS + MARGIN, goals.shape), _same, _same)
+                        ~self._square(SEAL_RADIUS + MARGIN, goals.shape), _same, _same)
         g = self._on_world(on_map) or on_map
         believed = (g.ground | g.open) & ~g.blocked
         passable = believed & ~(g.open & ~g.fresh)
@@ -101,7 +116,7 @@ class SealGuard:
         # stale sites: cut off by a stale mouth, the bricks beside a two-cell pocket were
         # doubted and its inner column seemed to get out through them (gen-pocket 017).
         structure = (self.maps.maps[BRICK] > 0.5) & (self.maps.maps[CONFIG] > 0.5)
-        local = around(c, SEAL_RADIUS + 1, goals.shape)
+        local = self._square(SEAL_RADIUS + 1, goals.shape)
         doubtful = g.from_map(walling_in(fresh & ~g.to_map(connected(reference, believed)), structure, local))
         unsafe = cut_off(g.from_map(near), passable | doubtful, reference, g.open,
                          fallbacks=(believed | doubtful, ~g.blocked))
@@ -114,14 +129,32 @@ class SealGuard:
         if far.ground is None or far.walls is None or far.discs is None:
             return None
         none = np.zeros_like(far.walls)
-        return _Frame(open=far.on_world(far.cells_grid(far.sites[far.site_open]), m.open),
-                      fresh=far.on_world(far.cells_grid(far.fresh_sites(FRESH_SITE)), m.fresh),
-                      blocked=far.on_world(far.walls | far.discs | far.cells_grid(far.sites[~far.site_open]),
-                                           m.blocked),
+        open_grid, fresh_grid, blocked_grid, supply_grid = self._remembered()
+        return _Frame(open=far.on_world(open_grid, m.open),
+                      fresh=far.on_world(fresh_grid, m.fresh),
+                      blocked=far.on_world(blocked_grid, m.blocked),
                       ground=far.ground | far.on_world(none, m.ground),
-                      supply=far.on_world(far.cells_grid(far.bricks), m.supply),
+                      supply=far.on_world(supply_grid, m.supply),
                       outside=far.on_world(~none, m.outside),
                       to_map=far.on_map, from_map=lambda layer: far.on_world(none, layer))
+
+    def _remembered(self) -> tuple[np.ndarray, ...]:
+        """The far memory's own world grids for `_on_world` (open sites, fresh ones, the
+        blocked cells, the bricks), kept until what they are made of changes: the sites'
+        beliefs, the walls and discs (`_memory_version`), or the remembered bricks (an
+        array the far memory replaces whenever it changes)."""
+        far = self.far
+        fresh = far.site_open & (far.site_clear_age <= FRESH_SITE)
+        key = (far.sites, far.bricks, far.site_open.tobytes(), fresh.tobytes(), far._memory_version)
+        kept = self._grids
+        if kept is None or not (kept[0][0] is key[0] and kept[0][1] is key[1] and kept[0][2:] == key[2:]):
+            assert far.walls is not None and far.discs is not None
+            grids = (far.cells_grid(far.sites[far.site_open]), far.cells_grid(far.sites[fresh]),
+                     far.walls | far.discs | far.cells_grid(far.sites[~far.site_open]), far.cells_grid(far.bricks))
+            for g in grids:
+                g.setflags(write=False)
+            self._grids = kept = (key, grids)
+        return kept[1]
 
 
 @dataclass(frozen=True)

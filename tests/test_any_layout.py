@@ -724,7 +724,7 @@ def test_explore_heads_for_squares_of_the_world_not_yet_seen():
 def test_bricks_beyond_the_map_stand_in_the_matching_at_the_border():
     brain = Brain(_welcome(([50.5], [52.5])), AgentConfig(map_size=11), np.random.default_rng(0))
     brain.far.bricks = np.array([[30, 0]])                   # a pile 30 cells east of the attach cell
-    supply = brain._supply_beyond()
+    supply = brain._supply()                                  # not holding: the far bricks alone
     assert supply.sum() == 1 and supply[brain.centre, -1]    # the east border cell on the agent's row
 
 

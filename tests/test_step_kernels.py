@@ -119,3 +119,36 @@ def test_a_cached_seeded_field_is_the_seeded_kernels():
     cache = FieldCache()
     assert np.array_equal(cache.seeded(seed, obstacles), seeded_distance_field(seed, obstacles))
     assert cache.seeded(seed, obstacles) is cache.seeded(seed, obstacles) and cache.misses == 1
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), size=st.sampled_from([5, 9, 12]), site_memory=st.sampled_from([0, 3, 300]),
+       agents_block=st.booleans(), closed_sites=st.booleans())
+def test_the_navigation_inputs_are_the_numpy_expressions(seed, size, site_memory, agents_block, closed_sites):
+    # The masks nav_masks once made with numpy, written out here as the reference.
+    from agent_runtime.esm import AGENT, BRICK, CONFIG, FOOD, OBSTACLE, WATER
+    from agent_runtime.nav_inputs import nav_inputs, nm_obstacles
+    rng = np.random.default_rng(seed)
+    marks = rng.random((7, size, size)) < 0.3
+    recalled, extra = rng.random((2, size, size)) < 0.1
+    clear_age = rng.integers(0, 6, (size, size)).astype(np.float32)
+    centre = size // 2
+    got = nav_inputs(marks, recalled, extra, clear_age, site_memory, agents_block, closed_sites, centre)
+    food = marks[FOOD] | marks[OBSTACLE] | recalled
+    water, brick, config = marks[WATER], marks[BRICK], marks[CONFIG]
+    agents = marks[AGENT] if agents_block else np.zeros_like(marks[AGENT])
+    config_goals, brick_goals = config & ~brick, brick & ~config
+    obstacles = food | water | (brick & config)
+    closed = config_goals & (clear_age > site_memory) if closed_sites else np.zeros_like(config_goals)
+    closed[centre - 1:centre + 2, centre - 1:centre + 2] = False
+    assert np.array_equal(got.config_goals, config_goals) and np.array_equal(got.brick_goals, brick_goals)
+    assert np.array_equal(got.obstacles, obstacles) and np.array_equal(got.closed, closed)
+    assert np.array_equal(got.supply_bricks, brick_goals | (extra & ~obstacles & ~config))
+    assert got.any_open == bool(config_goals.any())
+    goals = brick_goals & (rng.random((size, size)) < 0.5)           # what the matching left as goals
+    config_obstacles, brick_obstacles = nm_obstacles(got.in_the_way, brick, goals, centre)
+    want_config, want_brick = food | water | brick | agents, food | water | agents | (brick & ~goals)
+    want_config[centre, centre] = want_brick[centre, centre] = False
+    assert np.array_equal(config_obstacles, want_config) and np.array_equal(brick_obstacles, want_brick)
+    with pytest.raises(ValueError):
+        got.config_goals[0, 0] = True                                # shared by the step's readers: read-only

@@ -1,0 +1,99 @@
+"""The navigation maps' inputs, made from the ESMs' marks in one compiled pass.
+
+Every step the configuration and brick NMs (paper §4.2.3, Fig. 5) and the Matching grid
+(§6) read the same few masks of the thresholded ESMs: the sites still missing a brick, the
+free bricks, what is in the way, the supply, the sites not seen open lately. As numpy
+expressions that is some twenty whole-grid operations, each a Python call and a new
+array, around a few microseconds of actual work; one pass over the grid makes them all.
+The masks are exactly the expressions' (boolean algebra, nothing rounded), so no
+decision changes.
+
+Pure functions over numpy arrays; the brain owns when they are asked for.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from agent_runtime.esm import AGENT, BRICK, CONFIG, FOOD, OBSTACLE, WATER
+
+
+class NavInputs(NamedTuple):
+    """The masks one step's navigation maps are made from (bool grids of the map's shape)."""
+
+    config_goals: np.ndarray   # sites still missing a brick (CONFIG and not BRICK)
+    brick_goals: np.ndarray    # bricks not part of the structure (BRICK and not CONFIG)
+    obstacles: np.ndarray      # food, walls, recalled discs, water and structure bricks
+    supply_bricks: np.ndarray  # free bricks, and the extra supply where nothing is in the way
+    closed: np.ndarray         # open sites not seen open for `site_memory` steps, off the agent's 3 x 3
+    in_the_way: np.ndarray     # food, walls, recalled discs, water (and other agents, if they count)
+    any_open: bool             # whether any site on the map is missing a brick
+
+
+def nav_inputs(marks: np.ndarray, recalled: np.ndarray, extra_supply: np.ndarray, clear_age: np.ndarray,
+               site_memory: float, agents_block: bool, closed_sites: bool, centre: int) -> NavInputs:
+    """The masks of `NavInputs` from `marks` (the ESMs > 0.5, one bool grid per layer),
+    `recalled` (food and water remembered beyond the map, back on it), `extra_supply`
+    (the held brick's source and the far bricks at the border), the ESMs' `clear_age`;
+    `agents_block`: other agents are in the way; `closed_sites`: sites not seen open lately
+    are closed (else none is); `centre`: the agent's cell, (centre, centre)."""
+    *masks, any_open = _inputs_kernel(marks, recalled, extra_supply, clear_age, float(site_memory), agents_block,
+                                      closed_sites, centre)
+    for mask in masks:
+        mask.setflags(write=False)   # shared by every reader of the step
+    config_goals, brick_goals, obstacles, supply_bricks, closed, in_the_way = masks
+    return NavInputs(config_goals, brick_goals, obstacles, supply_bricks, closed, in_the_way, bool(any_open))
+
+
+def nm_obstacles(in_the_way: np.ndarray, bricks: np.ndarray, brick_goals: np.ndarray,
+                 centre: int) -> tuple[np.ndarray, np.ndarray]:
+    """The obstacles of the configuration NM (what is in the way, and every brick) and of
+    the brick NM (what is in the way, and the bricks that are not goals), each with the
+    agent's own cell free: it may stand on a brick it just dropped and must plan a way out."""
+    return _obstacles_kernel(in_the_way, bricks, brick_goals, centre)
+
+
+@njit(cache=True)
+def _inputs_kernel(marks, recalled, extra_supply, clear_age, site_memory, agents_block, closed_sites, centre):
+    n, m = recalled.shape
+    config_goals = np.empty((n, m), np.bool_)
+    brick_goals = np.empty((n, m), np.bool_)
+    obstacles = np.empty((n, m), np.bool_)
+    supply = np.empty((n, m), np.bool_)
+    closed = np.empty((n, m), np.bool_)
+    in_the_way = np.empty((n, m), np.bool_)
+    any_open = False
+    for r in range(n):
+        for c in range(m):
+            brick, config = marks[BRICK, r, c], marks[CONFIG, r, c]
+            fixed = marks[FOOD, r, c] or marks[OBSTACLE, r, c] or recalled[r, c] or marks[WATER, r, c]
+            site = config and not brick
+            free = brick and not config
+            blocked = fixed or (brick and config)
+            config_goals[r, c] = site
+            brick_goals[r, c] = free
+            obstacles[r, c] = blocked
+            supply[r, c] = free or (extra_supply[r, c] and not blocked and not config)
+            # The cells around the agent are never in doubt: it would be touching a brick there.
+            closed[r, c] = (closed_sites and site and clear_age[r, c] > site_memory
+                            and not (abs(r - centre) <= 1 and abs(c - centre) <= 1))
+            in_the_way[r, c] = fixed or (agents_block and marks[AGENT, r, c])
+            any_open = any_open or site
+    return config_goals, brick_goals, obstacles, supply, closed, in_the_way, any_open
+
+
+@njit(cache=True)
+def _obstacles_kernel(in_the_way, bricks, brick_goals, centre):
+    n, m = bricks.shape
+    config = np.empty((n, m), np.bool_)
+    brick = np.empty((n, m), np.bool_)
+    for r in range(n):
+        for c in range(m):
+            config[r, c] = in_the_way[r, c] or bricks[r, c]
+            brick[r, c] = in_the_way[r, c] or (bricks[r, c] and not brick_goals[r, c])
+    config[centre, centre] = False
+    brick[centre, centre] = False
+    return config, brick
