@@ -36,6 +36,7 @@ class SealGuard:
         self.maps, self.far, self.centre = maps, far, centre
         self._found: dict[tuple[int, int], int] = {}   # far-memory cell -> tick found sealing
         self._squares: dict[tuple[int, tuple[int, ...]], np.ndarray] = {}  # `_square`'s masks
+        self._judged: tuple[tuple, np.ndarray] | None = None  # `judge`: (inputs, verdict) of the last one
         self._grids: tuple[tuple, tuple[np.ndarray, ...]] | None = None  # `_remembered`: (key, grids)
 
     def _nothing(self, shape: tuple[int, ...]) -> np.ndarray:
@@ -92,16 +93,41 @@ class SealGuard:
         if not goals[max(c - r, 0):c + r + 1, max(c - r, 0):c + r + 1].any():
             return self._nothing(goals.shape)   # no goal near: nothing to judge
         near = goals & self._square(SEAL_RADIUS, goals.shape)
-        # No food or water lies on an open site: such a mark is a disc mapped a cell off
-        # (a slot between water walls looked filled in its middle, gen-pocket 120).
-        blocked = blocked & ~open_sites
         # Only open sites seen empty lately are ways through (a stale one may have been
         # filled since); the sites judged are, as the agent is about to fill one of them.
         fresh = (open_sites & (self.maps.clear_age <= FRESH_SITE)) | near
+        structure = (self.maps.maps[BRICK] > 0.5) & (self.maps.maps[CONFIG] > 0.5)
+        # A verdict is a pure function of these grids and of the far memory, and half the
+        # time an agent beside a site judges again exactly what it judged a step before.
+        key = (b"".join(g.tobytes() for g in (near, open_sites, blocked, supply, fresh, self.maps.known, structure)),
+               self._far_state())
+        if self._judged is not None and self._judged[0] == key:
+            return self._judged[1]
+        unsafe = self._judge(near, open_sites, blocked, supply, fresh, structure)
+        unsafe.setflags(write=False)
+        self._judged = (key, unsafe)
+        return unsafe
+
+    def _far_state(self) -> tuple:
+        """Everything of the far memory a judgement reads, as comparable values."""
+        far = self.far
+        if far.ground is None or far.walls is None or far.discs is None:
+            return ()
+        fresh = far.site_open & (far.site_clear_age <= FRESH_SITE)
+        return (int(far.pos[0]), int(far.pos[1]), far.sites.tobytes(), far.bricks.tobytes(), far.site_open.tobytes(),
+                fresh.tobytes(), far.walls.tobytes(), far.discs.tobytes(), far.ground.tobytes())
+
+    def _judge(self, near: np.ndarray, open_sites: np.ndarray, blocked: np.ndarray, supply: np.ndarray,
+               fresh: np.ndarray, structure: np.ndarray) -> np.ndarray:
+        """`judge`, worked out: `near` the goal sites judged, `fresh` the open sites seen
+        empty lately and `near`, `structure` the map's structure bricks."""
+        # No food or water lies on an open site: such a mark is a disc mapped a cell off
+        # (a slot between water walls looked filled in its middle, gen-pocket 120).
+        blocked = blocked & ~open_sites
         # The outside: the supply, and open ground seen a few cells beyond the sites that
         # are checked (the supply itself is often beyond the map, where nothing is seen).
         on_map = _Frame(open_sites, fresh, blocked, self.maps.known & ~blocked, supply,
-                        ~self._square(SEAL_RADIUS + MARGIN, goals.shape), _same, _same)
+                        ~self._square(SEAL_RADIUS + MARGIN, near.shape), _same, _same)
         g = self._on_world(on_map) or on_map
         believed = (g.ground | g.open) & ~g.blocked
         passable = believed & ~(g.open & ~g.fresh)
@@ -115,8 +141,7 @@ class SealGuard:
         # Structure bricks are doubted only round sites that no way reaches even through
         # stale sites: cut off by a stale mouth, the bricks beside a two-cell pocket were
         # doubted and its inner column seemed to get out through them (gen-pocket 017).
-        structure = (self.maps.maps[BRICK] > 0.5) & (self.maps.maps[CONFIG] > 0.5)
-        local = self._square(SEAL_RADIUS + 1, goals.shape)
+        local = self._square(SEAL_RADIUS + 1, near.shape)
         doubtful = g.from_map(walling_in(fresh & ~g.to_map(connected(reference, believed)), structure, local))
         unsafe = cut_off(g.from_map(near), passable | doubtful, reference, g.open,
                          fallbacks=(believed | doubtful, ~g.blocked))
@@ -140,15 +165,15 @@ class SealGuard:
 
     def _remembered(self) -> tuple[np.ndarray, ...]:
         """The far memory's own world grids for `_on_world` (open sites, fresh ones, the
-        blocked cells, the bricks), kept until what they are made of changes: the sites'
-        beliefs, the walls and discs (`_memory_version`), or the remembered bricks (an
-        array the far memory replaces whenever it changes)."""
+        blocked cells, the bricks), kept until what they are made of changes: the sites and
+        the beliefs about them, the walls and discs, the remembered bricks."""
         far = self.far
+        assert far.walls is not None and far.discs is not None
         fresh = far.site_open & (far.site_clear_age <= FRESH_SITE)
-        key = (far.sites, far.bricks, far.site_open.tobytes(), fresh.tobytes(), far._memory_version)
+        key = (far.sites.tobytes(), far.bricks.tobytes(), far.site_open.tobytes(), fresh.tobytes(),
+               far.walls.tobytes(), far.discs.tobytes())
         kept = self._grids
-        if kept is None or not (kept[0][0] is key[0] and kept[0][1] is key[1] and kept[0][2:] == key[2:]):
-            assert far.walls is not None and far.discs is not None
+        if kept is None or kept[0] != key:
             grids = (far.cells_grid(far.sites[far.site_open]), far.cells_grid(far.sites[fresh]),
                      far.walls | far.discs | far.cells_grid(far.sites[~far.site_open]), far.cells_grid(far.bricks))
             for g in grids:
