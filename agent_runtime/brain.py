@@ -133,6 +133,7 @@ class Brain:
         self.plans: Plans | None = None
         self.fields = FieldCache()   # navigation maps, computed again only when their inputs change
         self._layers: np.ndarray | None = None  # the maps thresholded at 0.5, during a step
+        self._marks: np.ndarray | None = None   # the same, as `perceive` left them, for the step
         self._enclosed: tuple[bytes, np.ndarray] | None = None  # (inputs, result) of the last check
         self._matching: tuple[bytes, Matching] | None = None  # (inputs, result) of the last matching
         self._inputs: tuple[np.ndarray, NavInputs] | None = None  # (the step's marks, `nav_inputs` of them)
@@ -174,10 +175,13 @@ class Brain:
         self._recalled &= ~self.maps.known     # seen free since: gone (eaten, moved)
         self.far.observe_sites(self.maps.maps[BRICK], self.maps.clear_age)
         self.far.age_sites(self.maps.clear_age)
-        enclosed = self._enclosed_sites() if self.cfg.enclosed_sites else None
+        marks = self.maps.maps > 0.5    # the maps as marks: what the step reads (`layers`)
+        enclosed = self._enclosed_sites(marks) if self.cfg.enclosed_sites else None
         if enclosed is not None and enclosed.any():
             self.maps.maps[BRICK][enclosed] = 1.0
+            marks[BRICK] |= enclosed
             self.far.observe_sites(self.maps.maps[BRICK], self.maps.clear_age)
+        self._marks = marks
         new = self.far.mark_seen(self.sensor_range - 1.0)
         if self.searching():
             self.searched += new
@@ -191,10 +195,10 @@ class Brain:
             return self._layers
         return self.maps.maps > 0.5
 
-    def _enclosed_sites(self) -> np.ndarray:
+    def _enclosed_sites(self, m: np.ndarray) -> np.ndarray:
         """Open sites on the map that no way reaches (`sealing.enclosed_sites`): believed filled.
-        Worked out again only when the open sites or the walls changed (read-only)."""
-        m = self.maps.maps > 0.5
+        `m`: the maps as marks. Worked out again only when the open sites or the walls
+        changed (read-only)."""
         walls = m[OBSTACLE] | m[FOOD] | m[WATER] | (m[BRICK] & m[CONFIG])
         open_sites = m[CONFIG] & ~m[BRICK]
         key = open_sites.tobytes() + walls.tobytes()
@@ -401,14 +405,14 @@ class Brain:
         return self.fields.seeded(seed, obstacles)
 
     def _nearest(self, cells: np.ndarray) -> tuple[float, float, float] | None:
-        """Offset and straight-line distance (cells) to the nearest marked cell, or None."""
-        rows, cols = np.nonzero(cells)
-        if rows.size == 0:
+        """Offset and straight-line distance (cells) to the nearest marked cell, or None
+        (the first in row order on a tie)."""
+        frac = self.maps.frac
+        found, row, col = _nearest_cell(cells, self.centre, float(frac[0]), float(frac[1]))
+        if not found:
             return None
-        dx, dy = self.maps.offset_of(rows, cols)
-        d = np.hypot(dx, dy)
-        i = int(np.argmin(d))
-        return float(dx[i]), float(dy[i]), float(d[i])
+        dx, dy = self.maps.offset_of(row, col)
+        return float(dx), float(dy), float(np.hypot(dx, dy))
 
     def _free_centre(self, obstacles: np.ndarray) -> np.ndarray:
         # The agent stands in the centre cell, sometimes on a brick it just dropped: its
@@ -440,7 +444,8 @@ class Brain:
     def step(self, frame: SensorFrame) -> Step:
         """One decision: perceive the frame, plan, choose, and the command that carries it out."""
         ranges = self.perceive(frame)
-        self._layers = self.maps.maps > 0.5
+        self._layers, self._marks = self._marks, None   # nothing changes the maps until the step ends
+        assert self._layers is not None
         self._layers.setflags(write=False)  # shared by every reader this step
         try:
             return self._decide(frame, ranges)
@@ -751,6 +756,22 @@ def _mouth_side_kernel(held, sites, depth):
                     out[r, c] = True
                     break
     return out
+
+
+@njit(cache=True)
+def _nearest_cell(cells, centre, fx, fy):
+    """(found, row, col) of the marked cell nearest the point (fx, fy) cells from the
+    centre cell's centre; the first in row order on a tie. Distances are compared as
+    `offset_of` and `np.hypot` give them, so the choice is the one numpy made."""
+    n, m = cells.shape
+    best, br, bc = np.inf, -1, -1
+    for r in range(n):
+        for c in range(m):
+            if cells[r, c]:
+                d = np.hypot(c - centre - fx, centre - r - fy)
+                if d < best:
+                    best, br, bc = d, r, c
+    return br >= 0, br, bc
 
 
 def _nearest_reading(readings: np.ndarray) -> float:

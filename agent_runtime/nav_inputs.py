@@ -58,6 +58,7 @@ def nm_obstacles(in_the_way: np.ndarray, bricks: np.ndarray, brick_goals: np.nda
 
 @njit(cache=True)
 def _inputs_kernel(marks, recalled, extra_supply, clear_age, site_memory, agents_block, closed_sites, centre):
+    # Bitwise operators on bools, not `and`/`or`: no branch per cell, so the loop vectorises.
     n, m = recalled.shape
     config_goals = np.empty((n, m), np.bool_)
     brick_goals = np.empty((n, m), np.bool_)
@@ -69,19 +70,19 @@ def _inputs_kernel(marks, recalled, extra_supply, clear_age, site_memory, agents
     for r in range(n):
         for c in range(m):
             brick, config = marks[BRICK, r, c], marks[CONFIG, r, c]
-            fixed = marks[FOOD, r, c] or marks[OBSTACLE, r, c] or recalled[r, c] or marks[WATER, r, c]
-            site = config and not brick
-            free = brick and not config
-            blocked = fixed or (brick and config)
+            fixed = marks[FOOD, r, c] | marks[OBSTACLE, r, c] | recalled[r, c] | marks[WATER, r, c]
+            site = config & (brick ^ True)
+            free = brick & (config ^ True)
+            blocked = fixed | (brick & config)
             config_goals[r, c] = site
             brick_goals[r, c] = free
             obstacles[r, c] = blocked
-            supply[r, c] = free or (extra_supply[r, c] and not blocked and not config)
-            # The cells around the agent are never in doubt: it would be touching a brick there.
-            closed[r, c] = (closed_sites and site and clear_age[r, c] > site_memory
-                            and not (abs(r - centre) <= 1 and abs(c - centre) <= 1))
-            in_the_way[r, c] = fixed or (agents_block and marks[AGENT, r, c])
-            any_open = any_open or site
+            supply[r, c] = free | (extra_supply[r, c] & ((blocked | config) ^ True))
+            closed[r, c] = closed_sites & site & (clear_age[r, c] > site_memory)
+            in_the_way[r, c] = fixed | (agents_block & marks[AGENT, r, c])
+            any_open |= site
+    # The cells around the agent are never in doubt: it would be touching a brick there.
+    closed[max(centre - 1, 0):centre + 2, max(centre - 1, 0):centre + 2] = False
     return config_goals, brick_goals, obstacles, supply, closed, in_the_way, any_open
 
 
@@ -92,8 +93,8 @@ def _obstacles_kernel(in_the_way, bricks, brick_goals, centre):
     brick = np.empty((n, m), np.bool_)
     for r in range(n):
         for c in range(m):
-            config[r, c] = in_the_way[r, c] or bricks[r, c]
-            brick[r, c] = in_the_way[r, c] or (bricks[r, c] and not brick_goals[r, c])
+            config[r, c] = in_the_way[r, c] | bricks[r, c]
+            brick[r, c] = in_the_way[r, c] | (bricks[r, c] & (brick_goals[r, c] ^ True))
     config[centre, centre] = False
     brick[centre, centre] = False
     return config, brick
