@@ -46,6 +46,7 @@ from pathlib import Path
 
 from conag.agent_settings import AgentSettings
 from conag.common import RECORDER_PRIORITY
+from conag.forkserver import Forked, ForkServer, ForkServerError
 from conag.noise_flags import to_note
 from conag.secure import bus_flags, run_bus_options, secure_bus
 from protocol import keys
@@ -93,6 +94,7 @@ class RunOptions:
     secure: str | None = None         # a secure bus (conag/secure.py): a deployment dir; "" a fresh one
     checkpoint_every: int = DEFAULT_EVERY  # ticks between the world's checkpoints (it is restarted from the last)
     noise: NoiseSettings = field(default_factory=NoiseSettings)  # the world's noise overrides (docs/noise.md)
+    fork_server: bool = True          # single agent processes are forks of a preloaded server (conag/forkserver.py)
 
 
 class RunEnding(RuntimeError):
@@ -104,7 +106,8 @@ class Fleet:
     """The agent processes of a run, by id."""
 
     opts: RunOptions
-    procs: dict[str, subprocess.Popen] = field(default_factory=dict)
+    procs: dict[str, subprocess.Popen | Forked] = field(default_factory=dict)
+    server: ForkServer | None = None  # single agent processes are forked from it (None: each a fresh interpreter)
     hosted: set[str] = field(default_factory=set)  # ids in procs served by a `conag agents` host, not stopped
     lock: threading.Lock = field(default_factory=threading.Lock)
     closed: bool = False  # stop_all has begun: a `conag restart` then starts nothing (it would outlive the run)
@@ -140,7 +143,7 @@ class Fleet:
             self.hosted.update(ids)
         return proc
 
-    def start(self, agent_id: str) -> subprocess.Popen:
+    def start(self, agent_id: str) -> subprocess.Popen | Forked:
         o = self.opts
         cmd = [sys.executable, "-m", "conag", "agent", "--id", agent_id, *self._bus_args(agent_id),
                "--seed", str(o.seed if o.seed is not None else o.scenario.seed), *o.agent.argv()]
@@ -154,10 +157,21 @@ class Fleet:
         with self.lock:
             if self.closed:
                 raise RunEnding(f"the run is ending: {agent_id} not started")
-            proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL)
+            proc = self._spawn(cmd)
             self.procs[agent_id] = proc
             self.hosted.discard(agent_id)
         return proc
+
+    def _spawn(self, cmd: list[str]) -> subprocess.Popen | Forked:
+        """`cmd` (`python -m conag ...`) forked from the fork server, or, without one or
+        should it fail, as a fresh interpreter."""
+        if self.server is not None:
+            try:
+                return self.server.spawn(cmd[3:])
+            except ForkServerError as exc:
+                print(f"warning: {exc}; agent processes start as fresh interpreters from now on", file=sys.stderr)
+                self.server = None
+        return subprocess.Popen(cmd, stdin=subprocess.DEVNULL)
 
     def kill(self, agent_id: str) -> str:
         with self.lock:
@@ -174,7 +188,7 @@ class Fleet:
         return f"killed {agent_id} (pid {proc.pid})"
 
     @staticmethod
-    def _stop_hosted(agent_id: str, proc: subprocess.Popen) -> str:
+    def _stop_hosted(agent_id: str, proc: subprocess.Popen | Forked) -> str:
         """A hosted agent is stopped alone (its host reads `stop ID`), not its whole host."""
         if proc.poll() is None and proc.stdin is not None:
             try:
@@ -415,6 +429,8 @@ def _run(opts: RunOptions, stop: threading.Event, tmp: Path) -> dict:
             if opts.foxglove is not None:
                 foxglove = _start_viewer(opts, foxglove=True)
             k = max(opts.per_process, 1)
+            if k == 1 and opts.fork_server:
+                fleet.server = _start_fork_server()
             for first in range(1, n_agents + 1, k):
                 if k == 1:
                     fleet.start(f"a{first}")
@@ -439,6 +455,8 @@ def _run(opts: RunOptions, stop: threading.Event, tmp: Path) -> dict:
         finally:
             _stop(world.proc, grace=10.0)
             fleet.stop_all()
+            if fleet.server is not None:
+                fleet.server.close()
             if teacher is not None:
                 _stop(teacher)
             for observer in (viewer, foxglove):
@@ -502,6 +520,15 @@ def _wait_until(*conditions: Callable[[], bool], poll: float = 0.1) -> None:
     exited, complete or out of ticks; a signal; a stall)."""
     while not any(condition() for condition in conditions):
         time.sleep(poll)
+
+
+def _start_fork_server() -> ForkServer | None:
+    """The run's fork server, or None (with a warning) if it cannot start."""
+    try:
+        return ForkServer()
+    except (ForkServerError, OSError) as exc:
+        print(f"warning: {exc}; agent processes start as fresh interpreters", file=sys.stderr)
+        return None
 
 
 def _start_teacher(opts: RunOptions) -> subprocess.Popen:

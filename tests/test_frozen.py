@@ -32,10 +32,11 @@ def _pid_of(*words: str) -> int | None:
         if not entry.isdigit():
             continue
         try:
-            cmd = Path(f"/proc/{entry}/cmdline").read_bytes().split(b"\0")
+            cmd = Path(f"/proc/{entry}/cmdline").read_bytes()
         except OSError:
             continue
-        args = [a.decode(errors="replace") for a in cmd if a]
+        # NUL-separated, or one string with spaces (a process forked by the fork server, titled)
+        args = cmd.replace(b"\0", b" ").decode(errors="replace").split()
         if all(w in args for w in words):
             return int(entry)
     return None

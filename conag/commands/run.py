@@ -80,6 +80,10 @@ def configure(u: argparse.ArgumentParser) -> None:
     u.add_argument("--per-process", type=int, default=1, metavar="K",
                    help="host up to K agents in each agent process (conag agents): less memory and a quicker "
                         "start-up for large teams; a crash of a host takes its K agents (default 1)")
+    u.add_argument("--no-fork-server", dest="fork_server", action="store_false",
+                   help="start every single agent process as a fresh interpreter; by default they are forks of a "
+                        "server that has loaded the agent's modules and kernels once (quicker to start, and "
+                        "sharing that memory; conag/forkserver.py)")
     u.add_argument("--agent-mode", choices=("auto", "peer", "client"), default="auto",
                    help="zenoh mode of the agent processes: peers reach each other directly (a full mesh), "
                         "clients only the world, which routes for them; auto: peers up to 32 agent processes, "
@@ -141,7 +145,8 @@ def run_options(args: argparse.Namespace) -> RunOptions:
                       unbuildable=unbuildable, record=args.record, record_priority=args.record_priority,
                       view=args.view, foxglove=args.foxglove, maps_every=args.maps_every, secure=args.secure,
                       checkpoint_every=args.checkpoint_every, profile=args.profile,
-                      per_process=args.per_process, agent_mode=args.agent_mode, noise=noise)
+                      per_process=args.per_process, agent_mode=args.agent_mode, noise=noise,
+                      fork_server=args.fork_server)
 
 
 def warn_if_unbuildable(path: str, scenario: Scenario, agents: int | None = None) -> str:
