@@ -25,6 +25,7 @@ agent (pid, poll, wait, kill, send_signal).
 
 from __future__ import annotations
 
+import gc
 import json
 import os
 import select
@@ -180,6 +181,10 @@ def main(argv: list[str] | None = None) -> int:
     stdout_fd = int(args[0])
     os.set_inheritable(stdout_fd, True)
     preload(warm="--no-warm" not in args)
+    # Everything loaded so far is moved out of the collector's reach: a collection in a
+    # child would otherwise write to every object's header and copy every page it shares.
+    gc.collect()
+    gc.freeze()
     if _threads() != 1:
         print(f"conag fork server: {_threads()} threads after loading; cannot fork safely", file=sys.stderr)
         return 1
