@@ -112,7 +112,9 @@ def _title(argv: list[str]) -> None:
         from setproctitle import setproctitle
     except ImportError:   # a checkout without it installed: the title stays the server's
         return
-    setproctitle(" ".join([sys.executable, "-m", "conag", *argv]))
+    # The interpreter's name, not its path: the title's first 15 bytes are also the main
+    # thread's name (top, /proc/PID/task/TID/comm), "python3 -m cona" as for a spawned agent.
+    setproctitle(" ".join([os.path.basename(sys.executable), "-m", "conag", *argv]))
 
 
 def _exit_code(status: int) -> int:
