@@ -26,6 +26,7 @@ agent (pid, poll, wait, kill, send_signal).
 from __future__ import annotations
 
 import gc
+import importlib
 import json
 import os
 import select
@@ -65,8 +66,10 @@ def _threads() -> int:
 def preload(warm: bool = True) -> None:
     """Import what an agent process imports and, with `warm`, load its compiled kernels by
     running a small build in process (what a child then finds in memory)."""
-    import conag.cli  # the command table; each command imports its module lazily
-    import conag.commands.agent  # noqa: F401
+    import conag.cli  # noqa: F401  (the command table; each command imports its module when first used)
+    # `conag agent`'s module, loaded as the command table loads it (by name, when used):
+    # the fork server runs commands, it does not depend on one.
+    importlib.import_module("conag.commands.agent")
     if warm:
         from conag import sim
         from world_server.scenario import parse_scenario
