@@ -158,7 +158,9 @@ class _MemorySampler:
         self._thread.start()
 
     def _run(self) -> None:
-        while not self._stop.wait(self.period):
+        # Every 0.2 s until a sample has seen agents: forked agent processes start at once
+        # and a short run may be over within the first period.
+        while not self._stop.wait(self.period if self.samples else 0.2):
             sample = memory_of_run(self.root)
             if sample["agent_processes"] and sample["agent_pss_mb"] > 0:
                 self.samples.append(sample)

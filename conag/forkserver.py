@@ -112,12 +112,14 @@ def _title(argv: list[str]) -> None:
     tools that find an agent by its command line, see the same as for a spawned one."""
     sys.argv = ["conag", *argv]
     try:
-        from setproctitle import setproctitle
+        from setproctitle import setproctitle, setthreadtitle
     except ImportError:   # a checkout without it installed: the title stays the server's
         return
-    # The interpreter's name, not its path: the title's first 15 bytes are also the main
-    # thread's name (top, /proc/PID/task/TID/comm), "python3 -m cona" as for a spawned agent.
-    setproctitle(" ".join([os.path.basename(sys.executable), "-m", "conag", *argv]))
+    interpreter = os.path.basename(sys.executable)
+    setproctitle(" ".join([interpreter, "-m", "conag", *argv]))
+    # setproctitle names the main thread after the title too (top, /proc/PID/task/TID/comm):
+    # give it back the interpreter's name, as a spawned agent's main thread has.
+    setthreadtitle(interpreter)
 
 
 def _exit_code(status: int) -> int:
