@@ -210,6 +210,7 @@ def _watch_world(tokens, report: RecordReport, world_id: str) -> None:
             return
         alive = token_event(sample)[1]
         if not alive and report.heard_world.is_set():
-            log.warning("recorder: world %s is gone after tick %d (it died, or its link to this recorder was "
-                        "closed); recording on when it is back", world_id, report.gaps.newest)
+            # Not a warning: every run's world goes as the run ends. Ticks it lacks are warned of.
+            log.info("recorder: world %s is gone after tick %d (it stopped or died, or its link to this recorder "
+                     "was closed); recording on when it is back", world_id, report.gaps.newest)
         report.gaps.token(alive)
