@@ -24,9 +24,9 @@ other end has been silent for that end's lease. Starved longer (an idle-priority
 whose cores other work keeps busy: 6 of 18 recordings at six-way load once), the recording
 lacked ticks. So:
 
-* an idle recorder whose loop went `STARVED` seconds without the CPU runs at the normal
-  priority from then on (`PriorityGuard`; every thread, zenoh's too), which it gets its
-  share of on any machine;
+* an idle recorder whose loop went `STARVED` seconds without the CPU runs at the priority
+  its process started with (normal, as a rule) from then on (`PriorityGuard`; every thread,
+  zenoh's too), which gets its share of the CPU on any machine;
 * its session announces a lease of `LEASE_MS` (zenoh's default is 10 s): the world and
   the agents wait that long for a silent recorder before they drop its link;
 * should the link be closed all the same, zenoh connects it again by itself, and the
@@ -62,7 +62,7 @@ QUEUE_DEPTH = 65_536   # samples zenoh may hold for the writer; when full, zenoh
 IDLE_SLEEP = 0.002     # seconds the writer sleeps when nothing is waiting
 QUIET = 0.5            # once stopped, the recorder writes on until nothing has come for this long ...
 QUIET_LIMIT = 10.0     # ... or for at most this long
-STARVED = 1.0          # seconds the loop went without the CPU: an idle recorder then runs at the normal priority
+STARVED = 1.0          # seconds the loop went without the CPU: an idle recorder then leaves the idle priority
 LEASE_MS = 60_000      # the recorder session's zenoh lease: how long others wait for it when it is silent
 
 
@@ -81,8 +81,9 @@ class RecordReport:
 
 class PriorityGuard:
     """Keeps an idle-priority recorder from starving (see the module): called every turn of
-    the loop, it raises every thread to the normal priority the first time a turn came
-    `STARVED` seconds or more after the one before."""
+    the loop, it puts every thread back at the priority the process started with (normal, as
+    a rule: `restore_priority`) the first time a turn came `STARVED` seconds or more after
+    the one before. It does not go back to idle: the machine that starved it once is busy."""
 
     def __init__(self, idle: bool, report: RecordReport, clock: Callable[[], float] = time.monotonic,
                  raise_priority: Callable[[], bool] = lambda: restore_priority("idle")):
