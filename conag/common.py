@@ -19,6 +19,7 @@ from protocol.bus import MODES, BusOptions
 PRIORITIES = ("idle", "low", "normal")
 RECORDER_PRIORITY = "idle"
 LOW_NICE = 10  # "low": this much above the starting nice value
+_STARTED: dict[str, int] = {}  # the scheduling policy the process had before `lower_priority`
 
 
 def bus_args(p: argparse.ArgumentParser, *, find_run: bool = False) -> None:
@@ -67,7 +68,7 @@ def ignore_repeat(_signum, _frame) -> None:
 
 
 @contextmanager
-def stop_on_signals(on_stop: Callable[[], None] | None = None):
+def stop_on_signals(on_stop: Callable[[], object] | None = None):
     """An Event set by SIGINT or SIGTERM, so loops finish their tick and close the session;
     `on_stop` is called first (in the handler, before anything else runs)."""
     stop = threading.Event()
@@ -140,6 +141,7 @@ def lower_priority(level: str) -> None:
         raise ValueError(f"priority must be one of {', '.join(PRIORITIES)}, got {level!r}")
     if level == "normal":
         return
+    _STARTED.setdefault("policy", os.sched_getscheduler(0))
 
     def lower(tid: int) -> None:
         if level == "idle":
@@ -151,19 +153,26 @@ def lower_priority(level: str) -> None:
         os.nice(LOW_NICE)  # the calling thread, which is all os.nice changes there
 
 
-def restore_priority(level: str) -> None:
-    """Undo `lower_priority("idle")` on every thread, for a process that is stopping: on a
-    machine whose cores are all busy a SCHED_IDLE thread gets almost no CPU, and a recorder
-    stopped there took longer than 5 s to finish its file (the slow tier beside a 2-job
-    benchmark). "low" stays as it is: a raised nice value still gets a share, and only a
-    privileged process may lower it again."""
-    if level != "idle":
-        return
+def restore_priority(level: str) -> bool:
+    """Undo `lower_priority("idle")` on every thread: back to the policy the process had
+    before (SCHED_OTHER, as a rule; one started idle, e.g. under `chrt -i 0`, stays idle).
+    For a process that is stopping, or a recorder that starves: on a machine whose cores are
+    all busy a SCHED_IDLE thread gets almost no CPU, and a recorder stopped there took
+    longer than 5 s to finish its file (the slow tier beside a 2-job benchmark). "low" stays
+    as it is: a raised nice value still gets a share, and only a privileged process may
+    lower it again. Returns whether the policy changed."""
+    policy = _STARTED.get("policy", os.SCHED_OTHER)
+    if level != "idle" or policy == os.SCHED_IDLE:
+        return False
+    policy = policy if policy in (os.SCHED_OTHER, os.SCHED_BATCH) else os.SCHED_OTHER
+    changed = []
 
     def restore(tid: int) -> None:
         try:
-            os.sched_setscheduler(tid, os.SCHED_OTHER, os.sched_param(0))
+            os.sched_setscheduler(tid, policy, os.sched_param(0))
+            changed.append(tid)
         except PermissionError:
             pass  # the system does not allow it: the thread stays idle
 
     _each_thread(restore)
+    return bool(changed)

@@ -576,6 +576,8 @@ def _start_world(opts: RunOptions, n_agents: int, final_path: Path, checkpoint: 
         cmd += [*(["--seed", str(opts.seed)] if opts.seed is not None else []), *opts.noise.to_args()]
     if opts.profile:
         cmd += ["--profile", opts.profile]
+    if opts.record:  # restarted, it lets the agents attach again only once the recorder is linked to it
+        cmd.append("--recorded")
     # stdin: `without ID` lines, for agents that died before the first tick (EarlyDeaths)
     return subprocess.Popen([*cmd, "--stdin-control"], stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
 

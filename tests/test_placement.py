@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from world_server.placement import body_cell, brick_drop_cell, extra_start_cells
+from world_server.placement import body_cell, brick_drop_cell, extra_start_cells, reachable_cells
 
 
 def grid(text: str) -> tuple[np.ndarray, np.ndarray]:
@@ -79,6 +79,22 @@ def test_a_body_comes_back_at_the_nearest_free_cell():
 """)
     assert body_cell(free, (0.2, 0.2)) == (1, 1)
     assert body_cell(np.zeros((2, 2), bool), (0.0, 0.0)) is None
+
+
+def test_a_body_comes_back_only_where_the_open_world_reaches():
+    free, _ = grid("""
+.......
+..###..
+..#.#..
+..###..
+.......
+""")
+    reach = reachable_cells(free, np.array([(0, 0)]))
+    assert not reach[2, 3] and reach[0, 3] and reach[4, 6]          # the walled-in cell is cut off
+    assert body_cell(free, (3.5, 2.5)) == (3, 2)                     # nearest free: inside
+    assert body_cell(free, (3.5, 2.5), reach) == (3, 0)              # nearest reachable: outside
+    # no reachable cell free (every seed walled in): any free cell rather than none
+    assert body_cell(free, (3.5, 2.5), reachable_cells(free, np.array([(3, 1)]))) == (3, 2)
 
 
 def test_extra_starts_grow_from_the_starts_by_walking_distance():

@@ -766,6 +766,38 @@ def test_a_restarted_agent_gets_its_body_back_at_the_free_cell_nearest_where_it_
     assert pose(w, "a")[:2] != pytest.approx(xy)                    # and it moves
 
 
+POCKET = """
+A........
+.........
+...bbb...
+...b.b...
+...b.b...
+.........
+"""
+
+
+@pytest.mark.parametrize("sealed", [True, False])
+def test_a_body_never_comes_back_inside_a_pocket_sealed_while_it_was_away(sealed):
+    from world_server.buildability import reachable
+
+    w = make(POCKET, agents=1, sensor_noise=0.0, body_grace_ticks=0)
+    w.attach("a")
+    inside = w.scenario.to_world([(4, 3)])[0]   # in the horseshoe of bricks, open to the south
+    w.physics.place_body(w.agents["a"].index, inside)
+    tick(w)
+    w.detach("a")                               # grace 0: the body leaves the world at once
+    if sealed:  # a brick closes the horseshoe's mouth while the body is away
+        assert w.perturb(Perturbation("add", *w.scenario.to_world([(4, 4)])[0], "brick", 0.0, 0.0, False)).ok
+    back = w.attach("a")
+    cell = tuple(int(v) for v in w.scenario.to_cell([(back.x, back.y)])[0])
+    if not sealed:
+        assert cell == (4, 3)                   # the pocket is open: back where it was
+        return
+    layout = [row[:4] + "b" + row[5:] if r == 4 else row for r, row in enumerate(w.scenario.layout)]
+    assert cell in reachable(layout)            # the open world, not the sealed pocket
+    assert np.hypot(cell[0] - 4, cell[1] - 3) == pytest.approx(2.0)  # and the nearest such cell
+
+
 def test_a_dead_agents_brick_never_fills_a_site_and_bricks_are_conserved():
     # The body dies standing on a site, holding a brick: the brick goes elsewhere.
     w = make(".......\n.......\n..b+...\n.......\n.......", agents=1, sensor_noise=0.0)

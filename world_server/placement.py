@@ -1,8 +1,9 @@
 """Where the world puts things an agent can no longer place itself: pure functions on grids.
 
 A dead agent's brick must land where nothing needs it (`brick_drop_cell`), a restarted
-agent's body where it overlaps nothing (`body_cell`), and agents beyond a scenario's `A`
-cells near those starts (`extra_start_cells`). Both take bool grids indexed
+agent's body where it overlaps nothing and the open world reaches (`body_cell`,
+`reachable_cells`), and agents beyond a scenario's `A` cells near those starts
+(`extra_start_cells`). They take bool grids indexed
 [row, col] like `Scenario.grid` (row 0 is the north) and a start in fractional cell
 coordinates (col, row), the centre of cell (c, r) being (c + 0.5, r + 0.5); they return
 the nearest cell that qualifies, by straight-line distance from the start, ties in
@@ -64,9 +65,50 @@ def brick_drop_cell(free: np.ndarray, site: np.ndarray, start: tuple[float, floa
     return None
 
 
-def body_cell(free: np.ndarray, start: tuple[float, float]) -> tuple[int, int] | None:
-    """The free cell nearest `start` for a body to come back at; None if there is none."""
-    return _by_distance(np.asarray(free, bool), start)
+def body_cell(free: np.ndarray, start: tuple[float, float], reachable: np.ndarray | None = None
+              ) -> tuple[int, int] | None:
+    """The free cell nearest `start` for a body to come back at; None if there is none.
+
+    With `reachable` (`reachable_cells`), only a cell the open world reaches: bricks laid
+    while the body was away may have sealed where it stood into a pocket, and a body put
+    there could never get out. Where no such cell is free, any free cell (a crowded world
+    is no reason to refuse an agent its body)."""
+    free = np.asarray(free, bool)
+    if reachable is not None:
+        cell = _by_distance(free & np.asarray(reachable, bool), start)
+        if cell is not None:
+            return cell
+    return _by_distance(free, start)
+
+
+def reachable_cells(passable: np.ndarray, seeds: np.ndarray) -> np.ndarray:
+    """bool [row, col]: the `passable` cells a body can walk to (4-connected steps through
+    `passable` cells) from any passable seed (k, 2) (col, row); all False if none is."""
+    passable = np.asarray(passable, bool)
+    seeds = np.asarray(seeds, np.int64).reshape(-1, 2)
+    rows, cols = passable.shape
+    inside = (seeds[:, 0] >= 0) & (seeds[:, 0] < cols) & (seeds[:, 1] >= 0) & (seeds[:, 1] < rows)
+    seeds = seeds[inside]
+    return _walking_distance(passable, seeds[passable[seeds[:, 1], seeds[:, 0]]]) >= 0
+
+
+def _walking_distance(passable: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """int [row, col]: steps from the nearest start through `passable` cells (4-connected;
+    the starts count as passable), -1 where none reaches."""
+    rows, cols = passable.shape
+    dist = np.full(passable.shape, -1, np.int64)
+    queue: deque[tuple[int, int]] = deque()
+    for c, r in np.asarray(starts, np.int64).reshape(-1, 2):
+        if 0 <= r < rows and 0 <= c < cols and dist[r, c] < 0:
+            dist[r, c] = 0
+            queue.append((int(r), int(c)))
+    while queue:
+        r, c = queue.popleft()
+        for nr, nc in ((r - 1, c), (r + 1, c), (r, c - 1), (r, c + 1)):
+            if 0 <= nr < rows and 0 <= nc < cols and passable[nr, nc] and dist[nr, nc] < 0:
+                dist[nr, nc] = dist[r, c] + 1
+                queue.append((nr, nc))
+    return dist
 
 
 def extra_start_cells(empty: np.ndarray, passable: np.ndarray, starts: np.ndarray) -> np.ndarray:
@@ -79,20 +121,7 @@ def extra_start_cells(empty: np.ndarray, passable: np.ndarray, starts: np.ndarra
     of any wall, instead of a pile in the top-left corner.
     """
     empty = np.asarray(empty, bool)
-    passable = np.asarray(passable, bool) | empty
-    rows, cols = empty.shape
-    dist = np.full(empty.shape, -1, np.int64)
-    queue: deque[tuple[int, int]] = deque()
-    for c, r in np.asarray(starts, np.int64).reshape(-1, 2):
-        if 0 <= r < rows and 0 <= c < cols and dist[r, c] < 0:
-            dist[r, c] = 0
-            queue.append((int(r), int(c)))
-    while queue:
-        r, c = queue.popleft()
-        for nr, nc in ((r - 1, c), (r + 1, c), (r, c - 1), (r, c + 1)):
-            if 0 <= nr < rows and 0 <= nc < cols and passable[nr, nc] and dist[nr, nc] < 0:
-                dist[nr, nc] = dist[r, c] + 1
-                queue.append((nr, nc))
+    dist = _walking_distance(np.asarray(passable, bool) | empty, starts)
     er, ec = np.nonzero(empty)  # reading order
     d = dist[er, ec]
     key = np.where(d < 0, np.iinfo(np.int64).max, d)

@@ -88,6 +88,7 @@ from world_server.world import World
 
 log = logging.getLogger("conag.world")
 RESUME_WAIT = 10.0  # wall seconds a resumed world waits for its live agents to attach again
+RECORDER_WAIT = 10.0  # wall seconds a recorded world waits for a recorder's link before agents may attach
 WAIT_REPORT = 5.0   # wall seconds between the lines a lockstep world logs while it cannot tick
 
 
@@ -144,7 +145,13 @@ class BadInput:
     agent: str | None = None
 
 
-Event = CommandArrived | LivelinessChanged | AttachAsked | PerturbAsked | ViewAsked | GoWithout | BadInput
+@dataclass(frozen=True)
+class RecorderHeard:
+    """A recorder's liveliness token reached the world: its link to the recorder is up."""
+
+
+Event = (CommandArrived | LivelinessChanged | AttachAsked | PerturbAsked | ViewAsked | GoWithout | BadInput
+         | RecorderHeard)
 
 
 class WorldServer:
@@ -165,7 +172,7 @@ class WorldServer:
                  clock: Callable[[], float] = time.monotonic,
                  on_status: Callable[[WorldStatus], None] | None = None, block_frames: bool = False,
                  view_every: int = 10, checkpoint: CheckpointPlan | None = None, resumed: bool = False,
-                 max_tick_rate: float | None = None):
+                 max_tick_rate: float | None = None, recorded: bool = False):
         self.world = world
         self.session = session
         self.mode = mode or world.scenario.tick_mode
@@ -199,7 +206,10 @@ class WorldServer:
         self.checkpoints_written = 0
         self._checkpointed = -1  # the tick of the last checkpoint written
         self._unclaimed = resumed  # a resumed world: agents without a token are let go before the first tick
-        self._resume_deadline: float | None = clock() + RESUME_WAIT if resumed else None
+        # Recorded: no attach before a recorder's token came (its link is up), for RECORDER_WAIT at most.
+        self._recorder_deadline: float | None = clock() + RECORDER_WAIT if recorded else None
+        self._resume_deadline: float | None = (clock() + RESUME_WAIT + (RECORDER_WAIT if recorded else 0.0)
+                                               if resumed else None)
         self._attached: set[str] = set()  # agents that attached to this server
         if max_tick_rate is not None and not max_tick_rate > 0:
             raise ValueError("max_tick_rate must be > 0 ticks per second")
@@ -249,6 +259,9 @@ class WorldServer:
         w, s, add = self.world.world_id, self.session, self._declared.add
         add(s.liveliness().declare_token(keys.world_token(w)))
         add(watch_tokens(s, keys.all_agent_tokens(w), self._on_token))
+        if self._recorder_deadline is not None:
+            add(watch_tokens(s, keys.all_recorder_tokens(w),
+                             lambda _recorder, alive: self._events.put(RecorderHeard()) if alive else None))
         add(s.declare_subscriber(keys.all_agents(w, "command"), self._on_command))
         add(s.declare_queryable(keys.all_agents(w, "attach"), lambda q: self._events.put(AttachAsked(q))))
         add(s.declare_queryable(keys.perturb(w), lambda q: self._events.put(PerturbAsked(q))))
@@ -462,6 +475,10 @@ class WorldServer:
                 self._perturb(query)
             case ViewAsked(query):
                 self._answer_view(query)
+            case RecorderHeard():
+                if self._recorder_deadline is not None:
+                    self._recorder_deadline = None
+                    log.info("tick %d: a recorder is linked: agents may attach", self.world.tick)
             case GoWithout(agent):
                 if agent not in self._not_awaited:
                     self._not_awaited.add(agent)
@@ -530,6 +547,12 @@ class WorldServer:
             query.reply_err(f"bad attach request: {exc}".encode())
             query.drop()
             return
+        if self._awaiting_recorder():
+            # A recorder links to a world started again seconds after the agents do: attaches
+            # answered before it came would be missing from the recording.
+            query.reply_err(b"the world waits for its recorder's link (a recorded run); retry")
+            query.drop()
+            return
         if hello.agent_id not in self._tokens:
             # Waiting for a process that has no token would stall lockstep forever.
             query.reply_err(b"declare your liveliness token before attaching, then retry")
@@ -546,6 +569,17 @@ class WorldServer:
         log.info("agent %s (pid %d) attached to body %d%s", hello.agent_id, hello.pid, welcome.body,
                  f", restart {welcome.restarts}" if welcome.restarts else "")
         self._publish_frame(self.world.frame(hello.agent_id))
+
+    def _awaiting_recorder(self) -> bool:
+        """Whether a recorded world still waits for its recorder's link (see `RECORDER_WAIT`)."""
+        if self._recorder_deadline is None:
+            return False
+        if self.clock() < self._recorder_deadline:
+            return True
+        log.warning("tick %d: no recorder linked within %g s: agents attach without it (the recording may lack "
+                    "their attaches)", self.world.tick, RECORDER_WAIT)
+        self._recorder_deadline = None
+        return False
 
     def _perturb(self, query: zenoh.Query) -> None:
         try:

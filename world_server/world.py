@@ -31,7 +31,7 @@ from protocol.messages import (
 )
 from world_server.discs import BRICK_DISC, FOOD_DISC, IN_WORLD, WATER_DISC, DiscStore
 from world_server.physics import Physics, motor_update
-from world_server.placement import body_cell, brick_drop_cell, extra_start_cells
+from world_server.placement import body_cell, brick_drop_cell, extra_start_cells, reachable_cells
 from world_server.scenario import Scenario
 from world_server.sensors import sense, warm_up
 
@@ -66,8 +66,8 @@ class World:
     (`world_server.placement.brick_drop_cell`); its body stays, stopped, for
     `body_grace_ticks`, then leaves the world (it no longer collides and is not sensed)
     until the same id attaches again and gets it back at the free cell nearest where it
-    was (`placement.body_cell`). `status`, `sites_filled`, `completed` and `blueprint` report
-    the build; `perturb` removes, adds or moves a disc or changes the blueprint.
+    was that the open world reaches (`placement.body_cell`). `status`, `sites_filled`,
+    `completed` and `blueprint` report the build; `perturb` removes, adds or moves a disc or changes the blueprint.
     """
 
     def __init__(self, scenario: Scenario, rng: np.random.Generator | None = None, world_id: str = "w0",
@@ -196,16 +196,29 @@ class World:
         size = self.cfg.cell_size
         return float(xy[0]) / size, self.scenario.rows - float(xy[1]) / size
 
-    def _free_cells(self, radius: float, body_margin: float = 0.0) -> np.ndarray:
+    def _open_cells(self) -> np.ndarray:
+        """bool [row, col]: the cells a body can walk to from the scenario's `A` starts (from
+        the bodies in the world where no start is open, e.g. a layout without `A`), through
+        cells a body fits in when no other body is in the way (bodies move; walls and discs
+        do not): the open world, not a pocket sealed off from it."""
+        passable = self._free_cells(self.cfg.agent_radius, bodies=False)
+        starts = self.scenario.cells_col_row("A")
+        reach = reachable_cells(passable, starts)
+        if not reach.any():
+            reach = reachable_cells(passable, self.scenario.to_cell(self.physics.state()[0][self.solid]))
+        return reach
+
+    def _free_cells(self, radius: float, body_margin: float = 0.0, bodies: bool = True) -> np.ndarray:
         """bool [row, col]: a circle of `radius` at the cell's centre overlaps no wall, no disc
-        in the world and no solid body (kept `body_margin` further from bodies)."""
+        in the world and (with `bodies`) no solid body (kept `body_margin` further from bodies)."""
         sc = self.scenario
         free = ~sc.grid("#")
         rows, cols = free.shape
         size = self.cfg.cell_size
         pos, _ = self.physics.state()
-        objects = [(self.discs.present_arrays()[1], radius + self.cfg.disc_radius),
-                   (pos[self.solid], radius + self.cfg.agent_radius + body_margin)]
+        objects = [(self.discs.present_arrays()[1], radius + self.cfg.disc_radius)]
+        if bodies:
+            objects.append((pos[self.solid], radius + self.cfg.agent_radius + body_margin))
         for xy, reach in objects:
             if not len(xy):
                 continue
@@ -242,10 +255,12 @@ class World:
                 del self._pending_release[brick]
 
     def _bring_back(self, rec: AgentRecord) -> None:
-        """A body that had left the world comes back at the free cell nearest where it was."""
+        """A body that had left the world comes back at the free cell nearest where it was
+        that the open world reaches (`_open_cells`): bricks laid while it was away may have
+        sealed where it stood into a pocket."""
         pos, _ = self.physics.state()
         free = self._free_cells(self.cfg.agent_radius, body_margin=0.1)
-        cell = body_cell(free, self._fractional_cell(pos[rec.index]))
+        cell = body_cell(free, self._fractional_cell(pos[rec.index]), self._open_cells())
         if cell is None:
             raise RuntimeError("no free cell left for a returning agent body")
         self.physics.place_body(rec.index, self.scenario.to_world(cell)[0])

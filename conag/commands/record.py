@@ -19,8 +19,9 @@ from conag.common import (
     restore_priority,
     stop_on_signals,
 )
+from conag.recording.gaps import describe_lost
 from conag.recording.mcap_log import DEFAULT_TICK_NS
-from conag.recording.recorder import RecordReport, run_recorder
+from conag.recording.recorder import LEASE_MS, RecordReport, run_recorder
 from protocol.bus import open_session
 from world_server.scenario import load_scenario
 
@@ -40,8 +41,9 @@ def configure(r: argparse.ArgumentParser) -> None:
                         "(docs/how-to/foxglove.md)")
     r.add_argument("--priority", choices=PRIORITIES, default=RECORDER_PRIORITY,
                    help="the recorder's CPU priority, so the run it records gets the CPU first: idle (the default) "
-                        "runs it only when a core would otherwise idle (Linux SCHED_IDLE), low raises its nice "
-                        "value by 10, normal leaves it as any process")
+                        "runs it only when a core would otherwise idle (Linux SCHED_IDLE; starved for a second, "
+                        "it runs at the normal priority from then on), low raises its nice value by 10, normal "
+                        "leaves it as any process")
     bus_args(r, find_run=True)
 
 
@@ -57,15 +59,17 @@ def run(args: argparse.Namespace) -> int:
     report = RecordReport()
     # Stopped, it finishes its file at the normal priority: idle, it could starve on a busy machine.
     with stop_on_signals(on_stop=lambda: restore_priority(args.priority)) as stop:
-        session = open_session(bus_options(args))
+        session = open_session(bus_options(args), lease_ms=LEASE_MS)
         try:
             print(f"recording world {args.world_id} to {args.out}", flush=True)
             run_recorder(session, args.world_id, args.out, stop, metadata=meta, tick_ns=_tick_ns(args.scenario),
                          recorder_id=args.id, report=report, maps_every=max(args.maps_every, 0),
-                         foxglove=not args.msgpack_only)
+                         foxglove=not args.msgpack_only, idle=args.priority == "idle")
         finally:
             session.close()
     print(f"wrote {report.path}: {report.messages} messages, last tick {report.last_tick}", flush=True)
+    if report.gaps.gaps:
+        print(f"warning: the recording {describe_lost(report.gaps.gaps)}", file=sys.stderr, flush=True)
     return 0
 
 

@@ -21,6 +21,7 @@ from conag.common import PRIORITIES, RECORDER_PRIORITY, stop_on_signals
 from conag.exit_codes import EXIT_ERROR, EXIT_INCOMPLETE, EXIT_INTERRUPTED, EXIT_STALLED, EXIT_USAGE
 from conag.foxglove.live import DEFAULT_PORT as FOXGLOVE_PORT
 from conag.noise_flags import add_noise_args, noise_settings
+from conag.recording.gaps import describe_lost, lost_ticks
 from conag.recording.mcap_log import read_end, world_cut_short
 from conag.run import RunOptions
 from conag.runs import check_name, endpoint_in_use, free_endpoint, register, unregister
@@ -167,9 +168,10 @@ def _report(opts: RunOptions, summary: dict, interrupted: bool) -> int:
           f"{summary['total_distance']:.1f}", flush=True)
     if opts.record:
         print(f"recording written to {opts.record}")
-        short = world_cut_short(read_end(opts.record), summary["ticks"])
-        if short:
-            print(f"warning: the recording {short}", file=sys.stderr, flush=True)
+        end = read_end(opts.record)
+        for short in (describe_lost(lost_ticks(end)), world_cut_short(end, summary["ticks"])):
+            if short:
+                print(f"warning: the recording {short}", file=sys.stderr, flush=True)
     if opts.summary == "-":
         print(json.dumps(summary, indent=2))
     elif opts.summary:

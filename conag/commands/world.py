@@ -38,6 +38,9 @@ def configure(w: argparse.ArgumentParser) -> None:
     w.add_argument("--stdin-control", action="store_true",
                    help="read `without ID` lines on stdin: the first tick does not wait for agent ID (its process "
                         "died before attaching; conag run uses it)")
+    w.add_argument("--recorded", action="store_true",
+                   help="let agents attach only once a recorder's link is up (up to 10 s): the recording then holds "
+                        "every attach, of a world started again too (conag run --record passes it)")
     w.add_argument("--max-tick-rate", type=float, metavar="HZ",
                    help="lockstep: step at most HZ ticks per wall second (default: as fast as the agents answer)")
     c = w.add_argument_group("checkpoints (the world survives its own death)")
@@ -89,7 +92,8 @@ def run(args: argparse.Namespace) -> int:
             server = WorldServer(world, session, mode=args.mode_tick, max_ticks=args.ticks,
                                  stop_when_complete=args.stop_when_complete, wait_agents=args.wait_agents,
                                  on_status=on_status, block_frames=block, checkpoint=plan,
-                                 resumed=bool(args.resume), max_tick_rate=args.max_tick_rate)
+                                 resumed=bool(args.resume), max_tick_rate=args.max_tick_rate,
+                                 recorded=args.recorded)
             if args.stdin_control:
                 read_go_without_requests(server, sys.stdin)
             final = server.run(stop)

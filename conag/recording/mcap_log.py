@@ -146,13 +146,12 @@ class McapRecorder:
         """Messages written so far."""
         return sum(self.counts.values())
 
-    def add(self, key: str, data: bytes, log_time_ns: int) -> None:
-        """Write one message published on `key`, received at `log_time_ns`."""
-        name, tick = peek(data)
-        if tick is None:
-            tick = self.tick
-        elif tick > self.tick:
-            self.tick = tick
+    def add(self, key: str, data: bytes, log_time_ns: int) -> tuple[str, int | None]:
+        """Write one message published on `key`, received at `log_time_ns`; returns its type's
+        name and its own tick (None if it has none: `peek`)."""
+        name, own = peek(data)
+        tick = self.tick if own is None else own
+        self.tick = max(self.tick, tick)
         channel = self._channels.get(key)
         if channel is None:
             channel = self._writer.register_channel(key, MESSAGE_ENCODING, 0, {"type": name})
@@ -164,6 +163,7 @@ class McapRecorder:
         if self.derive is not None:
             for d in self.derive(key, data, log_time_ns):
                 self._add_derived(d, log_time_ns)
+        return name, own
 
     def _add_derived(self, d: DerivedMessage, log_time_ns: int) -> None:
         channel = self._derived_channels.get(d.topic)

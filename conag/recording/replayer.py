@@ -86,9 +86,11 @@ class DriveError(RuntimeError):
 
 def drive_world(session: zenoh.Session, script: LockstepScript, world_id: str, stop: threading.Event | None = None,
                 *, timeout: float = 10.0, to_tick: int | None = None,
-                on_tick: Callable[[int], None] | None = None) -> Comparison:
-    """Feed a lockstep world the recorded attaches, perturbations and commands up to
-    `to_tick` (default: the recording's last), comparing its frames (see the module)."""
+                on_tick: Callable[[int], None] | None = None, tokens: Iterable[str] = ()) -> Comparison:
+    """Feed a lockstep world the recorded attaches, perturbations and commands from the
+    script's first tick up to `to_tick` (default: the recording's last), comparing its frames
+    (see the module). `tokens`: agents whose liveliness tokens the caller has declared on
+    `session` already (those of a resumed world, declared before it starts)."""
     stop = stop or threading.Event()
     last = script.last_tick if to_tick is None else min(to_tick, script.last_tick)
     result = Comparison()
@@ -96,7 +98,8 @@ def drive_world(session: zenoh.Session, script: LockstepScript, world_id: str, s
         frames = declared.add(Inbox(1 << 16).subscribe(session, keys.all_agents(world_id, "sensors")))
         timeouts = declared.add(Inbox(1024).subscribe(session, keys.lockstep_timeouts(world_id)))
         commands: dict[str, zenoh.Publisher] = {}
-        for tick in range(last + 2):   # the frames of last + 1 answer the commands of last
+        have_token = set(tokens)
+        for tick in range(script.first_tick, last + 2):   # the frames of last + 1 answer the commands of last
             if tick == last + 1 and not script.commands.get(last):
                 # None there (a recording cut short after the attaches, before any command):
                 # the world cannot step, and its frames of last + 1 would be waited for in vain.
@@ -109,7 +112,8 @@ def drive_world(session: zenoh.Session, script: LockstepScript, world_id: str, s
                 break
             if tick > last:
                 break
-            if not _feed_tick(session, script, world_id, tick, commands, declared, frames, result, timeout, stop):
+            if not _feed_tick(session, script, world_id, tick, commands, declared, frames, result, timeout, stop,
+                              have_token):
                 break
             if on_tick is not None:
                 on_tick(tick)
@@ -119,13 +123,15 @@ def drive_world(session: zenoh.Session, script: LockstepScript, world_id: str, s
 
 def _feed_tick(session: zenoh.Session, script: LockstepScript, world_id: str, tick: int,
                commands: dict[str, zenoh.Publisher], declared: Declarations, frames: Inbox, result: Comparison,
-               timeout: float, stop: threading.Event) -> bool:
+               timeout: float, stop: threading.Event, have_token: set[str]) -> bool:
     """The attaches, perturbations and commands of `tick`, as the world met them; False if an
     attach's frame did not come (stopped, or a bad frame)."""
     for welcome in script.attaches.get(tick, ()):
         a = welcome.agent_id
         if a not in commands:
-            declared.add(session.liveliness().declare_token(keys.agent_token(world_id, a)))
+            if a not in have_token:
+                declared.add(session.liveliness().declare_token(keys.agent_token(world_id, a)))
+                have_token.add(a)
             commands[a] = declared.add(session.declare_publisher(
                 keys.command(world_id, a), reliability=zenoh.Reliability.RELIABLE,
                 congestion_control=zenoh.CongestionControl.BLOCK))

@@ -54,9 +54,11 @@ class BusOptions:
 CONNECT_RETRY = {"period_init_ms": 100, "period_max_ms": 1000, "period_increase_factor": 2}
 
 
-def make_config(opts: BusOptions, *, serve: bool = False, leaf: bool = False):
+def make_config(opts: BusOptions, *, serve: bool = False, leaf: bool = False, lease_ms: int | None = None):
     """A zenoh.Config for a process; `serve` is True for the world (it listens by default),
-    `leaf` for an agent process (see LEAF_AUTOCONNECT; a configuration file is taken as it is)."""
+    `leaf` for an agent process (see LEAF_AUTOCONNECT; a configuration file is taken as it is).
+    `lease_ms`: the link lease the session announces (zenoh's default 10 s), how long the
+    processes linked to it wait for it when it is silent (a starved recorder's)."""
     import zenoh
 
     if opts.zenoh_config:
@@ -68,6 +70,7 @@ def make_config(opts: BusOptions, *, serve: bool = False, leaf: bool = False):
             config.insert_json5("listen/endpoints", json.dumps(list(opts.listen)))
         if opts.mode:
             config.insert_json5("mode", json.dumps(opts.mode))
+        _set_lease(config, lease_ms)
         return config
     mode = opts.mode or "peer"
     if mode not in MODES:
@@ -91,7 +94,13 @@ def make_config(opts: BusOptions, *, serve: bool = False, leaf: bool = False):
     # listening: try again within a tenth of a second, not after zenoh's 1 s, 2 s, 4 s backoff,
     # by which time a short lockstep build can be over.
     config.insert_json5("connect/retry", json.dumps(CONNECT_RETRY))
+    _set_lease(config, lease_ms)
     return config
+
+
+def _set_lease(config, lease_ms: int | None) -> None:
+    if lease_ms is not None:
+        config.insert_json5("transport/link/tx/lease", json.dumps(int(lease_ms)))
 
 
 def is_client(opts: BusOptions, *, serve: bool = False) -> bool:
@@ -112,10 +121,10 @@ class EndpointInUse(ValueError):
     """A session could not listen where it was asked to: something listens there already."""
 
 
-def open_session(opts: BusOptions, *, serve: bool = False, leaf: bool = False):
-    """Open a zenoh session (quiet logs unless RUST_LOG says otherwise); `serve` and `leaf` as
-    in `make_config`. EndpointInUse, naming the endpoint, where another process listens
-    already (zenoh's ZError otherwise)."""
+def open_session(opts: BusOptions, *, serve: bool = False, leaf: bool = False, lease_ms: int | None = None):
+    """Open a zenoh session (quiet logs unless RUST_LOG says otherwise); `serve`, `leaf` and
+    `lease_ms` as in `make_config`. EndpointInUse, naming the endpoint, where another process
+    listens already (zenoh's ZError otherwise)."""
     import zenoh
 
     if opts.mode == "router":
@@ -123,7 +132,7 @@ def open_session(opts: BusOptions, *, serve: bool = False, leaf: bool = False):
         os.environ.setdefault("ZENOH_RUNTIME", ROUTER_RUNTIME)
     zenoh.init_log_from_env_or("error")
     try:
-        return zenoh.open(make_config(opts, serve=serve, leaf=leaf))
+        return zenoh.open(make_config(opts, serve=serve, leaf=leaf, lease_ms=lease_ms))
     except zenoh.ZError as exc:
         m = re.search(r"listener bound to (\S+?): \[.*Address already in use", str(exc))
         if m is None:
