@@ -28,10 +28,10 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
-from conag.foxglove.convert import Translator
+from conag.foxglove.convert import MapLayer, Translator, decode_map
 from conag.recording.mcap_log import McapRecorder, read_recording
 from protocol import keys
-from protocol.codec import decode, encode
+from protocol.codec import ProtocolError, decode, encode
 from protocol.messages import (
     CHANNELS,
     MAP_LAYERS,
@@ -180,6 +180,41 @@ def test_a_recording_without_foxglove_channels_has_the_bus_channels_only(tmp_pat
     assert read_foxglove(out) == {} and len(read_recording(out).entries) == 1
 
 
+def test_a_map_is_decoded_fast_as_the_codec_decodes_it():
+    for m in (_map(10), _map(0, "matching", 41), AgentMap("a-2.x", 7, "config_nm", 1, (127,))):
+        assert decode_map(encode(m)) == MapLayer.of(m)
+        assert MapLayer.of(m).cells == bytes(m.cells)
+
+
+def _raw_map(fields: list) -> bytes:
+    import msgpack
+
+    return msgpack.packb({"v": 4, "t": "AgentMap", "f": fields}, use_bin_type=True)
+
+
+@pytest.mark.parametrize("data", [
+    _raw_map(["a1", 1, "food", 3, [1] * 8]),            # fewer cells than size x size
+    _raw_map(["a1", 1, "food", 3, [1] * 8 + [128]]),    # above MAP_LEVEL
+    _raw_map(["a1", 1, "food", 3, [1] * 8 + [-1]]),
+    _raw_map(["a1", 1, "food", 3, [1] * 8 + [1.0]]),    # not an int
+    _raw_map(["a1", 1, "food", 3, [1] * 8 + ["x"]]),
+    _raw_map(["a 1", 1, "food", 3, [1] * 9]),           # not an id
+    _raw_map(["a1", -1, "food", 3, [1] * 9]),
+    _raw_map(["a1", True, "food", 3, [1] * 9]),
+    _raw_map(["a1", 1, "nope", 3, [1] * 9]),            # no such layer
+    _raw_map(["a1", 1, "food", 4, [1] * 16]),           # an even size
+    _raw_map(["a1", 1, "food", 3, [1] * 9, 0]),         # a field too many
+    encode(_view(10)),                                  # another message
+    b"\xc1not msgpack",
+])
+def test_a_map_the_codec_refuses_is_refused_and_not_translated(data):
+    with pytest.raises(ProtocolError):
+        decode(data, AgentMap)
+    with pytest.raises(ProtocolError):
+        decode_map(data)
+    assert Translator().feed(keys.agent_maps(W, "a1"), data, 1) == []
+
+
 # --- live ----------------------------------------------------------------------------------------
 
 class FoxgloveClient:
@@ -203,14 +238,21 @@ class FoxgloveClient:
             {"id": self.subscriptions, "channelId": self.channels[topic]["id"]}]}))
         return self.subscriptions
 
-    def next_message(self, topic: str, timeout: float = 30.0) -> bytes:
-        """Subscribe to `topic`; the payload of its first message."""
+    def next_message(self, topic: str, timeout: float = 30.0, subscribed: bool = False) -> bytes:
+        """Subscribe to `topic` (`subscribed`: its last subscription); the payload of its next message."""
         deadline = time.monotonic() + timeout
-        sub = self.subscribe(topic, timeout)
+        sub = self.subscriptions if subscribed else self.subscribe(topic, timeout)
         while True:
             m = self._receive(deadline)
             if isinstance(m, bytes) and m[0] == 1 and struct.unpack_from("<I", m, 1)[0] == sub:
                 return m[13:]
+
+    def receive(self, timeout: float) -> None:
+        """Take what comes within `timeout` seconds (advertisements among it)."""
+        try:
+            self._receive(time.monotonic() + timeout)
+        except TimeoutError:
+            pass
 
     def _receive(self, deadline: float) -> str | bytes:
         if time.monotonic() >= deadline:
@@ -264,6 +306,64 @@ def test_a_live_world_is_served_to_a_foxglove_websocket_client(bus):
             client.close()
         stop.set()
         thread.join(5)
+        bridge.close()
+
+
+def _frame(tick: int) -> SensorFrame:
+    """a1's frame of `tick`: its food ranges say the tick (to tell which frame a scan came from)."""
+    ranges = tuple(float(tick) if c == 0 else 1.0 for c in range(len(CHANNELS)) for _ in range(4))
+    return SensorFrame("a1", tick, 0.7, 0.0, 0.0, 4, ranges, True)
+
+
+def test_a_client_of_an_agents_scans_gets_those_of_the_newest_views_tick(bus):
+    from foxglove_schemas_protobuf.LaserScan_pb2 import LaserScan
+
+    from conag.foxglove.live import FoxgloveBridge
+
+    world = bus.server_session()
+    frames = world.declare_publisher(keys.sensors(W, "a1"))
+    bridge = FoxgloveBridge(bus.client_session(), W, port=0).start()
+    client = None
+    try:
+        client = FoxgloveClient(f"ws://127.0.0.1:{bridge.port}")
+        client.subscribe("/world/scene")
+        wait_until(bridge.listener.watched, what="the scene watched")
+        while "/agents/a1/scan/food" not in client.channels:  # advertised once a view names a1
+            world.put(keys.view(W), encode(_view(10)))
+            bridge.step()
+            client.receive(0.1)
+        client.subscribe("/agents/a1/scan/food")
+        wait_until(lambda: bridge.step() is not None and frames.matching_status.matching,
+                   what="the bridge subscribed to a1's frames")
+        for tick in range(20, 36):  # the frames of ticks 20 to 35, the view of tick 30 among them
+            frames.put(encode(_frame(tick)))
+            if tick == 30:
+                world.put(keys.view(W), encode(_view(30)))
+        wait_until(bridge.step, what="the bridge sent what came")
+        scan = LaserScan.FromString(client.next_message("/agents/a1/scan/food", subscribed=True))
+        assert list(scan.ranges) == [30.0] * 4  # the frame of the view's tick, of the 16 that came
+        assert (scan.pose.position.x, scan.pose.position.y) == (3.2, 4.4)  # a1's body in that view
+    finally:
+        if client is not None:
+            client.close()
+        bridge.close()
+
+
+def test_the_more_agents_are_watched_the_less_often_each_is_asked_for_its_maps(bus):
+    from conag.foxglove.live import MAPS_TOTAL_HZ, FoxgloveBridge
+
+    now = [0.0]
+    bridge = FoxgloveBridge(bus.client_session(), W, port=0, maps_every=10, clock=lambda: now[0])
+    try:
+        bridge.translator.view = _view(0)
+        assert bridge._maps_interval(1) == 10 and bridge._maps_interval(10) == 100  # before the speed is known
+        now[0], bridge.translator.view = 2.0, _view(200)  # 100 ticks a second
+        assert bridge._maps_interval(1) == 100  # one agent: once a second, as the browser viewer
+        for agents in (2, 10, 40):
+            snapshots = agents * 100 / bridge._maps_interval(agents)  # a second, all agents together
+            assert snapshots <= 2.5 * MAPS_TOTAL_HZ, agents
+        assert bridge._maps_interval(10) >= 200
+    finally:
         bridge.close()
 
 

@@ -40,13 +40,17 @@ from dataclasses import dataclass
 from typing import Any
 
 import foxglove.messages as fm
+import msgpack
 
 from conag.recording.mcap_log import peek
-from protocol.codec import ProtocolError, decode
+from protocol.codec import MAX_MESSAGE_BYTES, ProtocolError, decode
+from protocol.keys import check_id
 from protocol.messages import (
     CHANNELS,
     MAP_LAYERS,
+    MAP_LEVEL,
     NO_READING,
+    SCHEMA_VERSION,
     AgentMap,
     AgentState,
     LockstepTimeout,
@@ -159,6 +163,53 @@ class Geometry:
         return cls(c.cell_size, c.disc_radius, c.agent_radius)
 
 
+@dataclass(frozen=True)
+class MapLayer:
+    """An AgentMap as the translator needs it: its cells as bytes, one a cell, row 0 north."""
+
+    agent_id: str
+    tick: int
+    layer: str
+    size: int
+    cells: bytes
+
+    @classmethod
+    def of(cls, m: AgentMap) -> MapLayer:
+        """The layer of a decoded AgentMap."""
+        return cls(m.agent_id, m.tick, m.layer, m.size, bytes(m.cells))
+
+
+def decode_map(data: bytes) -> MapLayer:
+    """An encoded AgentMap as a `MapLayer`, checked as `protocol.codec.decode` checks it (a
+    ProtocolError for anything it would refuse), in a tenth of the time: the cells go
+    straight from msgpack's list to bytes (C), with no tuple of ints and no check per cell in
+    Python. A live server gets nine a snapshot from every agent it watches."""
+    if len(data) > MAX_MESSAGE_BYTES:
+        raise ProtocolError(f"message of {len(data)} bytes exceeds {MAX_MESSAGE_BYTES}")
+    try:
+        raw = msgpack.unpackb(data, raw=False, strict_map_key=True, use_list=True)
+    except Exception as exc:  # noqa: BLE001 -- msgpack raises many types; all mean "not a message"
+        raise ProtocolError(f"not msgpack: {exc}") from None
+    if not isinstance(raw, dict) or set(raw) != {"v", "t", "f"} or type(raw["v"]) is not int \
+            or raw["v"] != SCHEMA_VERSION or raw["t"] != "AgentMap":
+        raise ProtocolError("not an AgentMap")
+    f = raw["f"]
+    if not isinstance(f, list) or len(f) != 5:
+        raise ProtocolError("AgentMap: expected 5 fields")
+    agent, tick, layer, size, cells = f
+    if not (type(tick) is int and tick >= 0 and layer in MAP_LAYERS and type(size) is int
+            and 1 <= size <= 89 and size % 2 == 1 and isinstance(cells, list) and len(cells) == size * size):
+        raise ProtocolError("AgentMap: bad fields")
+    try:
+        check_id(agent, "agent id")
+        grid = bytes(bytearray(cells))  # ints 0 to 255, else ValueError or TypeError; in C (bytes(list) is slow)
+    except (TypeError, ValueError) as exc:
+        raise ProtocolError(str(exc)) from None
+    if not (grid.isascii() if MAP_LEVEL == 127 else max(grid) <= MAP_LEVEL):  # isascii: every byte <= 127
+        raise ProtocolError(f"AgentMap.cells must be 0 to {MAP_LEVEL}")
+    return MapLayer(agent, tick, layer, size, grid)
+
+
 class Translator:
     """Bus messages in, Foxglove messages out (see the module). One per recording or live
     server; not thread-safe."""
@@ -178,7 +229,7 @@ class Translator:
         if handler is None or (leaf == "sensors" and not self._wanted_frame(data)):
             return []
         try:
-            msg = decode(data, handler[0])
+            msg = decode_map(data) if leaf == "maps" else decode(data, handler[0])
         except ProtocolError:
             return []
         return list(handler[1](self, msg, log_time))
@@ -281,20 +332,23 @@ class Translator:
                                 end_angle=(f.sectors - 0.5) * step, ranges=ranges, intensities=[float(c)] * f.sectors)
             yield Derived(scan_topic(agent, channel), schema_of("LaserScan"), f.tick, scan.encode())
 
-    def _on_map(self, m: AgentMap, t: int) -> Iterable[Derived]:
+    def _on_map(self, m: MapLayer, t: int) -> Iterable[Derived]:
         yield Derived(map_topic(m.agent_id, m.layer), schema_of("Grid"), m.tick, self.grid(m, t).encode())
 
-    def grid(self, m: AgentMap, t: int) -> fm.Grid:
+    def grid(self, m: MapLayer | AgentMap, t: int) -> fm.Grid:
         """The Grid of one AgentMap layer, centred on where the newest view has the agent (the
         world's centre when none has it)."""
+        if isinstance(m, AgentMap):
+            m = MapLayer.of(m)
         x, y = self._where(m.agent_id)
         c = self.geometry.cell
         half = m.size * c / 2
-        rows = [bytes(m.cells[r * m.size:(r + 1) * m.size]) for r in range(m.size)]
+        n, cells = m.size, m.cells
+        rows = [cells[r * n:(r + 1) * n] for r in range(n - 1, -1, -1)]  # south first
         return fm.Grid(timestamp=_stamp(t), frame_id=FRAME, pose=_pose(x - half, y - half), column_count=m.size,
                        cell_size=fm.Vector2(x=c, y=c), row_stride=m.size, cell_stride=1,
                        fields=[fm.PackedElementField(name="value", type=fm.PackedElementFieldNumericType.Uint8)],
-                       data=b"".join(reversed(rows)))
+                       data=b"".join(rows))
 
     def _where(self, agent: str) -> tuple[float, float]:
         v = self.view
@@ -346,7 +400,7 @@ def transforms(v: WorldView, t: int) -> fm.FrameTransforms:
 _HANDLERS: dict[str, tuple[type, Callable[[Translator, Any, int], Iterable[Derived]]]] = {
     "view": (WorldView, Translator._on_view),
     "sensors": (SensorFrame, Translator._on_frame),
-    "maps": (AgentMap, Translator._on_map),
+    "maps": (AgentMap, Translator._on_map),  # decoded by decode_map
     "welcome": (Welcome, Translator._on_welcome),
     "state": (AgentState, Translator._on_state),
     "perturbed": (Perturbed, Translator._on_perturbed),
