@@ -15,13 +15,6 @@ shift by whole cells, opposite to the motion, so sub-cell motion is never lost a
 map stays aligned with the world grid the blueprint was given in. Whatever is shifted
 off the map is forgotten.
 
-Fixed obstacles (see `obstacle_trust`) are written only from readings near enough to put
-them in their own cell, so a one-cell gap in a wall is never sealed by a misplaced mark.
-A farther food or water reading is never written on a blueprint site: sites are where
-bricks go, so the disc is the one beside it. Far discs of two water walls otherwise landed
-in the one-cell slot of sites between them, and (a marked cell explains the same reading
-ever after) shut it for good (gen-pocket 20261127).
-
 Sensing (see `sense`) clears what a sector proves empty (nothing of its colour nearer
 than its reading, or nothing at all within range) and writes each reading at the cell
 holding the point at that distance along the sector's centre angle. A sector cannot
@@ -29,7 +22,24 @@ tell the angle inside it, so that point is up to d * 2 sin(pi / 2S) from the dis
 disc sitting on a cell centre lands in its very cell while that is under half a cell
 (d < 2.5 cells with 16 sectors) and at most one cell off while it is under 1.5 (all of
 a 6-cell range). Cells behind a reading keep what they had: a sector reports only the
-nearest object, so it says nothing about what lies beyond.
+nearest object, so it says nothing about what lies beyond. That is the plain rule, the
+paper's agent's (`Sensing(False, False, False, False)`). Four refinements, each a flag
+of `agent_runtime.config.AgentConfig` and of `Sensing`, are on by default:
+
+* `ghost_association`: a reading is attributed to a cell of its band already holding
+  that colour (for bricks, else a blueprint cell), and other brick marks in the band are
+  cleared as ghosts of the one brick the sector saw (`sense` says why).
+* `clear_margins`: a sector clears only cells nearer than its reading - CLEAR_MARGIN, or
+  with no reading, within range - RANGE_MARGIN (a disc's own cell centre can be nearer
+  than the disc).
+* `site_core`: a blueprint site's cell is cleared of bricks by the sectors that cover its
+  core (SITE_BRICK_OFFSET) only, since a brick on a site lies at its centre.
+* `obstacle_trust`: fixed obstacles are written only from readings near enough to put
+  them in their own cell (`obstacle_trust`), so a one-cell gap in a wall is never sealed
+  by a misplaced mark; and a farther food or water reading is never written on a
+  blueprint site: sites are where bricks go, so the disc is the one beside it. Far discs
+  of two water walls otherwise landed in the one-cell slot of sites between them, and (a
+  marked cell explains the same reading ever after) shut it for good (gen-pocket 20261127).
 
 Pure numpy, no bus. The per-sector geometry of the cells within sensor range is
 computed for a window of cell offsets fixed per sensor range, and cached per `frac`.
@@ -37,7 +47,9 @@ computed for a window of cell offsets fixed per sensor range, and cached per `fr
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -64,13 +76,31 @@ SITE_BRICK_OFFSET = 0.35       # a brick on a drop site lies this close to its c
                                # drop within drop_centering = 0.3 of it; a little noise on top)
 
 
-class EgocentricMaps:
-    """The agent's ESMs: `maps` (LAYERS, size, size) float32 and the sub-cell offset `frac`."""
+@dataclass(frozen=True)
+class Sensing:
+    """Which refinements of the plain sensing rule `EgocentricMaps.sense` applies (the
+    module says what each does); each is the AgentConfig flag of the same name."""
 
-    def __init__(self, size: int = 41):
+    ghost_association: bool = True
+    clear_margins: bool = True
+    site_core: bool = True
+    obstacle_trust: bool = True
+
+    @classmethod
+    def of(cls, cfg: Any) -> Sensing:
+        """The refinements an AgentConfig (or anything with these attributes) switches on."""
+        return cls(**{f.name: bool(getattr(cfg, f.name)) for f in dataclasses.fields(cls)})
+
+
+class EgocentricMaps:
+    """The agent's ESMs: `maps` (LAYERS, size, size) float32, the sub-cell offset `frac`
+    and the refinements of the sensing rule it applies, `sensing` (default all)."""
+
+    def __init__(self, size: int = 41, sensing: Sensing | None = None):
         if not (isinstance(size, int) and size >= 1 and size % 2 == 1):
             raise ValueError("map size must be an odd positive integer")
         self.size = size
+        self.sensing = sensing or Sensing()
         self.centre = size // 2
         self.maps = np.zeros((LAYERS, size, size), np.float32)
         # A flat view, valid for the map's lifetime because `maps` is only ever changed in place.
@@ -163,7 +193,8 @@ class EgocentricMaps:
         Per sector of FOOD, WATER and BRICK: cells whose centre lies in the sector's wedge
         and nearer than reading - 0.75 cell are cleared (the reading is the nearest object of
         that colour), or, with no reading, every cell of the wedge within sensor_range - 0.5
-        cell. Then each reading is written at the cell holding the point at its distance
+        cell (without `sensing.clear_margins`: nearer than the reading, within the range).
+        Then each reading is written at the cell holding the point at its distance
         along the sector's centre angle, measured from the agent's true position (the cell
         centre plus `frac`). Cells beyond a reading keep what they had. The AGENT layer is
         rebuilt from this frame alone; CONFIG is never touched. `clear_age` counts the
@@ -178,7 +209,8 @@ class EgocentricMaps:
         blueprint cell (bricks are expected there), else the cell at the sector's centre
         angle (the plain rule). Other brick marks in the band are ghosts of the one brick
         the sector saw and are cleared, except on blueprint cells, where neighbouring
-        structure bricks really do stand at the same distance.
+        structure bricks really do stand at the same distance. Without
+        `sensing.ghost_association` every reading is written by the plain rule.
         """
         r = np.ascontiguousarray(np.asarray(ranges, np.float64).reshape(len(CHANNELS), -1) / cell_size)
         sectors = r.shape[1]
@@ -187,21 +219,25 @@ class EgocentricMaps:
         dirs = self._dirs(sectors)
         # One compiled pass (`_sense_kernel`) does what the steps below say, in their order:
         # A cell is known empty when it is nearer than what every sector it overlaps saw;
-        # of a site cell, only the sectors where a brick on it could lie. Else a site in a
-        # pocket, beside structure bricks seen at about its distance, is never seen open
-        # again once a ghost lands on it, and the pocket's mouth is filled over it.
-        # Each reading may then be explained by any cell its wedge overlaps (see below).
-        # A fixed obstacle is written only where the sector's centre angle lands in its own
-        # cell: farther off, the mark may fall in the cell beside it, and a one-cell gap in
-        # a wall (which every sector along the wall keeps reporting at about the same
-        # distance, so nothing ever clears it) would be sealed for good. Farther readings
-        # still clear the cells in front of them, and the wall is mapped as it comes near.
-        # The rest is marked at its cell, except food and water read from farther than the
-        # obstacle trust whose cell is a blueprint site.
+        # of a site cell, only the sectors where a brick on it could lie (`site_core`). Else
+        # a site in a pocket, beside structure bricks seen at about its distance, is never
+        # seen open again once a ghost lands on it, and the pocket's mouth is filled over it.
+        # Each reading may then be explained by any cell its wedge overlaps (see above;
+        # `ghost_association`). With `obstacle_trust`, a fixed obstacle is written only
+        # where the sector's centre angle lands in its own cell: farther off, the mark may
+        # fall in the cell beside it, and a one-cell gap in a wall (which every sector along
+        # the wall keeps reporting at about the same distance, so nothing ever clears it)
+        # would be sealed for good. Farther readings still clear the cells in front of them,
+        # and the wall is mapped as it comes near.
+        # The rest is marked at its cell, except (`obstacle_trust`) food and water read from
+        # farther than the obstacle trust whose cell is a blueprint site.
+        on = self.sensing
         _sense_kernel(self._all, self.clear_age.reshape(-1), self.known.reshape(-1), cells, dist, k, sector, starts,
                       core_sector, core_starts, vx, vy, r, float(reach), self.size, self.centre,
-                      float(self.frac[0]), float(self.frac[1]), dirs[0], dirs[1], obstacle_trust(sectors),
-                      _CHANNEL_LAYER_I64, _FOOD_OR_WATER_FLAT)
+                      float(self.frac[0]), float(self.frac[1]), dirs[0], dirs[1],
+                      obstacle_trust(sectors) if on.obstacle_trust else math.inf,
+                      _CHANNEL_LAYER_I64, _FOOD_OR_WATER_FLAT, CLEAR_MARGIN if on.clear_margins else 0.0,
+                      RANGE_MARGIN if on.clear_margins else 0.0, on.site_core, on.ghost_association)
 
     def _set_cells(self, layer: int, row: np.ndarray, col: np.ndarray) -> None:
         inside = (row >= 0) & (row < self.size) & (col >= 0) & (col < self.size)
@@ -404,8 +440,10 @@ def _min_limit(limit, ch, sector, first, end):
 
 @njit(cache=True)
 def _sense_kernel(flat, clear_age, known, cells, dist, k, sector, starts, core_sector, core_starts, vx, vy, r,
-                  reach, size, centre, f0, f1, cos_s, sin_s, trust, layer_of_channel, food_or_water):
-    """`EgocentricMaps.sense` on the flat maps: clear, age, associate, write (see there)."""
+                  reach, size, centre, f0, f1, cos_s, sin_s, trust, layer_of_channel, food_or_water, clear_margin,
+                  range_margin, site_core, associate):
+    """`EgocentricMaps.sense` on the flat maps: clear, age, associate, write (see there);
+    the last four arguments and `trust` (inf: none) are the refinements of `Sensing`."""
     nn = size * size
     n_ch, sectors = r.shape
     ncell = dist.shape[0]
@@ -413,12 +451,12 @@ def _sense_kernel(flat, clear_age, known, cells, dist, k, sector, starts, core_s
     for ch in range(_DISC_CHANNELS):
         for s in range(sectors):
             d = r[ch, s]
-            limit[ch, s] = d - CLEAR_MARGIN if d >= 0.0 else reach - RANGE_MARGIN
+            limit[ch, s] = d - clear_margin if d >= 0.0 else reach - range_margin
     clear = np.zeros((_DISC_CHANNELS, ncell), np.bool_)
     for i in range(ncell):
         end = starts[i + 1] if i + 1 < ncell else sector.shape[0]
         core_end = core_starts[i + 1] if i + 1 < ncell else core_sector.shape[0]
-        site = flat[cells[0, i] - FOOD * nn + CONFIG * nn] > 0.5
+        site = site_core and flat[cells[0, i] - FOOD * nn + CONFIG * nn] > 0.5
         for ch in range(_DISC_CHANNELS):
             if ch == _BRICK_CH and site:
                 m = _min_limit(limit, ch, core_sector, core_starts[i], core_end)
@@ -437,19 +475,23 @@ def _sense_kernel(flat, clear_age, known, cells, dist, k, sector, starts, core_s
         if clear[FOOD, i] and clear[WATER, i] and clear[_OBSTACLE_CH, i]:
             known[cells[FOOD, i] - FOOD * nn] = True
     known[centre * size + centre] = True  # the agent stands there
-    pairs = k.shape[0]
-    cells_k = np.empty((_DISC_CHANNELS, pairs), np.int64)
-    dist_k = np.empty(pairs)
-    vx_k = np.empty(pairs)
-    vy_k = np.empty(pairs)
-    for p in range(pairs):
-        for ch in range(_DISC_CHANNELS):
-            cells_k[ch, p] = cells[ch, k[p]]
-        dist_k[p] = dist[k[p]]
-        vx_k[p] = vx[k[p]]
-        vy_k[p] = vy[k[p]]
-    explained = _associate_kernel(flat, cells_k, dist_k, sector, vx_k, vy_k, np.ascontiguousarray(r[:_DISC_CHANNELS]),
-                                  cos_s, sin_s, nn * CONFIG, BRICK, BAND, n_ch)
+    if associate:
+        pairs = k.shape[0]
+        cells_k = np.empty((_DISC_CHANNELS, pairs), np.int64)
+        dist_k = np.empty(pairs)
+        vx_k = np.empty(pairs)
+        vy_k = np.empty(pairs)
+        for p in range(pairs):
+            for ch in range(_DISC_CHANNELS):
+                cells_k[ch, p] = cells[ch, k[p]]
+            dist_k[p] = dist[k[p]]
+            vx_k[p] = vx[k[p]]
+            vy_k[p] = vy[k[p]]
+        explained = _associate_kernel(flat, cells_k, dist_k, sector, vx_k, vy_k,
+                                      np.ascontiguousarray(r[:_DISC_CHANNELS]), cos_s, sin_s, nn * CONFIG, BRICK,
+                                      BAND, n_ch)
+    else:  # the plain rule: every reading is written where its sector's centre angle puts it
+        explained = np.zeros((n_ch, sectors), np.bool_)
     for i in range(AGENT * nn, (AGENT + 1) * nn):
         flat[i] = 0.0
     hit = np.zeros((n_ch, sectors), np.bool_)

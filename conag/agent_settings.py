@@ -46,6 +46,15 @@ class AgentSettings:
         return AgentConfig.preset(self.preset, map_size=self.map_size, goal_sequencing=not self.nearest_first,
                                   **dict.fromkeys(self.without, False))
 
+    def describe(self) -> dict:
+        """Which agent these settings run, as the run summary records it: the preset, the
+        additions switched off and other settings changed (`AgentConfig.describe`), and,
+        for a learning student, `learn` and `eta`."""
+        out = self.config().describe(self.preset)
+        if self.learn:
+            out.update(learn=True, eta=self.eta)
+        return out
+
     def argv(self) -> list[str]:
         """The `conag agent` / `conag agents` flags that ask for these settings."""
         flags = ["--map-size", str(self.map_size)]
@@ -68,7 +77,7 @@ def add_kind_args(p: argparse.ArgumentParser) -> None:
     """--agent and --without, as `conag agent`, `conag agents` and `conag run` take them."""
     p.add_argument("--agent", default="default", metavar="PRESET",
                    help="which agent: default (the best agent) or paper (the agent as the paper describes it, "
-                        "every switchable addition off); see docs/design.md")
+                        "every switchable addition off but ghost association); see docs/design.md")
     p.add_argument("--without", metavar="NAMES",
                    help="switch these additions off, comma separated (e.g. unstick,seal_guard; "
                         "agent_runtime.config.ADDITIONS names them all)")

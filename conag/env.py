@@ -24,6 +24,10 @@ and returns the frames of the next one as observations.
   which an action of speed and turn has no counterpart for.
 * Episodes end (terminated) when the structure is complete, or are truncated after
   `max_cycles` steps.
+* Agent (`cfg`): the ConAg agent the env runs where it runs one (the teacher's judge, the
+  Gymnasium env's other agents), an AgentConfig or a preset's name as `conag run --agent`
+  takes it (`cfg="paper"`: the agent as the paper describes it). The reset's infos record
+  which agent it is, as the run summary does: `infos[agent]["agent"]` (`AgentConfig.describe`).
 
 `ConAgGymEnv(scenario)` is one agent's view as a `gymnasium.Env`, the other agents of the
 scenario being ConAg's own agents (`agent_runtime.Brain`), driven in this process over the
@@ -45,6 +49,8 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
 from agent_runtime.brain import Brain
+from agent_runtime.config import AgentConfig
+from agent_runtime.esm import Sensing
 from agent_runtime.world_link import WorldLink
 from protocol.bus import BusOptions, open_session
 from protocol.messages import ACTIONS, CHANNELS, Decision, SensorFrame, Welcome
@@ -65,6 +71,19 @@ def sites_filled_reward(env: ConAgParallelEnv, agent: str, filled_now: int) -> f
 _NO_OUTPUTS = (0.0,) * 7  # a Decision's output activations: the teacher's rule does not read them
 
 
+def _agent_config(cfg: AgentConfig | str | None) -> tuple[AgentConfig, dict]:
+    """The AgentConfig `cfg` names (a preset's name, a config, None: the default) and its record."""
+    preset = cfg if isinstance(cfg, str) else None
+    config = AgentConfig.preset(cfg) if isinstance(cfg, str) else cfg or AgentConfig()
+    return config, config.describe(preset)
+
+
+def _brain(welcome: Welcome, cfg: AgentConfig, rng: np.random.Generator | None = None) -> Brain:
+    brain = Brain(welcome, cfg, rng)
+    brain.maps.sensing = Sensing.of(cfg)  # until Brain passes its cfg's sensing flags itself
+    return brain
+
+
 def _free_port() -> int:
     import socket
 
@@ -80,7 +99,8 @@ class ConAgParallelEnv(ParallelEnv):
 
     def __init__(self, scenario: Scenario | str | Path = "scenarios/quick_wall.toml", *, agents: int | None = None,
                  max_cycles: int = 1000, reward: RewardFn = sites_filled_reward, frame_timeout: float = 30.0,
-                 teacher: bool = False):
+                 teacher: bool = False, cfg: AgentConfig | str | None = None):
+        self.agent_config, self.agent_record = _agent_config(cfg)
         sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
         # Lockstep, and the world never steps on its own: the env's commands drive every tick.
         self.scenario = dataclasses.replace(sc, tick_mode="lockstep",
@@ -169,9 +189,13 @@ class ConAgParallelEnv(ParallelEnv):
         self.teacher_arm = {}
         if self.teacher is not None:
             self.teacher = Teacher()
-            self._observers = {a: Brain(self.welcomes[a]) for a in self.agents}
+            self._observers = {a: _brain(self.welcomes[a], self.agent_config) for a in self.agents}
         self._filled = int(self.world.sites_filled().sum())
-        return {a: self._observe(a) for a in self.agents}, {a: self._info(a) for a in self.agents}
+        infos = {a: self._info(a) for a in self.agents}
+        if self.teacher is not None:  # the teacher's judge is a ConAg agent: which one
+            for info in infos.values():
+                info["agent"] = self.agent_record
+        return {a: self._observe(a) for a in self.agents}, infos
 
     def _next(self, agent: str, after: int) -> SensorFrame:
         frame = self._links[agent].next_frame(after, timeout=self.frame_timeout)
@@ -260,8 +284,9 @@ class ConAgGymEnv(gymnasium.Env):
 
     def __init__(self, scenario: Scenario | str | Path = "scenarios/quick_wall.toml", *, agents: int | None = None,
                  agent: str = "a1", max_cycles: int = 1000, reward: RewardFn = sites_filled_reward,
-                 teacher: bool = False):
-        self.env = ConAgParallelEnv(scenario, agents=agents, max_cycles=max_cycles, reward=reward, teacher=teacher)
+                 teacher: bool = False, cfg: AgentConfig | str | None = None):
+        self.env = ConAgParallelEnv(scenario, agents=agents, max_cycles=max_cycles, reward=reward, teacher=teacher,
+                                    cfg=cfg)
         if agent not in self.env.possible_agents:
             raise ValueError(f"{agent!r} is not one of {self.env.possible_agents}")
         self.agent = agent
@@ -270,13 +295,14 @@ class ConAgGymEnv(gymnasium.Env):
         self.brains: dict[str, Brain] = {}
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):  # noqa: ARG002 -- Gymnasium's
-        """Reset the world; the other agents get fresh brains (seeded from `seed`)."""
+        """Reset the world; the other agents get fresh brains (seeded from `seed`) of the env's
+        agent (`cfg`), which the info records (`info["agent"]`)."""
         super().reset(seed=seed)
         obs, infos = self.env.reset(seed=seed)
         others = [a for a in self.env.possible_agents if a != self.agent]
-        self.brains = {a: Brain(self.env.welcomes[a], rng=np.random.default_rng([seed or 0, i]))
+        self.brains = {a: _brain(self.env.welcomes[a], self.env.agent_config, np.random.default_rng([seed or 0, i]))
                        for i, a in enumerate(others)}
-        return obs[self.agent], infos[self.agent]
+        return obs[self.agent], {**infos[self.agent], "agent": self.env.agent_record}
 
     def step(self, action):
         """Our agent's action; the others act on their brains. (obs, reward, terminated, truncated, info)."""

@@ -466,7 +466,8 @@ def _run(opts: RunOptions, stop: threading.Event, tmp: Path) -> dict:
                 _stop(recorder, grace=60.0)  # last: it writes what is queued, the summary and the footer
     if tty and not watch.stalled:
         print()
-    summary = replace(_final_summary(final_path, world.proc), stalled=watch.stalled, world_restarts=world.restarts)
+    summary = replace(_final_summary(final_path, world.proc), stalled=watch.stalled, world_restarts=world.restarts,
+                      agent=opts.agent.describe())
     if opts.summary and opts.summary != "-":
         Path(opts.summary).write_text(summary.to_json(), encoding="utf-8")
     return summary.as_dict()

@@ -18,6 +18,8 @@ errors per trial) and fig9_student.json (a trained student: `conag agent --weigh
 
     python3 -m experiments.fig9_learning           # full run (about 25 min on 2 cores)
     python3 -m experiments.fig9_learning --quick   # seconds-long smoke run (to a temp dir)
+    python3 -m experiments.fig9_learning --agent paper --runs 10   # the paper's agent (issue 33):
+                                                   # fig9_learning_paper.md, .json, fig9_student_paper.json
     python3 -m experiments.fig9_learning --cluster tcp://HOST:8786   # on a Dask cluster (experiments/runner.py)
 """
 from __future__ import annotations
@@ -39,6 +41,7 @@ from agent_runtime.network import engineered
 from agent_runtime.qlearning import QLearner
 from conag.sim.trials import run_learning, run_trial, trial_seed
 from experiments import runner
+from experiments.agents import Agent, add_arguments, chosen
 from teacher.core import Teacher
 from world_server.scenario import load_scenario
 
@@ -46,7 +49,8 @@ ROOT = Path(__file__).resolve().parent.parent
 
 # Fig. 9 is the learning agent of §5, before goal sequencing (§6): which sites and bricks
 # excite the navigation maps does not change what the network must learn, and the
-# committed results were measured with the plain nearest-first agent.
+# committed results were measured with the plain nearest-first agent (of the preset
+# `Plan.agent`, with `Plan.without` switched off: `--agent`, `--without`).
 AGENT = AgentConfig(goal_sequencing=False)
 
 TRAINING = "scenarios/fig6.toml"
@@ -66,9 +70,15 @@ class Plan:
     novel_students: int = 10   # trained students (runs 0..n-1 of each curve) put into the novel environments
     novel_ticks: int = 5000    # at most this many steps there
     student_eta: float = 0.05  # whose run 0 is saved as fig9_student.json
+    agent: str = "default"     # the agent's preset (`--agent`) ...
+    without: tuple[str, ...] = ()  # ... and the additions switched off from it (`--without`)
 
     def curves(self) -> list[tuple[str, float]]:
         return [("delta", eta) for eta in self.etas] + [("q", self.q_alpha)]
+
+    def config(self) -> AgentConfig:
+        """The agent the learners drive: AGENT's settings on the plan's preset."""
+        return Agent(self.agent, tuple(self.without)).config(goal_sequencing=AGENT.goal_sequencing)
 
 
 def label(kind: str, eta: float, plan: Plan) -> str:
@@ -131,7 +141,7 @@ def one_run(job: tuple[str, float, int, Plan]) -> LearningRun:
     rng = np.random.default_rng([plan.seed, run])  # run r starts from the same weights at every rate
     learner = Student.random(rng) if kind == "delta" else QLearner(rng, gamma=plan.q_gamma)
     results = run_learning(load_scenario(ROOT / TRAINING), learner, trials=plan.trials, ticks=plan.ticks, eta=eta,
-                           seed=plan.seed, run=run, cfg=AGENT)
+                           seed=plan.seed, run=run, cfg=plan.config())
     novel = novel_learning = None
     if run < plan.novel_students:
         # Learning off first; then (the same student, so last) learning on, as it would in a `conag agent --learn`.
@@ -146,7 +156,8 @@ def one_run(job: tuple[str, float, int, Plan]) -> LearningRun:
 def novel_trial(learner, path: str, plan: Plan, run: int, eta: float | None = None) -> NovelTrial:
     """Build `path` from its initial layout; the learner learns (at `eta`) only if `eta` is given."""
     r = run_trial(load_scenario(ROOT / path), learner, Teacher(), ticks=plan.novel_ticks, eta=eta or 0.0,
-                  seed=trial_seed(plan.seed, run, 10_000), learn=eta is not None, until_complete=True, cfg=AGENT)
+                  seed=trial_seed(plan.seed, run, 10_000), learn=eta is not None, until_complete=True,
+                  cfg=plan.config())
     return NovelTrial(completed=r.completed_at is not None, ticks=r.ticks, errors=r.errors,
                       sites_filled=r.sites_filled, sites_total=r.sites_total)
 
@@ -221,7 +232,8 @@ def report(curves, baseline, plan: Plan, seconds: float, where: str, quick: bool
     keys = list(curves)
     names = [label(*k, plan) for k in keys]
     lines = [f"# L3, L4 — learning the construction sequence (Fig. 9){' — QUICK smoke run' if quick else ''}", "",
-             (f"Written by `python3 -m experiments.{STEM}{' --quick' if quick else ''}` in {seconds / 60:.1f} min "
+             (f"Written by `python3 -m experiments.{STEM}{' --quick' if quick else ''}{_agent_flags(plan)}` "
+              f"in {seconds / 60:.1f} min "
               f"on {where}. Training environment `{TRAINING}` with one agent; {plan.runs} runs per "
              f"curve, {plan.trials} trials of {plan.ticks:,} steps; before each trial the environment is reset "
               "and the agent put at its start (fresh maps, weights kept). Error = a step where the student's "
@@ -269,6 +281,12 @@ def report(curves, baseline, plan: Plan, seconds: float, where: str, quick: bool
     return "\n".join(lines) + "\n"
 
 
+def _agent_flags(plan: Plan) -> str:
+    """The --agent and --without flags of a plan's agent ("" for the default)."""
+    flags = "" if plan.agent == "default" else f" --agent {plan.agent}"
+    return flags + (f" --without {','.join(plan.without)}" if plan.without else "")
+
+
 def _median_max(values) -> str:
     reached = [v for v in values if v is not None]
     missing = len(values) - len(reached)
@@ -285,10 +303,13 @@ def main(argv=None) -> int:
     parser.add_argument("--trials", type=int, help="trials per run (default 20)")
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 2, help="worker processes")
     runner.add_cluster_argument(parser)
+    add_arguments(parser)
     args = parser.parse_args(argv)
+    agent = chosen(parser, args)
     plan = Plan(etas=(0.05, 0.2, 0.5), runs=2, trials=3, ticks=200, novel_students=1, novel_ticks=400) \
         if args.quick else Plan()
-    plan = Plan(**{**asdict(plan), **{k: v for k, v in (("runs", args.runs), ("trials", args.trials)) if v}})
+    plan = Plan(**{**asdict(plan), **{k: v for k, v in (("runs", args.runs), ("trials", args.trials)) if v},
+                   "agent": agent.preset, "without": agent.without})
     out = args.out or (Path(tempfile.gettempdir()) if args.quick else ROOT / "experiments")
     out.mkdir(parents=True, exist_ok=True)
     try:
@@ -298,17 +319,18 @@ def main(argv=None) -> int:
         return 2
     curves = curves_of(done, plan)
     baseline = engineered_baseline(plan)
-    plot(curves, plan, out / f"{STEM}.png")
+    stem, student = f"{STEM}{agent.suffix}", f"fig9_student{agent.suffix}.json"
+    plot(curves, plan, out / f"{stem}.png")
     text = report(curves, baseline, plan, seconds, runner.where_of(args, args.workers).describe(), args.quick)
-    (out / f"{STEM}.md").write_text(text, encoding="utf-8")
+    (out / f"{stem}.md").write_text(text, encoding="utf-8")
     raw = dict(plan=asdict(plan), seconds=seconds, runs=[o.to_json() for o in done])
-    (out / f"{STEM}.json").write_text(json.dumps(raw) + "\n", encoding="utf-8")
+    (out / f"{stem}.json").write_text(json.dumps(raw) + "\n", encoding="utf-8")
     saved = next(o for o in done if o.kind == "delta" and o.run == 0
                  and o.eta == (plan.student_eta if plan.student_eta in plan.etas else plan.etas[0]))
     assert saved.student is not None  # every delta-rule run keeps its weights
-    saved.student.save(out / "fig9_student.json")
+    saved.student.save(out / student)
     print(text)
-    print(f"wrote {out / STEM}.md, .png, .json and {out / 'fig9_student.json'}", file=sys.stderr)
+    print(f"wrote {out / stem}.md, .png, .json and {out / student}", file=sys.stderr)
     return 0
 
 

@@ -13,10 +13,14 @@ ideal order (experiments/replay.replay: goal sequencing on the fully known map, 
 agent). A run that fills no site for `--stall` ticks is stopped as stalled.
 
 Writes experiments/goal_sequencing.md and goal_sequencing.png and the G3 section of
-docs/results/experiments.md; prints the table.
+docs/results/experiments.md; prints the table. With `--agent PRESET` (and `--without
+NAMES`, as `conag run` takes them) another agent builds: the files get its suffix
+(`goal_sequencing_paper.md`, `goal_sequencing_paper_runs.json`) and the section is
+`G3_paper`, which sets its runs beside the default agent's (goal_sequencing_runs.json).
 
     python3 -m experiments.goal_sequencing            # full run (a few minutes)
     python3 -m experiments.goal_sequencing --quick    # smoke run (seconds)
+    python3 -m experiments.goal_sequencing --agent paper   # the paper's agent (issue 33)
     python3 -m experiments.goal_sequencing --cluster tcp://HOST:8786   # on a Dask cluster (experiments/runner.py)
 """
 
@@ -36,6 +40,7 @@ import numpy as np
 from agent_runtime.config import AgentConfig
 from conag import sim
 from experiments import runner
+from experiments.agents import DEFAULT, Agent, add_arguments, chosen
 from experiments.replay import lower_bound, replay
 from experiments.report import RESULTS_DOC, write_section
 from world_server.scenario import Scenario, load_scenario
@@ -84,6 +89,7 @@ class Job:
     seed: int
     max_ticks: int
     stall: int
+    agent: Agent = DEFAULT   # the preset and the additions switched off
 
 
 @dataclass(frozen=True)
@@ -113,7 +119,7 @@ def run_job(job: Job) -> JobResult:
     Stalled: no new site filled for more than `job.stall` ticks.
     """
     sc = scenario(job.scenario)
-    cfg = AgentConfig(goal_sequencing=dict(MODES)[job.mode], hunger_rate=0.0, thirst_rate=0.0)
+    cfg = job.agent.config(goal_sequencing=dict(MODES)[job.mode], hunger_rate=0.0, thirst_rate=0.0)
     run = sim.start(sc, agents=job.agents, seed=job.seed, cfg=cfg)
     starts = [tuple(int(v) for v in cell[::-1]) for cell in sc.to_cell(run.world.agent_poses()[:, :2])]
     started = time.perf_counter()
@@ -124,6 +130,16 @@ def run_job(job: Job) -> JobResult:
                      paper_order=None if order is None else bool(order[1](run.fill_ticks())),
                      total=status.sites_total, distance=float(sum(status.agent_distance)), starts=starts,
                      stalled=result.stalled, seconds=time.perf_counter() - started)
+
+
+def load_runs(path: Path) -> list[JobResult]:
+    """The runs of a goal_sequencing*_runs.json file."""
+    raw = json.loads(path.read_text(encoding="utf-8"))
+    return [JobResult(**{**r, "starts": [tuple(s) for s in r["starts"]],
+                         "job": Job(**{**r["job"], "agent": Agent(**{**r["job"].get("agent", {}),
+                                                                   "without": tuple(r["job"].get("agent", {})
+                                                                                    .get("without", ()))})})})
+            for r in raw]
 
 
 def bounds(name: str, starts: list[tuple[int, int]]) -> float:
@@ -195,7 +211,7 @@ def table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def chart(rows: list[dict], path: Path) -> None:
+def chart(rows: list[dict], path: Path, agent: Agent = DEFAULT) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -220,7 +236,8 @@ def chart(rows: list[dict], path: Path) -> None:
     ax.axhline(1.0, color="black", lw=0.8)
     ax.set_xticks(range(len(cases)), [f"{s}\n{a} agent{'s' if a > 1 else ''}" for s, a in cases], fontsize=8)
     ax.set_ylabel("distance walked / lower bound")
-    ax.set_title("Goal sequencing against nearest-first (paper Fig. 13); labels: runs completed")
+    ax.set_title("Goal sequencing against nearest-first (paper Fig. 13); labels: runs completed"
+                 + ("" if agent == DEFAULT else f"\nagent: {agent.label}"))
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
@@ -236,13 +253,15 @@ def main(argv: list[str] | None = None) -> str:
     runner.add_cluster_argument(ap)
     ap.add_argument("--out", default=str(ROOT / "experiments"), help="directory for the table and chart")
     ap.add_argument("--doc", default=str(RESULTS_DOC), help="markdown report to update (G3 section)")
+    add_arguments(ap)
     args = ap.parse_args(argv)
     if args.seeds < 1 or args.stall < 1 or args.jobs < 1:
         ap.error("--seeds, --stall and --jobs must be >= 1")
+    agent = chosen(ap, args)
     names, agent_counts, seeds = (("fig17", "fig18"), (1,), [1]) if args.quick else \
         (SCENARIOS, (1, 3), list(range(1, args.seeds + 1)))
     stall = min(args.stall, 1500) if args.quick else args.stall
-    jobs = [Job(n, m, a, s, 3000 if args.quick else scenario(n).max_ticks, stall)
+    jobs = [Job(n, m, a, s, 3000 if args.quick else scenario(n).max_ticks, stall, agent)
             for n in names for a in agent_counts for m, _ in MODES for s in seeds]
     started = time.perf_counter()
     where = runner.where_of(args, args.jobs)
@@ -257,10 +276,18 @@ def main(argv: list[str] | None = None) -> str:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     runs = [asdict(r) for r in results]
-    (out / "goal_sequencing_runs.json").write_text(json.dumps(runs, indent=1) + "\n", encoding="utf-8")
-    (out / "goal_sequencing.md").write_text(tab + "\n", encoding="utf-8")
-    chart(rows, out / "goal_sequencing.png")
-    write_section(args.doc, "G3", report(tab, rows, seeds, agent_counts, args, time.perf_counter() - started))
+    stem = f"goal_sequencing{agent.suffix}"
+    (out / f"{stem}_runs.json").write_text(json.dumps(runs, indent=1) + "\n", encoding="utf-8")
+    (out / f"{stem}.md").write_text(tab + "\n", encoding="utf-8")
+    chart(rows, out / f"{stem}.png", agent)
+    seconds = time.perf_counter() - started
+    if agent == DEFAULT:
+        write_section(args.doc, "G3", report(tab, rows, seeds, agent_counts, args, seconds))
+    else:
+        default = out / "goal_sequencing_runs.json"
+        write_section(args.doc, f"G3{agent.suffix}",
+                      agent_report(tab, rows, agent, summarise(load_runs(default)) if default.exists() else [],
+                                   seeds, agent_counts, args, seconds))
     return tab
 
 
@@ -321,6 +348,41 @@ nearest-first {sum(r['completed'] for r in nf)}/{sum(r['runs'] for r in nf)}.
   three agents they give way to each other. Median distance, goal sequencing against
   nearest-first, 1 and 3 agents: fig19 {_dist(ts, nf, 'fig19')}; fig20 {_dist(ts, nf, 'fig20')}
   (held-back sites make an agent pass nearer sites by).
+"""
+
+
+def agent_report(tab: str, rows: list[dict], agent: Agent, default: list[dict], seeds, agent_counts, args,
+                 seconds: float) -> str:
+    """The section of another agent's run: its table, and where it differs from the default agent's."""
+    flags = f"--agent {agent.preset}" + (f" --without {','.join(agent.without)}" if agent.without else "")
+    diff = [("| scenario | agents | agent | completed: default | completed: this agent | ticks: default "
+             "| ticks: this agent | distance / bound: default | distance / bound: this agent |"),
+            "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        d = next((d for d in default
+                  if (d["scenario"], d["agents"], d["mode"]) == (r["scenario"], r["agents"], r["mode"])), None)
+        if d is not None:
+            diff.append(f"| {r['scenario']} | {r['agents']} | {r['mode']} | {d['completed']}/{d['runs']} | "
+                        f"{r['completed']}/{r['runs']} | {_num(d['ticks'])} | {_num(r['ticks'])} | "
+                        f"{_num(d['ratio'], '.2f')} | {_num(r['ratio'], '.2f')} |")
+    run = "a `--quick`" if args.quick else "the full"
+    completed = f"{sum(r['completed'] for r in rows)}/{sum(r['runs'] for r in rows)}"
+    return f"""## G3 with the agent `{agent.label}` (issue 33) {{#g3{agent.suffix.replace("_", "-")}}}
+
+    python3 -m experiments.goal_sequencing {flags}   # writes this section, the table and the runs
+
+The G3 experiment (the paper's layouts of §6: Fig. 13, 17-20, nested squares) with the agent
+`{agent.label}` ([Concepts](../design.md#the-papers-agent-and-what-we-added)) in place of the
+default one: {run} run ({seconds:.0f} s on {args.where}), seeds {seeds},
+{" and ".join(map(str, agent_counts))} agent(s), hunger and thirst off, stopped after {args.stall} ticks
+without a new fill. Table: experiments/goal_sequencing{agent.suffix}.md; runs:
+experiments/goal_sequencing{agent.suffix}_runs.json. Completed: {completed} runs.
+
+{tab}
+
+Beside the default agent's runs (the G3 section; medians over completed runs):
+
+{chr(10).join(diff)}
 """
 
 

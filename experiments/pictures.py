@@ -45,9 +45,7 @@ def fig9_learning(out: Path) -> list[Path]:
 def goal_sequencing(out: Path) -> list[Path]:
     from experiments import goal_sequencing as gs
 
-    raw = json.loads((HERE / "goal_sequencing_runs.json").read_text(encoding="utf-8"))
-    results = [gs.JobResult(**{**r, "job": gs.Job(**r["job"]), "starts": [tuple(s) for s in r["starts"]]})
-               for r in raw]
+    results = gs.load_runs(HERE / "goal_sequencing_runs.json")
     path = out / "goal_sequencing.png"
     gs.chart(gs.summarise(results), path)
     return [path]

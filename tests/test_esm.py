@@ -16,7 +16,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent_runtime.esm import AGENT, BRICK, CONFIG, FOOD, OBSTACLE, WATER, EgocentricMaps, obstacle_trust
+from agent_runtime.esm import AGENT, BRICK, CONFIG, FOOD, OBSTACLE, WATER, EgocentricMaps, Sensing, obstacle_trust
 from protocol.messages import CHANNELS, NO_READING, Perturbation
 from world_server.discs import IN_WORLD
 from world_server.scenario import parse_scenario
@@ -491,19 +491,26 @@ def test_real_sensor_readings_put_discs_in_their_cells_from_any_sub_cell_positio
                     assert truth and min(chebyshev((row, col), t) for t in truth) <= 1, (ch, row, col)
 
 
-def reference_sense(m: EgocentricMaps, ranges: np.ndarray, reach: float) -> np.ndarray:
+ALL = Sensing()
+
+
+def reference_sense(m: EgocentricMaps, ranges: np.ndarray, reach: float, on: Sensing = ALL) -> np.ndarray:
     """The rule of EgocentricMaps.sense, cell by cell (slow and plain), on a copy of the maps.
 
     1. A cell is cleared when it is nearer than (reading - 0.75) of every sector it
-       overlaps (reach - 0.5 for a sector with no reading); on the brick layer, a site
-       cell only needs the sectors within 0.35 cell of its centre.
+       overlaps (reach - 0.5 for a sector with no reading; without `clear_margins`, the
+       reading and reach themselves); on the brick layer, a site cell only needs the
+       sectors within 0.35 cell of its centre (`site_core`).
     2. Each disc reading is attributed to the best cell of its band (cells overlapping its
        wedge within 0.75 of its distance): score = distance to the measured point, minus 2
        if the cell is marked in that layer, minus 1 for a brick on a blueprint cell; the best
        must be marked or a blueprint brick cell. Other marked, non-blueprint brick cells of
        the band are ghosts and cleared. Unattributed readings are written at the sector's
-       centre angle.
+       centre angle. Without `ghost_association` none is attributed and there are no ghosts.
+    3. With `obstacle_trust`, walls farther than obstacle_trust(sectors) are not written,
+       nor far food and water on a site.
     """
+    margin, range_margin = (0.75, 0.5) if on.clear_margins else (0.0, 0.0)
     out = m.maps.copy()
     n, sectors = m.size, ranges.shape[1]
     # Which sectors each cell overlaps is taken from the map's own geometry: at exact sector
@@ -523,9 +530,9 @@ def reference_sense(m: EgocentricMaps, ranges: np.ndarray, reach: float) -> np.n
         for cell, (_, _, d, overlapped) in geometry.items():
             if d > reach + 0.75:
                 continue
-            if layer == BRICK and m.maps[CONFIG][cell] > 0.5:
+            if layer == BRICK and on.site_core and m.maps[CONFIG][cell] > 0.5:
                 overlapped = core.get(cell, set())   # a site's brick lies near its centre
-            limits = [ranges[layer, s] - 0.75 if ranges[layer, s] >= 0 else reach - 0.5 for s in overlapped]
+            limits = [ranges[layer, s] - margin if ranges[layer, s] >= 0 else reach - range_margin for s in overlapped]
             if d < min(limits):
                 out[layer][cell] = 0.0
     cleared = out.copy()
@@ -544,10 +551,12 @@ def reference_sense(m: EgocentricMaps, ranges: np.ndarray, reach: float) -> np.n
                 marked = cleared[layer][c] > 0.5
                 blueprint = layer == BRICK and cleared[CONFIG][c] > 0.5
                 scored.append((math.hypot(ox - px, oy - py) - 2.0 * marked - 1.0 * blueprint, c, marked, blueprint))
+            if not on.ghost_association:
+                scored = []
             best = min(scored)[0] if scored else None
             won = [c for score, c, marked, bp in scored if score <= best and (marked or bp)]
             winners += [(layer, c) for c in won]
-            far = d > obstacle_trust(sectors)
+            far = on.obstacle_trust and d > obstacle_trust(sectors)
             cell = m.cell_of(px, py)
             # far walls are not written (see obstacle_trust), nor far food and water on a site
             on_site = m.contains(*cell) and cleared[CONFIG][cell] > 0.5
@@ -584,6 +593,84 @@ def test_sense_follows_its_rule_cell_by_cell(size, fx, fy, sectors, reach, seed)
         np.testing.assert_array_equal(m.maps, expected)
         if tick:
             m.move(*rng.uniform(-1.5, 1.5, 2))
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.sampled_from([7, 15, 41]), st.floats(-0.5, 0.4999), st.floats(-0.5, 0.4999),
+       st.sampled_from([1, 4, 16, 64]), st.floats(1.0, 12.0), st.integers(0, 2**32 - 1),
+       st.builds(Sensing, st.booleans(), st.booleans(), st.booleans(), st.booleans()))
+def test_sense_follows_its_rule_with_any_refinement_switched_off(size, fx, fy, sectors, reach, seed, on):
+    rng = np.random.default_rng(seed)
+    m = EgocentricMaps(size, on)
+    m.frac[:] = (fx, fy)
+    m.maps[:] = rng.random(m.maps.shape) < 0.5
+    m.maps[CONFIG] = rng.random(m.maps[CONFIG].shape) < 0.2
+    for tick in range(3):
+        ranges = np.where(rng.random((NCH, sectors)) < 0.6, rng.uniform(0, reach, (NCH, sectors)), NO_READING)
+        expected = reference_sense(m, ranges, reach, on)
+        m.sense(ranges, reach)
+        np.testing.assert_array_equal(m.maps, expected)
+        if tick:
+            m.move(*rng.uniform(-1.5, 1.5, 2))
+
+
+def test_each_sensing_refinement_is_the_agent_config_flag_of_its_name():
+    from agent_runtime.config import ADDITIONS, AgentConfig
+
+    assert Sensing.of(AgentConfig()) == Sensing()
+    assert Sensing.of(AgentConfig.preset("paper")) == Sensing(True, False, False, False)  # config.py says why
+    for name in Sensing.__dataclass_fields__:
+        assert name in ADDITIONS
+        assert Sensing.of(AgentConfig(**{name: False})) == Sensing(**{name: False})
+
+
+def test_without_ghost_association_a_reading_is_written_at_its_sectors_centre_angle():
+    # As in the test above: a disc known at (C-5, C+2), read at 5.5 in sector 3 (78.75 degrees).
+    for on, kept, written in ((Sensing(), 1.0, 0.0), (Sensing(ghost_association=False), 1.0, 1.0)):
+        m = EgocentricMaps(SIZE, on)
+        m.maps[BRICK, C - 5, C + 2] = 1.0
+        readings = np.full((NCH, 16), NO_READING)
+        readings[BRICK, 3] = 5.5
+        m.sense(readings, 6.0)
+        # With association the known brick explains the reading; without, the plain rule
+        # writes a second mark beside it, and that ghost stays (it lies at the reading's distance).
+        assert (m.maps[BRICK, C - 5, C + 2], m.maps[BRICK, C - 5, C + 1]) == (kept, written), on
+
+
+def test_without_clear_margins_a_sector_clears_up_to_its_reading_and_to_its_range():
+    readings = np.full((NCH, 16), NO_READING)
+    readings[BRICK, 0] = 3.3        # a brick 3.3 cells east (sector 0: 11.25 degrees)
+    for on, in_front, at_range in ((Sensing(), 1.0, 1.0), (Sensing(clear_margins=False), 0.0, 0.0)):
+        m = EgocentricMaps(SIZE, on)
+        m.maps[BRICK, C, C + 3] = 1.0    # 3.0 away, 0.3 in front of the reading: within the margin
+        m.maps[FOOD, C - 5, C - 3] = 1.0   # 5.8 away, no food reading: beyond range - 0.5, inside the range
+        m.sense(readings, 6.0)
+        assert (m.maps[BRICK, C, C + 3], m.maps[FOOD, C - 5, C - 3]) == (in_front, at_range), on
+
+
+def test_without_site_core_a_ghost_on_a_site_beside_a_structure_brick_stays():
+    readings = np.full((NCH, 16), NO_READING)     # the pocket of the test above
+    readings[BRICK, 2] = 1.41
+    readings[BRICK, 3] = readings[BRICK, 4] = 2.0
+    for on, expect in ((Sensing(), 0.0), (Sensing(site_core=False), 1.0)):
+        m = EgocentricMaps(SIZE, on)
+        m.maps[BRICK, C - 1, C] = 1.0
+        m.maps[CONFIG, C - 1, C + 1] = m.maps[CONFIG, C - 2, C] = m.maps[CONFIG, C - 1, C] = 1.0
+        m.sense(readings, 6.0)
+        assert m.maps[BRICK, C - 1, C] == expect, on
+
+
+def test_without_obstacle_trust_far_walls_and_far_water_on_a_site_are_written():
+    readings = np.full((NCH, 16), NO_READING)
+    readings[OBSTACLE, 0] = 5.0       # a wall 5 cells east: farther than obstacle_trust(16) = 2.3
+    readings[WATER, 4] = 5.0          # water 5 cells away in sector 4 (101.25 degrees) ...
+    for on, expect in ((Sensing(), 0.0), (Sensing(obstacle_trust=False), 1.0)):
+        m = EgocentricMaps(SIZE, on)
+        row, col = m.cell_of(5.0 * math.cos(4.5 * math.pi / 8), 5.0 * math.sin(4.5 * math.pi / 8))
+        m.maps[CONFIG, row, col] = 1.0  # ... whose cell is a blueprint site
+        m.sense(readings, 6.0)
+        wall = m.cell_of(5.0 * math.cos(math.pi / 16), 5.0 * math.sin(math.pi / 16))
+        assert (m.maps[OBSTACLE][wall], m.maps[WATER, row, col]) == (expect, expect), on
 
 
 def test_world_units_are_converted_with_the_cell_size():

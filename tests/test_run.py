@@ -20,13 +20,23 @@ def test_run_builds_fig6_with_three_agent_processes_and_writes_the_summary(tmp_p
     assert any(line.startswith("tick ") and "sites" in line for line in r.stdout.splitlines())  # progress
     s = json.loads(out.read_text())
     assert set(s) == {"scenario", "seed", "completed", "stalled", "ticks", "sites_total", "sites_filled",
-                      "bricks_total", "total_distance", "agents", "world_restarts"}
+                      "bricks_total", "total_distance", "agents", "agent", "world_restarts"}
     assert s["world_restarts"] == 0
+    assert s["agent"] == {"preset": "default", "without": [], "changed": {}}   # which agent ran
     assert s["stalled"] is False and all(a["behaviour_ticks"] for a in s["agents"])
     assert s["completed"] and s["sites_filled"] == s["sites_total"] == 4 and s["bricks_total"] == 5
     assert [a["id"] for a in s["agents"]] == ["a1", "a2", "a3"]
     assert sum(a["drops"] for a in s["agents"]) >= 4
     assert s["total_distance"] == pytest.approx(sum(a["distance"] for a in s["agents"]), abs=1e-3)
+
+
+def test_the_papers_agent_builds_fig6_and_the_summary_says_it_ran(tmp_path):
+    out = tmp_path / "summary.json"
+    r = conag("run", "scenarios/fig6.toml", "--headless", "--summary", out, "--agent", "paper",
+              "--listen", f"tcp/127.0.0.1:{free_port()}", timeout=600)
+    assert r.returncode == 0, r.stdout + r.stderr
+    s = json.loads(out.read_text())
+    assert s["completed"] and s["agent"] == {"preset": "paper", "without": [], "changed": {}}
 
 
 def test_an_agent_killed_mid_build_and_restarted_rejoins_and_the_structure_completes(tmp_path):

@@ -66,3 +66,12 @@ def test_a_summary_reads_back_what_it_wrote(tmp_path):
     assert back.agents[0].behaviour_ticks == written.agents[0].behaviour_ticks
     with_restarts = replace(back, world_restarts=0)
     assert RunSummary.from_json(with_restarts.to_json()) == with_restarts
+
+
+def test_conag_run_records_which_agent_ran_before_world_restarts():
+    agent = {"preset": "paper", "without": ["ghost_association"], "changed": {"map_size": 31}}
+    new = replace(RunSummary.of(STATUS), world_restarts=1, agent=agent)
+    data = json.loads(new.to_json())
+    assert list(data)[-3:] == ["agents", "agent", "world_restarts"] and data["agent"] == agent
+    assert RunSummary.from_json(new.to_json()) == new
+    assert "agent" not in RunSummary.of(STATUS).as_dict()   # the world's own summary: it does not know

@@ -2,7 +2,9 @@
 
 {scenario, seed, completed, stalled, ticks, sites_total, sites_filled, bricks_total,
  total_distance, agents: [{id, distance, grabs, drops, restarts, behaviour_ticks}]}
-and, from `conag run`, world_restarts. `RunSummary` is it typed; `as_dict`/`to_json` give the JSON.
+and, from `conag run`, `agent` (which agent ran: {preset, without, changed}, see
+`agent_runtime.config.AgentConfig.describe`; with --learn also learn and eta) and
+world_restarts. `RunSummary` is it typed; `as_dict`/`to_json` give the JSON.
 
 `behaviour_ticks` maps each behaviour the agent has spent ticks in to that count, from
 its last AgentState ({} if none arrived); `stalled` is set by `conag run --stall-ticks`.
@@ -45,8 +47,9 @@ class AgentSummary:
 
 @dataclass(frozen=True)
 class RunSummary:
-    """The run summary (see the module). `world_restarts` is set by `conag run` (how often
-    it restarted a world process that died); a summary without it has no such key."""
+    """The run summary (see the module). `agent` (which agent ran) and `world_restarts` (how
+    often it restarted a world process that died) are set by `conag run`; a summary
+    without them has no such keys (the world does not know its agents' settings)."""
 
     scenario: str
     seed: int
@@ -59,6 +62,7 @@ class RunSummary:
     total_distance: float
     agents: tuple[AgentSummary, ...]
     world_restarts: int | None = None
+    agent: dict[str, Any] | None = None
 
     @classmethod
     def of(cls, status: WorldStatus, states: Mapping[str, AgentState] | None = None,
@@ -76,11 +80,13 @@ class RunSummary:
                    agents=tuple(agents))
 
     def as_dict(self) -> dict[str, Any]:
-        """The JSON object, keys in the contract's order (`world_restarts` last, if set)."""
+        """The JSON object, keys in the contract's order (then `agent` and `world_restarts`, if set)."""
         out = {"scenario": self.scenario, "seed": self.seed, "completed": self.completed, "stalled": self.stalled,
                "ticks": self.ticks, "sites_total": self.sites_total, "sites_filled": self.sites_filled,
                "bricks_total": self.bricks_total, "total_distance": self.total_distance,
                "agents": [a.as_dict() for a in self.agents]}
+        if self.agent is not None:
+            out["agent"] = self.agent
         if self.world_restarts is not None:
             out["world_restarts"] = self.world_restarts
         return out

@@ -7,7 +7,9 @@ run --stall-ticks N` gives up; `stall_report()` then says what each agent was at
 of its `stop` conditions holds, calling its `observers` after every tick, and returns a
 `SimResult`. `on_step` sees every decision (the teacher's view). `SimRun.perturb`
 changes the world as `conag perturb` does, handing a changed blueprint to every brain as
-the Blueprint message does on the bus.
+the Blueprint message does on the bus. `start(..., cfg="paper")` runs the agent of a
+preset as `conag run --agent paper` does; `SimRun.agent` and `SimResult.agent` record
+which agent ran, as the run summary does (`AgentConfig.describe`).
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import numpy as np
 
 from agent_runtime.brain import Brain, Step
 from agent_runtime.config import AgentConfig
+from agent_runtime.esm import Sensing
 from protocol.messages import SITE_OPS, Perturbation, PerturbResult
 from world_server.buildability import check_layout
 from world_server.noise import NoiseSettings
@@ -39,6 +42,9 @@ class SimResult:
     stalled: bool
     ticks: int             # the world's tick at the end
     stopped: bool = False  # one of the run's stop conditions ended it
+    # which agent ran: {"preset", "without", "changed"} (`AgentConfig.describe`, as in the run
+    # summary); not compared, so a result still equals SimResult(completed, stalled, ticks, ...)
+    agent: dict = field(default_factory=dict, compare=False)
 
     def __bool__(self) -> bool:
         return self.completed
@@ -55,6 +61,7 @@ class SimRun:
     filled_at: np.ndarray | None = None  # per site (world order), the tick it was last filled; -1: empty
     on_step: Callable[[str, Step], None] | None = None  # sees every decision (the teacher's view)
     stall: StallClock | None = None  # the last run's, when it watched for stalls
+    agent: dict = field(default_factory=dict)  # which agent runs (`AgentConfig.describe`), for SimResult
 
     def step(self) -> None:
         """One lockstep tick: every brain answers its frame, then the world steps."""
@@ -105,15 +112,15 @@ class SimRun:
         self.stall = StallClock(stall_ticks) if stall_ticks else None
         for _ in range(max_ticks):
             if until_complete and self.world.completed():
-                return SimResult(True, False, self.world.tick)
+                return SimResult(True, False, self.world.tick, agent=self.agent)
             if self._stalled():
-                return SimResult(False, True, self.world.tick)
+                return SimResult(False, True, self.world.tick, agent=self.agent)
             if any(condition(self) for condition in stop):
-                return SimResult(self.world.completed(), False, self.world.tick, stopped=True)
+                return SimResult(self.world.completed(), False, self.world.tick, stopped=True, agent=self.agent)
             self.step()
             for observe in observers:
                 observe(self)
-        return SimResult(self.world.completed(), self._stalled(), self.world.tick)
+        return SimResult(self.world.completed(), self._stalled(), self.world.tick, agent=self.agent)
 
     def _stalled(self) -> bool:
         if self.stall is None:
@@ -151,17 +158,22 @@ class FirstCompletion:
 
 
 def start(scenario: Scenario, agents: int | None = None, seed: int | None = None,
-          cfg: AgentConfig | None = None, network=None, noise: NoiseSettings | None = None) -> SimRun:
-    """A world and its brains; `network` (one for every agent) replaces the Fig. 8 network;
-    `noise` overrides the scenario's noise settings (docs/noise.md)."""
+          cfg: AgentConfig | str | None = None, network=None, noise: NoiseSettings | None = None) -> SimRun:
+    """A world and its brains; `cfg` is every agent's AgentConfig or a preset's name, as
+    `conag run --agent` takes it ("default", "paper"; default the default agent);
+    `network` (one for every agent) replaces the Fig. 8 network; `noise` overrides the
+    scenario's noise settings (docs/noise.md)."""
     seed = scenario.seed if seed is None else seed
+    preset = cfg if isinstance(cfg, str) else None
+    cfg = AgentConfig.preset(cfg) if isinstance(cfg, str) else cfg or AgentConfig()
     if noise is not None:
         scenario = noise.apply(scenario)
     world = World(scenario, np.random.default_rng(seed))
-    run = SimRun(world)
+    run = SimRun(world, agent=cfg.describe(preset))
     run._record_fills()  # sites filled from the start count as filled at tick 0
     for i in range(scenario.agents if agents is None else agents):
         agent_id = f"a{i + 1}"
         welcome = world.attach(agent_id)
-        run.brains[agent_id] = Brain(welcome, cfg, np.random.default_rng([seed, i]), network=network)
+        brain = run.brains[agent_id] = Brain(welcome, cfg, np.random.default_rng([seed, i]), network=network)
+        brain.maps.sensing = Sensing.of(cfg)  # until Brain passes cfg's sensing flags to its maps itself
     return run
