@@ -31,7 +31,7 @@ from numba import njit
 
 from agent_runtime import steering
 from agent_runtime.config import AgentConfig
-from agent_runtime.esm import AGENT, BRICK, CONFIG, FOOD, OBSTACLE, WATER, EgocentricMaps
+from agent_runtime.esm import AGENT, BRICK, CONFIG, FOOD, OBSTACLE, WATER, EgocentricMaps, Sensing
 from agent_runtime.far_memory import FarMemory, on_border
 from agent_runtime.field_cache import FieldCache
 from agent_runtime.matching import Matching, calculate_matching, select_goals
@@ -96,7 +96,7 @@ class Brain:
         self.sectors = welcome.sectors
         self.rng = rng if rng is not None else np.random.default_rng(0)
         self.network = network or engineered()
-        self.maps = EgocentricMaps(self.cfg.map_size)
+        self.maps = EgocentricMaps(self.cfg.map_size, Sensing.of(self.cfg))
         self.maps.seed_blueprint(welcome.x, welcome.y, welcome.site_xs, welcome.site_ys, welcome.cell_size)
         # The attach cell, in world cells: the origin of the agent's odometry frame.
         self._origin = np.floor(np.array([welcome.x, welcome.y]) / welcome.cell_size).astype(np.int64)

@@ -37,7 +37,6 @@ import numpy as np
 
 from agent_runtime.brain import Brain
 from agent_runtime.config import AgentConfig
-from agent_runtime.esm import Sensing
 from agent_runtime.feeds import AgentFeeds
 from agent_runtime.learning import Student
 from agent_runtime.student_link import StudentLink
@@ -154,7 +153,6 @@ class AgentProcess:
         self.brain = Brain(welcome, self.opts.cfg,
                            np.random.default_rng([self.opts.seed, welcome.restarts, self.reattaches]),
                            network=self.student)
-        self.brain.maps.sensing = Sensing.of(self.brain.cfg)  # until Brain passes its cfg's sensing flags itself
         self.tick = welcome.tick - 1
 
     def serve(self, stop) -> None:

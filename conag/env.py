@@ -50,7 +50,6 @@ from pettingzoo import ParallelEnv
 
 from agent_runtime.brain import Brain
 from agent_runtime.config import AgentConfig
-from agent_runtime.esm import Sensing
 from agent_runtime.world_link import WorldLink
 from protocol.bus import BusOptions, open_session
 from protocol.messages import ACTIONS, CHANNELS, Decision, SensorFrame, Welcome
@@ -79,9 +78,7 @@ def _agent_config(cfg: AgentConfig | str | None) -> tuple[AgentConfig, dict]:
 
 
 def _brain(welcome: Welcome, cfg: AgentConfig, rng: np.random.Generator | None = None) -> Brain:
-    brain = Brain(welcome, cfg, rng)
-    brain.maps.sensing = Sensing.of(cfg)  # until Brain passes its cfg's sensing flags itself
-    return brain
+    return Brain(welcome, cfg, rng)
 
 
 def _free_port() -> int:

@@ -22,7 +22,6 @@ import numpy as np
 
 from agent_runtime.brain import Brain, Step
 from agent_runtime.config import AgentConfig
-from agent_runtime.esm import Sensing
 from protocol.messages import SITE_OPS, Perturbation, PerturbResult
 from world_server.buildability import check_layout
 from world_server.noise import NoiseSettings
@@ -174,6 +173,5 @@ def start(scenario: Scenario, agents: int | None = None, seed: int | None = None
     for i in range(scenario.agents if agents is None else agents):
         agent_id = f"a{i + 1}"
         welcome = world.attach(agent_id)
-        brain = run.brains[agent_id] = Brain(welcome, cfg, np.random.default_rng([seed, i]), network=network)
-        brain.maps.sensing = Sensing.of(cfg)  # until Brain passes cfg's sensing flags to its maps itself
+        run.brains[agent_id] = Brain(welcome, cfg, np.random.default_rng([seed, i]), network=network)
     return run
