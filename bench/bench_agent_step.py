@@ -46,9 +46,9 @@ REFERENCE = "f7f6a27"
 WORKER = r"""
 import hashlib, json, statistics, sys, time
 try:
-    from conag import sim
+    import sim  # the tree before the package move (f7f6a27): its own simulator, not this one's
 except ImportError:
-    import sim
+    from conag import sim
 from agent_runtime.config import AgentConfig
 from world_server.scenario import load_scenario
 

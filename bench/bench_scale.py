@@ -23,7 +23,9 @@ on the checkout `--reference-dir`, right after this tree's run of the same row, 
 share the machine's state. Each side runs its own code: cwd and PYTHONPATH are its tree.
 
 * The in-process measurement is a script passed with `python3 -c` (`CHILD`); it imports
-  `start` from `conag.sim.loop` or, before the package move (f7f6a27), from `sim.loop`.
+  `start` from `sim.loop` in a tree from before the package move (f7f6a27), else from
+  `conag.sim.loop` (tried in that order: an installed `conag` must not lend a reference
+  tree this tree's simulator).
 * The processes row is the same `conag run` command line on both sides: f7f6a27's
   `conag run` already has `--listen`, `--profile` and `--per-process`, and its world writes
   the same profile, so both sides' ticks/s come from their world's profile. A reference
@@ -192,9 +194,9 @@ CHILD_MAIN = r"""
 import json, os, sys, time
 from pathlib import Path
 try:
-    from conag.sim.loop import start
+    from sim.loop import start  # the tree before the package move (f7f6a27): its own simulator
 except ImportError:
-    from sim.loop import start
+    from conag.sim.loop import start
 from world_server.scenario import load_scenario
 
 scenario, agents, ticks, launched, out = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), float(sys.argv[4]), \
