@@ -38,6 +38,8 @@ import time
 import traceback
 from dataclasses import dataclass, field
 
+from conag.exit_codes import EXIT_INTERRUPTED
+
 # Set before numpy loads, in the server and so in every child: OpenBLAS would otherwise
 # start a thread per core at import, and a process with threads must not fork.
 _ONE_THREAD = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
@@ -95,9 +97,12 @@ def _child(argv: list[str], stdout_fd: int) -> None:
         code = main(argv)
     except SystemExit as exc:
         code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
-    except BaseException:   # noqa: BLE001 (a child's crash is reported as a spawned process's would be)
-        traceback.print_exc()
-        code = 1
+    except BaseException as exc:   # noqa: BLE001 (a child's crash is reported as a spawned process's would be)
+        if _interrupted(exc):
+            code = EXIT_INTERRUPTED   # Ctrl-C or SIGTERM landed inside a library call: stopped, not crashed
+        else:
+            traceback.print_exc()
+            code = 1
     finally:
         for stream in (sys.stdout, sys.stderr):
             try:
@@ -105,6 +110,18 @@ def _child(argv: list[str], stdout_fd: int) -> None:
             except (OSError, ValueError):
                 pass
         os._exit(code if isinstance(code, int) else 1)
+
+
+def _interrupted(exc: BaseException | None) -> bool:
+    """Whether `exc` was caused by a stop signal: a KeyboardInterrupt or the commands' stop
+    exception, perhaps wrapped by a library it interrupted (numba's loader turns it into a
+    SystemError)."""
+    seen = 0
+    while exc is not None and seen < 20:
+        if isinstance(exc, KeyboardInterrupt) or type(exc).__name__ == "_Stopped":
+            return True
+        exc, seen = exc.__cause__ or exc.__context__, seen + 1
+    return False
 
 
 def _title(argv: list[str]) -> None:

@@ -77,3 +77,18 @@ def test_closing_the_server_ends_its_children():
     assert not _alive(child.pid)
     with pytest.raises(ForkServerError):
         fs.spawn(["status"])
+
+
+def test_a_stop_signal_inside_a_library_call_is_a_stop_not_a_crash():
+    # Ctrl-C landing while numba loads a kernel reaches the child as a SystemError whose
+    # cause is the stop: the child exits as interrupted (130) without a traceback.
+    from conag.common import _Stopped
+    from conag.forkserver import _interrupted
+    try:
+        try:
+            raise _Stopped()
+        except _Stopped as stop:
+            raise SystemError("returned a result with an exception set") from stop
+    except SystemError as wrapped:
+        assert _interrupted(wrapped)
+    assert not _interrupted(SystemError("a real crash")) and not _interrupted(None)
