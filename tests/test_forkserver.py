@@ -84,11 +84,7 @@ def test_a_stop_signal_inside_a_library_call_is_a_stop_not_a_crash():
     # cause is the stop: the child exits as interrupted (130) without a traceback.
     from conag.common import _Stopped
     from conag.forkserver import _interrupted
-    try:
-        try:
-            raise _Stopped()
-        except _Stopped as stop:
-            raise SystemError("returned a result with an exception set") from stop
-    except SystemError as wrapped:
-        assert _interrupted(wrapped)
+    wrapped = SystemError("returned a result with an exception set")
+    wrapped.__cause__ = _Stopped()
+    assert _interrupted(wrapped)
     assert not _interrupted(SystemError("a real crash")) and not _interrupted(None)
