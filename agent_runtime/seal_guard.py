@@ -99,28 +99,38 @@ class SealGuard:
         structure = (self.maps.maps[BRICK] > 0.5) & (self.maps.maps[CONFIG] > 0.5)
         # A verdict is a pure function of these grids and of the far memory, and half the
         # time an agent beside a site judges again exactly what it judged a step before.
+        memory = self._memory_key()
         key = (b"".join(g.tobytes() for g in (near, open_sites, blocked, supply, fresh, self.maps.known, structure)),
-               self._far_state())
+               memory, self._where())
         if self._judged is not None and self._judged[0] == key:
             return self._judged[1]
-        unsafe = self._judge(near, open_sites, blocked, supply, fresh, structure)
+        unsafe = self._judge(near, open_sites, blocked, supply, fresh, structure, memory)
         unsafe.setflags(write=False)
         self._judged = (key, unsafe)
         return unsafe
 
-    def _far_state(self) -> tuple:
-        """Everything of the far memory a judgement reads, as comparable values."""
+    def _memory_key(self) -> tuple:
+        """What the far memory's own world grids (`_remembered`) are made of, as comparable
+        values: the sites and the beliefs about them, the remembered bricks, walls and discs
+        (() while the world's extent is unknown: then nothing of it is read)."""
         far = self.far
         if far.ground is None or far.walls is None or far.discs is None:
             return ()
         fresh = far.site_open & (far.site_clear_age <= FRESH_SITE)
-        return (int(far.pos[0]), int(far.pos[1]), far.sites.tobytes(), far.bricks.tobytes(), far.site_open.tobytes(),
-                fresh.tobytes(), far.walls.tobytes(), far.discs.tobytes(), far.ground.tobytes())
+        return (far.sites.tobytes(), far.bricks.tobytes(), far.site_open.tobytes(), fresh.tobytes(),
+                far.walls.tobytes(), far.discs.tobytes())
+
+    def _where(self) -> tuple:
+        """The rest of the far memory a judgement reads: the agent's cell (the map's window
+        on the world) and the ground seen free."""
+        far = self.far
+        return () if far.ground is None else (int(far.pos[0]), int(far.pos[1]), far.ground.tobytes())
 
     def _judge(self, near: np.ndarray, open_sites: np.ndarray, blocked: np.ndarray, supply: np.ndarray,
-               fresh: np.ndarray, structure: np.ndarray) -> np.ndarray:
+               fresh: np.ndarray, structure: np.ndarray, memory: tuple) -> np.ndarray:
         """`judge`, worked out: `near` the goal sites judged, `fresh` the open sites seen
-        empty lately and `near`, `structure` the map's structure bricks."""
+        empty lately and `near`, `structure` the map's structure bricks, `memory` the far
+        memory's `_memory_key`."""
         # No food or water lies on an open site: such a mark is a disc mapped a cell off
         # (a slot between water walls looked filled in its middle, gen-pocket 120).
         blocked = blocked & ~open_sites
@@ -128,7 +138,7 @@ class SealGuard:
         # are checked (the supply itself is often beyond the map, where nothing is seen).
         on_map = _Frame(open_sites, fresh, blocked, self.maps.known & ~blocked, supply,
                         ~self._square(SEAL_RADIUS + MARGIN, near.shape), _same, _same)
-        g = self._on_world(on_map) or on_map
+        g = self._on_world(on_map, memory) or on_map
         believed = (g.ground | g.open) & ~g.blocked
         passable = believed & ~(g.open & ~g.fresh)
         reference = (g.supply | (g.outside & g.ground & ~g.open)) & passable
@@ -147,14 +157,14 @@ class SealGuard:
                          fallbacks=(believed | doubtful, ~g.blocked))
         return g.to_map(unsafe)
 
-    def _on_world(self, m: _Frame) -> _Frame | None:
+    def _on_world(self, m: _Frame, memory: tuple) -> _Frame | None:
         """The map's grids `m` on the whole world as the far memory holds it, what the
         agent sees now in the map's window; None while the world's extent is unknown."""
         far = self.far
         if far.ground is None or far.walls is None or far.discs is None:
             return None
         none = np.zeros_like(far.walls)
-        open_grid, fresh_grid, blocked_grid, supply_grid = self._remembered()
+        open_grid, fresh_grid, blocked_grid, supply_grid = self._remembered(memory)
         return _Frame(open=far.on_world(open_grid, m.open),
                       fresh=far.on_world(fresh_grid, m.fresh),
                       blocked=far.on_world(blocked_grid, m.blocked),
@@ -163,17 +173,15 @@ class SealGuard:
                       outside=far.on_world(~none, m.outside),
                       to_map=far.on_map, from_map=lambda layer: far.on_world(none, layer))
 
-    def _remembered(self) -> tuple[np.ndarray, ...]:
+    def _remembered(self, key: tuple) -> tuple[np.ndarray, ...]:
         """The far memory's own world grids for `_on_world` (open sites, fresh ones, the
-        blocked cells, the bricks), kept until what they are made of changes: the sites and
-        the beliefs about them, the walls and discs, the remembered bricks."""
+        blocked cells, the bricks), kept while what they are made of (`key`, the
+        `_memory_key` the judgement was asked with) stays the same."""
         far = self.far
         assert far.walls is not None and far.discs is not None
-        fresh = far.site_open & (far.site_clear_age <= FRESH_SITE)
-        key = (far.sites.tobytes(), far.bricks.tobytes(), far.site_open.tobytes(), fresh.tobytes(),
-               far.walls.tobytes(), far.discs.tobytes())
         kept = self._grids
         if kept is None or kept[0] != key:
+            fresh = far.site_open & (far.site_clear_age <= FRESH_SITE)
             grids = (far.cells_grid(far.sites[far.site_open]), far.cells_grid(far.sites[fresh]),
                      far.walls | far.discs | far.cells_grid(far.sites[~far.site_open]), far.cells_grid(far.bricks))
             for g in grids:

@@ -175,7 +175,7 @@ class FrameWatch:
             return self._killed is not None
 
 
-def _world_pid(run_pid: int) -> int | None:
+def world_pid(run_pid: int) -> int | None:
     """The `conag world` child of the `conag run` process `run_pid` (Linux /proc), if any."""
     children: list[int] = []
     for task in Path(f"/proc/{run_pid}/task").glob("*"):
@@ -261,7 +261,7 @@ def chaos_run(opts: ChaosOptions, index: int, stop: threading.Event, log=print) 
                 now = time.monotonic()
                 if now >= next_world and frames.newest >= frames.started_at + interval:
                     next_world = float("inf")  # the next is drawn once the restarted world ticks
-                    pid = _world_pid(proc.pid)
+                    pid = world_pid(proc.pid)
                     if pid is not None:
                         frames.killed()
                         os.kill(pid, signal.SIGKILL)

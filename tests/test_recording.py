@@ -38,6 +38,7 @@ from conag.recording.mcap_log import McapRecorder, read_recording
 from conag.recording.recorder import RecordReport, drain_until_quiet, run_recorder
 from conag.recording.replay import Comparison, LockstepScript, paced
 from conag.recording.replayer import drive_world, publish_recording
+from faults.chaos import world_pid
 from protocol import keys
 from protocol.codec import decode, encode
 from protocol.messages import (
@@ -569,23 +570,6 @@ def test_conag_run_record_then_replay_verify_reproduces_fig6(tmp_path, endpoint)
     assert time.monotonic() - started < 50
 
 
-def _world_child(run: subprocess.Popen) -> int | None:
-    """The `conag world` child of a `conag run` (Linux /proc), if it has one now."""
-    for task in Path(f"/proc/{run.pid}/task").glob("*"):
-        try:
-            children = (task / "children").read_text().split()
-        except OSError:
-            continue
-        for pid in children:
-            try:
-                argv = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
-            except OSError:
-                continue
-            if b"conag" in argv and argv[argv.index(b"conag") + 1:][:1] == [b"world"]:
-                return int(pid)
-    return None
-
-
 @pytest.mark.slow
 @pytest.mark.timeout(600)
 def test_replay_verify_reproduces_a_recorded_run_across_a_world_restart(tmp_path, endpoint):
@@ -603,7 +587,7 @@ def test_replay_verify_reproduces_a_recorded_run_across_a_world_restart(tmp_path
         for line in run.stdout:  # past the first checkpoint (tick 50)
             if line.startswith("tick ") and int(line.split()[1]) >= 60:
                 break
-        os.kill(wait_until(lambda: _world_child(run), what="the world process"), signal.SIGKILL)
+        os.kill(wait_until(lambda: world_pid(run.pid), what="the world process"), signal.SIGKILL)
         rest, _ = run.communicate(timeout=300)
     finally:
         if run.poll() is None:
