@@ -432,7 +432,7 @@ class Brain:
             "brick_available": plans.brick[c, c] < math.inf,
             "drop_site_available": plans.config[c, c] < math.inf,
         }
-        return np.array([float(values[n]) for n in STATE_NODES])
+        return np.fromiter((values[n] for n in STATE_NODES), np.float64, len(STATE_NODES))
 
     @staticmethod
     def _brick_within(plans: Plans, within: float) -> tuple[float, float] | None:
@@ -553,12 +553,11 @@ class Brain:
         self._moving.append(moving)
         self._still += not moving
         full = self._trail_len == self.cfg.stuck_ticks
-        if full and self._still == 0:
-            pts = self._trail   # all of it is the trail once full; order does not matter to max - min
-            if float(np.hypot(*(pts.max(axis=0) - pts.min(axis=0)))) < self.cfg.stuck_distance:
-                self.unsticks += 1
-                self._unstick_left = int(self.rng.integers(self.cfg.stuck_ticks // 4, self.cfg.stuck_ticks // 2 + 1))
-                self._unstick_heading = float(self.rng.uniform(-math.pi, math.pi))
+        # All of the ring is the trail once full; order does not matter to its extent.
+        if full and self._still == 0 and _extent(self._trail) < self.cfg.stuck_distance:
+            self.unsticks += 1
+            self._unstick_left = int(self.rng.integers(self.cfg.stuck_ticks // 4, self.cfg.stuck_ticks // 2 + 1))
+            self._unstick_heading = float(self.rng.uniform(-math.pi, math.pi))
         return speed, turn, action, behaviour
 
     # reporting -----------------------------------------------------------------------------
@@ -774,7 +773,22 @@ def _nearest_cell(cells, centre, fx, fy):
     return br >= 0, br, bc
 
 
-def _nearest_reading(readings: np.ndarray) -> float:
+@njit(cache=True)
+def _nearest_reading(readings):
     """The nearest of one channel's sector readings (inf when no sector senses anything)."""
-    hits = readings[readings != NO_READING]
-    return float(hits.min()) if hits.size else math.inf
+    best = np.inf
+    for value in readings:
+        if value != NO_READING and value < best:
+            best = value
+    return best
+
+
+@njit(cache=True)
+def _extent(points):
+    """The diagonal of the box round `points` ((k, 2)): how far apart they lie at most."""
+    lo0 = hi0 = points[0, 0]
+    lo1 = hi1 = points[0, 1]
+    for i in range(1, points.shape[0]):
+        lo0, hi0 = min(lo0, points[i, 0]), max(hi0, points[i, 0])
+        lo1, hi1 = min(lo1, points[i, 1]), max(hi1, points[i, 1])
+    return np.hypot(hi0 - lo0, hi1 - lo1)

@@ -48,6 +48,7 @@ class FarMemory:
         self.size = size
         self.centre = size // 2
         self.pos = np.zeros(2, np.int64)                 # the agent's cell, (x, y) from the attach cell
+        self._cell = (0, 0)                              # `pos` as a tuple: the caches' key (`move` keeps it)
         self.sites = np.asarray(sites, np.int64).reshape(-1, 2)
         self.site_open = np.ones(len(self.sites), bool)  # belief: no brick seen on it (yet)
         # Steps since each site was last seen empty (inf: never). A site believed open but
@@ -75,9 +76,10 @@ class FarMemory:
         self._costs_cache: dict[tuple[int, bytes], np.ndarray] = {}
         # What depends only on where the agent is (and the blueprint): most steps it stays
         # in its cell, so each is worked out again only when `pos` or the sites change.
-        self._by_pos: dict[str, tuple[tuple, object, object]] = {}
+        self._by_pos: dict[str, tuple[tuple[int, int], tuple, object, object]] = {}
         self._centres: np.ndarray | None = None          # the BLOCK squares' centres, fixed
         self._border_cache: dict[tuple, np.ndarray | None] = {}
+        self._marked: tuple | None = None   # (cell, radius) of the last `mark_seen` that changed nothing since
         if bounds is not None:
             x0, y0, x1, y1 = bounds
             self.seen = np.zeros((-(-(x1 - x0) // BLOCK), -(-(y1 - y0) // BLOCK)), bool)
@@ -105,12 +107,11 @@ class FarMemory:
     def _cached(self, name: str, key: tuple, array: np.ndarray | None, compute):
         """`compute()`, kept until `key` (with the agent's cell) changes or `array` is
         replaced (compared by identity: the cache holds it, so its id is never reused)."""
-        key = (int(self.pos[0]), int(self.pos[1]), *key)
         hit = self._by_pos.get(name)
-        if hit is not None and hit[0] == key and hit[1] is array:
-            return hit[2]
+        if hit is not None and hit[0] == self._cell and hit[1] == key and hit[2] is array:
+            return hit[3]
         value = compute()
-        self._by_pos[name] = (key, array, value)
+        self._by_pos[name] = (self._cell, key, array, value)
         return value
 
     def _sites_on_map(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -149,16 +150,13 @@ class FarMemory:
         """Update beliefs from the maps: a brick on a site's cell fills it; a cell seen empty of
         bricks this step opens it again (a repair, a perturbation)."""
         on, r, c = self._sites_on_map()
-        bricks = brick_layer[r, c]
-        self.site_open[on[bricks > 0.5]] = False
-        self.site_open[on[(clear_age[r, c] == 0) & (bricks <= 0.5)]] = True
+        _observe_sites(on, r, c, brick_layer, clear_age, self.site_open)
 
     def age_sites(self, clear_age: np.ndarray) -> None:
         """One step older: each site's steps since it was last seen empty of bricks, from
         the map's `clear_age` for the sites on the map (once per step)."""
-        self.site_clear_age += 1.0
         on, r, c = self._sites_on_map()
-        self.site_clear_age[on] = np.minimum(self.site_clear_age[on], clear_age[r, c])
+        _age_sites(on, r, c, clear_age, self.site_clear_age)
 
     def fresh_sites(self, within: float) -> np.ndarray:
         """(k, 2) cells of the sites believed open and seen empty in the last `within` steps."""
@@ -188,6 +186,7 @@ class FarMemory:
             self._remember(self.from_map(rows[leaving], cols[leaving]))
         was_on = self._on_map(*self.to_map(self.sites))
         self.pos += (kx, ky)
+        self._cell = (int(self.pos[0]), int(self.pos[1]))
         back = np.zeros((self.size, self.size), bool)
         r, c = self.to_map(self.sites)
         entering = self._on_map(r, c) & ~was_on & ~self.site_open
@@ -297,12 +296,15 @@ class FarMemory:
         returns how many had never been seen before."""
         if self.seen is None or self.ever_seen is None:
             return 0
+        if self._marked == (self._cell, radius):
+            return 0   # the same squares as last step, all marked already: nothing to add
         centres = self._block_centres()
         near = self._cached("near", (radius,), None, lambda: np.hypot(centres[..., 0] - self.pos[0],
                                                                       centres[..., 1] - self.pos[1]) <= radius)
         new = int(np.count_nonzero(near & ~self.ever_seen))
         self.seen |= near
         self.ever_seen |= near
+        self._marked = (self._cell, radius)
         return new
 
     def _block_centres(self) -> np.ndarray:
@@ -330,6 +332,7 @@ class FarMemory:
             self._target_age = 0
             if self.seen.all():
                 self.seen[:] = False
+                self._marked = None   # the squares round the agent are unseen again
             free = np.argwhere(~self.seen)
             centres = self._block_centres()[~self.seen]
             d = np.hypot(centres[:, 0] - self.pos[0], centres[:, 1] - self.pos[1]) * rng.uniform(1.0, 1.5, len(free))
@@ -501,3 +504,24 @@ def _nearest_octile(cells: np.ndarray, targets: np.ndarray) -> np.ndarray:
                 best = d
         out[i] = best
     return out
+
+
+@njit(cache=True)
+def _observe_sites(on, rows, cols, brick_layer, clear_age, site_open):
+    """`observe_sites` for the sites on the map (`on` their indices, at `rows`, `cols`):
+    a brick on a site's cell fills it, a cell seen empty of bricks this step opens it."""
+    for i in range(on.size):
+        r, c = rows[i], cols[i]
+        if brick_layer[r, c] > 0.5:
+            site_open[on[i]] = False
+        elif clear_age[r, c] == 0:
+            site_open[on[i]] = True
+
+
+@njit(cache=True)
+def _age_sites(on, rows, cols, clear_age, site_clear_age):
+    """`age_sites`: every site one step older, the ones on the map no older than their cell."""
+    for i in range(site_clear_age.size):
+        site_clear_age[i] += 1.0
+    for i in range(on.size):
+        site_clear_age[on[i]] = min(site_clear_age[on[i]], clear_age[rows[i], cols[i]])

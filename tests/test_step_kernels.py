@@ -11,7 +11,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent_runtime.brain import _mouth_side
+from agent_runtime.brain import _extent, _mouth_side, _nearest_reading
+from agent_runtime.far_memory import _age_sites, _observe_sites
 from agent_runtime.field_cache import FieldCache
 from agent_runtime.spreading import _STEP, MOVES, distance_field, gradient_step, reachable, seeded_distance_field
 from tests.test_spreading import grids
@@ -152,3 +153,42 @@ def test_the_navigation_inputs_are_the_numpy_expressions(seed, size, site_memory
     assert np.array_equal(config_obstacles, want_config) and np.array_equal(brick_obstacles, want_brick)
     with pytest.raises(ValueError):
         got.config_goals[0, 0] = True                                # shared by the step's readers: read-only
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.sampled_from([-1.0, 0.0, 0.25, 1.5, 3.0, 5.75]), min_size=1, max_size=16))
+def test_the_compiled_nearest_reading_is_the_least_real_reading(values):
+    readings = np.array(values)
+    hits = readings[readings != -1.0]
+    expected = float(hits.min()) if hits.size else math.inf
+    assert _nearest_reading(readings) == expected
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(1, 40))
+def test_the_compiled_extent_is_the_diagonal_of_the_bounding_box(seed, k):
+    points = np.random.default_rng(seed).normal(0.0, 3.0, (k, 2))
+    assert _extent(points) == float(np.hypot(*(points.max(axis=0) - points.min(axis=0))))
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.integers(0, 2**31 - 1))
+def test_the_compiled_site_beliefs_are_the_numpy_expressions(seed):
+    rng = np.random.default_rng(seed)
+    n, k = 9, 12
+    bricks = (rng.random((n, n)) < 0.4).astype(np.float64)
+    clear_age = rng.integers(0, 3, (n, n)).astype(np.float64)
+    on = np.sort(rng.choice(k, size=rng.integers(0, k + 1), replace=False))
+    rows, cols = rng.integers(0, n, on.size), rng.integers(0, n, on.size)
+    site_open = rng.random(k) < 0.5
+    ages = np.where(rng.random(k) < 0.3, np.inf, rng.integers(0, 50, k).astype(np.float64))
+    expected_open, expected_ages = site_open.copy(), ages.copy()
+    seen = bricks[rows, cols]                                  # far_memory's numpy code before it was compiled
+    expected_open[on[seen > 0.5]] = False
+    expected_open[on[(clear_age[rows, cols] == 0) & (seen <= 0.5)]] = True
+    expected_ages += 1.0
+    expected_ages[on] = np.minimum(expected_ages[on], clear_age[rows, cols])
+    _observe_sites(on, rows, cols, bricks, clear_age, site_open)
+    _age_sites(on, rows, cols, clear_age, ages)
+    assert np.array_equal(site_open, expected_open)
+    assert np.array_equal(ages, expected_ages)
