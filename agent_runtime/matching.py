@@ -61,9 +61,11 @@ def _grids(bricks, sites, obstacles, closed=None) -> tuple[np.ndarray, np.ndarra
 
 def _result(match, rounds, site_r, site_c, brick_r, brick_c, sites) -> Matching:
     n = int(rounds)
-    pairs = tuple(((int(site_r[i]), int(site_c[i])), (int(brick_r[i]), int(brick_c[i]))) for i in range(n))
-    matched = {p[0] for p in pairs}
-    unmatched = tuple((int(r), int(c)) for r, c in zip(*np.nonzero(sites)) if (int(r), int(c)) not in matched)
+    sr, sc, br, bc = (a[:n].tolist() for a in (site_r, site_c, brick_r, brick_c))
+    pairs = tuple(((r, c), (rb, cb)) for r, c, rb, cb in zip(sr, sc, br, bc))
+    matched = set(zip(sr, sc))
+    rows, cols = np.nonzero(sites)
+    unmatched = tuple(cell for cell in zip(rows.tolist(), cols.tolist()) if cell not in matched)
     return Matching(match, pairs, unmatched)
 
 
@@ -82,26 +84,53 @@ def _can_step(obstacles, r, c, j):
 
 
 @njit(cache=True)
-def _nearest_neighbours(da, obstacles, r, c):
-    """The passable neighbours of (r, c) nearest a brick, as a mask over the 8 moves, and
-    the first of them (Eq. 3's succ, first in move order on a tie)."""
-    dist = np.full(8, np.inf)
-    for j in range(8):
-        if _can_step(obstacles, r, c, j):
-            dist[j] = da[r + _DR[j], c + _DC[j]]
-    tied = dist <= dist.min() + _TIE
-    return tied, np.argmax(tied)
+def _neighbour(da, obstacles, r, c, j):
+    """da of the neighbour move j leads to, inf where the move is not allowed."""
+    return da[r + _DR[j], c + _DC[j]] if _can_step(obstacles, r, c, j) else np.inf
 
 
 @njit(cache=True)
-def _trace(da, obstacles, match, r, c):
-    """Mark the path from (r, c) down the gradient of a to a brick; returns the brick."""
-    match[r, c] = True
-    while da[r, c] > 0.0:
-        _, j = _nearest_neighbours(da, obstacles, r, c)
-        r, c = r + _DR[j], c + _DC[j]
+def _nearest(da, obstacles, r, c):
+    """The least da among the neighbours of (r, c) a move may reach (inf: none)."""
+    best = np.inf
+    for j in range(8):
+        best = min(best, _neighbour(da, obstacles, r, c, j))
+    return best
+
+
+@njit(cache=True)
+def _first_nearest(da, obstacles, r, c):
+    """Eq. 3's succ: the first move in move order to a neighbour nearest a brick (within
+    the tie). With no move allowed every move ties, and it is the first."""
+    best = _nearest(da, obstacles, r, c)
+    for j in range(8):
+        if _neighbour(da, obstacles, r, c, j) <= best + _TIE:
+            return j
+    return 0
+
+
+@njit(cache=True)
+def _trace(da, obstacles, match, end, path, r, c):
+    """Mark the path from (r, c) down the gradient of a to a brick; returns the brick.
+
+    succ is a function of the cell alone, so from a cell an earlier path crossed the
+    rest of the way is that path's: the walk stops there (every cell on it is marked
+    already) and takes its brick from `end` (flat index per cell, -1: not walked yet),
+    which it fills in for its own cells. `path`: scratch, one slot per cell."""
+    m = da.shape[1]
+    k = 0
+    while end[r, c] < 0 and da[r, c] > 0.0:
         match[r, c] = True
-    return r, c
+        path[k] = r * m + c
+        k += 1
+        j = _first_nearest(da, obstacles, r, c)
+        r, c = r + _DR[j], c + _DC[j]
+    match[r, c] = True
+    brick = end[r, c] if end[r, c] >= 0 else r * m + c
+    end[r, c] = brick
+    for i in range(k):
+        end[path[i] // m, path[i] % m] = brick
+    return brick // m, brick % m
 
 
 @njit(cache=True)
@@ -118,46 +147,51 @@ def _site_value(da, obstacles, r, c):
 @njit(cache=True)
 def _matching_kernel(bricks, sites, obstacles):
     n, m = bricks.shape
-    da = _field_kernel(bricks, obstacles)                       # step 1 (distances: a = 1 - k da)
-    value = np.full((n, m), np.inf)
+    da = _field_kernel(bricks, obstacles)                       # step 1 (distances: a = 1 - k d)
+    total = 0
+    for r in range(n):
+        for c in range(m):
+            total += sites[r, c]
+    # The sites in reading order, with their values: each round scans these, not the grid.
+    rows = np.empty(total, np.int64)
+    cols = np.empty(total, np.int64)
+    value = np.empty(total)
+    k = 0
     for r in range(n):
         for c in range(m):
             if sites[r, c]:
-                value[r, c] = _site_value(da, obstacles, r, c)
-    todo = sites.copy()
+                rows[k], cols[k], value[k] = r, c, _site_value(da, obstacles, r, c)
+                k += 1
+    todo = np.ones(total, np.bool_)
     match = np.zeros((n, m), np.bool_)
-    total = int(todo.sum())
+    end = np.full((n, m), -1, np.int64)
+    path = np.empty(n * m, np.int64)
     site_r = np.empty(total, np.int64)
     site_c = np.empty(total, np.int64)
     brick_r = np.empty(total, np.int64)
     brick_c = np.empty(total, np.int64)
     done = 0
     while True:
-        # Steps 2-3: the largest a + b over the grid is the least distance sum. Through any
-        # cell x, da(x) + db(x) >= da(s) for the site s that db(x) comes from (da is a
-        # shortest-path field; moves are symmetric), and at s itself the sum is s's own
-        # value: so the best is the least value of a remaining site, and the b field of
-        # each round (one distance field per site) need not be spread to find it.
         best = np.inf
-        for r in range(n):
-            for c in range(m):
-                if todo[r, c]:
-                    best = min(best, value[r, c])
+        for i in range(total):
+            if todo[i]:
+                best = min(best, value[i])
         if not np.isfinite(best):
             break                                               # no remaining site reaches a brick
-        for r in range(n):                                      # steps 4-5, each maximal site
-            for c in range(m):
-                if not todo[r, c] or value[r, c] > best + _TIE:
-                    continue
-                todo[r, c] = False
-                tied, first = _nearest_neighbours(da, obstacles, r, c)
-                for j in range(8):                              # every tied way out (see above)
-                    if tied[j]:
-                        br, bc = _trace(da, obstacles, match, r + _DR[j], c + _DC[j])
-                        if j == first:
-                            brick_r[done], brick_c[done] = br, bc
-                site_r[done], site_c[done] = r, c
-                done += 1
+        for i in range(total):                                  # steps 4-5, each maximal site
+            if not todo[i] or value[i] > best + _TIE:
+                continue
+            todo[i] = False
+            r, c = rows[i], cols[i]
+            best_way = _nearest(da, obstacles, r, c)
+            first = _first_nearest(da, obstacles, r, c)
+            for j in range(8):                                  # every tied way out (see above)
+                if _neighbour(da, obstacles, r, c, j) <= best_way + _TIE:
+                    br, bc = _trace(da, obstacles, match, end, path, r + _DR[j], c + _DC[j])
+                    if j == first:
+                        brick_r[done], brick_c[done] = br, bc
+            site_r[done], site_c[done] = r, c
+            done += 1
     return match, done, site_r, site_c, brick_r, brick_c
 
 
