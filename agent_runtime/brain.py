@@ -36,7 +36,7 @@ from agent_runtime.far_memory import FarMemory, on_border
 from agent_runtime.field_cache import FieldCache
 from agent_runtime.matching import Matching, calculate_matching, select_goals
 from agent_runtime.motivations import Motivations
-from agent_runtime.nav_inputs import NavInputs, nav_inputs, nm_obstacles
+from agent_runtime.nav_inputs import NavInputs, nav_inputs, nm_obstacles, step_marks
 from agent_runtime.network import NONE, STATE_NODES, ActionNetwork, engineered
 from agent_runtime.seal_guard import SealGuard
 from agent_runtime.sealing import enclosed_sites, pocket_beside
@@ -169,14 +169,13 @@ class Brain:
                 self._recalled = self.far.load_discs()
         self._track_source(frame)
         self.maps.sense(ranges, self.sensor_range)
-        outside = self.far.outside_world()
-        if outside is not None:
-            self.maps.maps[OBSTACLE][outside] = 1.0
-        self._recalled &= ~self.maps.known     # seen free since: gone (eaten, moved)
+        # The world's edge is a wall; recalled discs on cells seen free since are gone
+        # (eaten, moved); the maps as marks: what the step reads (`layers`).
+        marks, open_sites, walls = step_marks(self.maps.maps, self.far.outside_world(), self._recalled,
+                                              self.maps.known)
         self.far.observe_sites(self.maps.maps[BRICK], self.maps.clear_age)
         self.far.age_sites(self.maps.clear_age)
-        marks = self.maps.maps > 0.5    # the maps as marks: what the step reads (`layers`)
-        enclosed = self._enclosed_sites(marks) if self.cfg.enclosed_sites else None
+        enclosed = self._enclosed_sites(open_sites, walls) if self.cfg.enclosed_sites else None
         if enclosed is not None and enclosed.any():
             self.maps.maps[BRICK][enclosed] = 1.0
             marks[BRICK] |= enclosed
@@ -195,12 +194,10 @@ class Brain:
             return self._layers
         return self.maps.maps > 0.5
 
-    def _enclosed_sites(self, m: np.ndarray) -> np.ndarray:
+    def _enclosed_sites(self, open_sites: np.ndarray, walls: np.ndarray) -> np.ndarray:
         """Open sites on the map that no way reaches (`sealing.enclosed_sites`): believed filled.
-        `m`: the maps as marks. Worked out again only when the open sites or the walls
+        `open_sites`, `walls`: as `step_marks` gives them. Worked out again only when they
         changed (read-only)."""
-        walls = m[OBSTACLE] | m[FOOD] | m[WATER] | (m[BRICK] & m[CONFIG])
-        open_sites = m[CONFIG] & ~m[BRICK]
         key = open_sites.tobytes() + walls.tobytes()
         if self._enclosed is None or self._enclosed[0] != key:
             found = enclosed_sites(open_sites, walls, (self.centre, self.centre))
@@ -742,18 +739,21 @@ def _mouth_side(held: np.ndarray, sites: np.ndarray, depth: np.ndarray) -> np.nd
 
 @njit(cache=True)
 def _mouth_side_kernel(held, sites, depth):
-    """A site beside (4-neighbour) a held site, reachable and no deeper than it (+1e-9)."""
+    """A site beside (4-neighbour) a held site, reachable and no deeper than it (+1e-9).
+    Walked from the held sites (a few), not from every cell."""
     n, m = sites.shape
     out = np.zeros((n, m), np.bool_)
-    for r in range(n):
-        for c in range(m):
-            if not sites[r, c] or not np.isfinite(depth[r, c]):
-                continue   # a site no path reaches (depth inf) is on no side of a mouth
-            for dr, dc in ((1, 0), (-1, 0), (0, 1), (0, -1)):
-                rr, cc = r - dr, c - dc
-                if 0 <= rr < n and 0 <= cc < m and held[rr, cc] and depth[r, c] <= depth[rr, cc] + 1e-9:
-                    out[r, c] = True
-                    break
+    flat = held.ravel()
+    for i in range(flat.size):
+        if not flat[i]:
+            continue
+        rr, cc = i // m, i % m
+        for dr, dc in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+            r, c = rr + dr, cc + dc
+            # a site no path reaches (depth inf) is on no side of a mouth
+            if (0 <= r < n and 0 <= c < m and sites[r, c] and np.isfinite(depth[r, c])
+                    and depth[r, c] <= depth[rr, cc] + 1e-9):
+                out[r, c] = True
     return out
 
 

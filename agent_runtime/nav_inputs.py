@@ -1,5 +1,9 @@
 """The navigation maps' inputs, made from the ESMs' marks in one compiled pass.
 
+`step_marks` makes the marks themselves (the ESMs thresholded at 0.5), with the two
+updates of the maps that come just before them and the two masks the enclosed-sites
+check reads, in one pass as well.
+
 Every step the configuration and brick NMs (paper §4.2.3, Fig. 5) and the Matching grid
 (§6) read the same few masks of the thresholded ESMs: the sites still missing a brick, the
 free bricks, what is in the way, the supply, the sites not seen open lately. As numpy
@@ -48,6 +52,25 @@ def nav_inputs(marks: np.ndarray, recalled: np.ndarray, extra_supply: np.ndarray
     return NavInputs(config_goals, brick_goals, obstacles, supply_bricks, closed, in_the_way, bool(any_open))
 
 
+class StepMarks(NamedTuple):
+    """The maps as marks for one step, and the masks the enclosed-sites check reads."""
+
+    marks: np.ndarray        # the ESMs > 0.5, one bool grid per layer (`Brain.layers`)
+    open_sites: np.ndarray   # CONFIG and not BRICK
+    walls: np.ndarray        # OBSTACLE, FOOD, WATER, and bricks on sites
+
+
+_NOWHERE = np.zeros((1, 1), np.bool_)
+
+
+def step_marks(maps: np.ndarray, outside: np.ndarray | None, recalled: np.ndarray, known: np.ndarray) -> StepMarks:
+    """After sensing: mark the cells beyond the world's edge (`outside`, None when its
+    extent is unknown) as fixed obstacles in `maps`, forget the `recalled` discs on cells
+    seen free since (`known`; both in place), then threshold the maps."""
+    has_outside = outside is not None
+    return StepMarks(*_marks_kernel(maps, outside if has_outside else _NOWHERE, has_outside, recalled, known))
+
+
 def nm_obstacles(in_the_way: np.ndarray, bricks: np.ndarray, brick_goals: np.ndarray,
                  centre: int) -> tuple[np.ndarray, np.ndarray]:
     """The obstacles of the configuration NM (what is in the way, and every brick) and of
@@ -84,6 +107,29 @@ def _inputs_kernel(marks, recalled, extra_supply, clear_age, site_memory, agents
     # The cells around the agent are never in doubt: it would be touching a brick there.
     closed[max(centre - 1, 0):centre + 2, max(centre - 1, 0):centre + 2] = False
     return config_goals, brick_goals, obstacles, supply, closed, in_the_way, any_open
+
+
+@njit(cache=True)
+def _marks_kernel(maps, outside, has_outside, recalled, known):
+    layers, n, m = maps.shape
+    for r in range(n):
+        for c in range(m):
+            if has_outside and outside[r, c]:
+                maps[OBSTACLE, r, c] = 1.0
+            recalled[r, c] = recalled[r, c] & (known[r, c] ^ True)
+    marks = np.empty((layers, n, m), np.bool_)
+    for layer in range(layers):
+        for r in range(n):
+            for c in range(m):
+                marks[layer, r, c] = maps[layer, r, c] > 0.5
+    open_sites = np.empty((n, m), np.bool_)
+    walls = np.empty((n, m), np.bool_)
+    for r in range(n):
+        for c in range(m):
+            brick, config = marks[BRICK, r, c], marks[CONFIG, r, c]
+            open_sites[r, c] = config & (brick ^ True)
+            walls[r, c] = marks[OBSTACLE, r, c] | marks[FOOD, r, c] | marks[WATER, r, c] | (brick & config)
+    return marks, open_sites, walls
 
 
 @njit(cache=True)

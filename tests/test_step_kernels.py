@@ -192,3 +192,24 @@ def test_the_compiled_site_beliefs_are_the_numpy_expressions(seed):
     _age_sites(on, rows, cols, clear_age, ages)
     assert np.array_equal(site_open, expected_open)
     assert np.array_equal(ages, expected_ages)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), size=st.sampled_from([5, 9, 12]), bounded=st.booleans())
+def test_the_step_marks_are_the_numpy_expressions(seed, size, bounded):
+    # What Brain.perceive once did with numpy after sensing, written out as the reference.
+    from agent_runtime.esm import BRICK, CONFIG, FOOD, OBSTACLE, WATER
+    from agent_runtime.nav_inputs import step_marks
+    rng = np.random.default_rng(seed)
+    maps = np.where(rng.random((6, size, size)) < 0.3, 1.0, rng.random((6, size, size)) * 0.5)
+    outside = rng.random((size, size)) < 0.2 if bounded else None
+    recalled, known = rng.random((2, size, size)) < 0.4
+    want_maps, want_recalled = maps.copy(), recalled & ~known
+    if outside is not None:
+        want_maps[OBSTACLE][outside] = 1.0
+    marks = want_maps > 0.5
+    got = step_marks(maps, outside, recalled, known)
+    assert np.array_equal(maps, want_maps) and np.array_equal(recalled, want_recalled)   # both in place
+    assert np.array_equal(got.marks, marks)
+    assert np.array_equal(got.open_sites, marks[CONFIG] & ~marks[BRICK])
+    assert np.array_equal(got.walls, marks[OBSTACLE] | marks[FOOD] | marks[WATER] | (marks[BRICK] & marks[CONFIG]))
