@@ -86,8 +86,20 @@ class ActionNetwork:
         return self.excite + self.inhibit
 
     def choose(self, state: np.ndarray) -> Choice:
-        """The (arm, motor) outputs this network fires for the state node activations `state`."""
-        return select(self.inputs(state), self.threshold)
+        """The (arm, motor) outputs this network fires for the state node activations `state`.
+
+        The weights never change, and an agent's state nodes are 0 or 1: a handful of
+        states recur every step, so each one's choice is worked out once."""
+        state = np.asarray(state, dtype=np.float64)
+        key = state.tobytes()
+        choice = self._chosen.get(key)
+        if choice is None:
+            choice = self._chosen[key] = select(self.inputs(state), self.threshold)
+        return choice
+
+    @cached_property
+    def _chosen(self) -> dict[bytes, Choice]:
+        return {}
 
 
 def select(net: np.ndarray, threshold: float = THRESHOLD) -> Choice:
