@@ -7,12 +7,15 @@
 For each layout (scenarios/fig6.toml and three of the generalisation suite: a 21 x 21, a
 51 x 50 and a 117 x 116 world) and map size, the in-process sim (default AgentConfig but
 for the map size) warms up for `--warmup` ticks, then every agent's `Brain.step(frame)` is
-timed on every tick for `--ticks` ticks (the world's step is not timed). The same worker
+timed on every tick for `--ticks` ticks (the world's step is not timed), as the CPU time
+of the thread that steps (what the step costs: a machine shared with other jobs preempts
+the process, and wall time then counts the others' work too) and as wall time. The same worker
 runs on this checkout and on a git worktree of `--reference` (default f7f6a27, the code
 before the cheaper step), one after the other for each row and `--repeats` times in
-alternation, so both sides share the machine's load; the table gives both medians and
-their ratio. Both sides also hash every decision (speed, turn, action, behaviour, state
-nodes, outputs): "same decisions" says whether the two codes chose alike, step for step.
+alternation, so both sides share the machine's load; the table gives both sides' CPU
+medians and their ratio, and the wall-time medians. Both sides also hash every decision
+(speed, turn, action, behaviour, state nodes, outputs): "same decisions" says whether the
+two codes chose alike, step for step.
 
 `REFERENCE` and `reference_checkout` are shared with `bench_scale`: one reference commit for
 the benches of issue 31.
@@ -56,13 +59,15 @@ path, map_size, warmup, ticks = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]),
 sc = load_scenario(path)
 run = sim.start(sc, cfg=AgentConfig(map_size=map_size))
 run.run(warmup, until_complete=False)
-steps, digest = [], hashlib.sha256()
+steps, cpu, digest = [], [], hashlib.sha256()
 for _ in range(ticks):
     for frame in run.world.frames():
         brain = run.brains[frame.agent_id]
+        c = time.thread_time()
         t = time.perf_counter()
         s = brain.step(frame)
         steps.append(time.perf_counter() - t)
+        cpu.append(time.thread_time() - c)
         d = s.decision
         digest.update(repr((frame.agent_id, frame.tick, s.speed, s.turn, s.action, s.behaviour, d.state,
                             d.outputs, d.arm, d.motor)).encode())
@@ -70,12 +75,13 @@ for _ in range(ticks):
     run.world.step()
 steps.sort()
 print(json.dumps(dict(size=f"{sc.cols} x {sc.rows}", agents=len(run.brains), median_ms=1e3 * statistics.median(steps),
-                      p90_ms=1e3 * steps[int(0.9 * (len(steps) - 1))], digest=digest.hexdigest())))
+                      p90_ms=1e3 * steps[int(0.9 * (len(steps) - 1))], cpu_ms=1e3 * statistics.median(cpu),
+                      digest=digest.hexdigest())))
 """
 
 
 def measure(tree: Path, layout: Path, map_size: int, warmup: int, ticks: int) -> dict:
-    """One worker run of `tree` on `layout`: its step median, p90 and decision digest."""
+    """One worker run of `tree` on `layout`: its step medians (CPU, wall), wall p90 and decision digest."""
     env = {**os.environ, "PYTHONPATH": str(tree)}
     out = subprocess.run([sys.executable, "-c", WORKER, str(layout), str(map_size), str(warmup), str(ticks)],
                          cwd=tree, env=env, capture_output=True, text=True, timeout=3600, check=False)
@@ -120,6 +126,8 @@ def compare(trees: dict[str, Path], layouts, maps, warmup: int, ticks: int, repe
                     runs[side].append(measure(tree, layout, map_size, warmup, ticks))
             new, ref = runs["this"], runs["reference"]
             yield dict(layout=layout.stem, map=map_size, size=new[0]["size"], agents=new[0]["agents"],
+                       this_cpu_ms=statistics.median(r["cpu_ms"] for r in new),
+                       ref_cpu_ms=statistics.median(r["cpu_ms"] for r in ref),
                        this_ms=statistics.median(r["median_ms"] for r in new),
                        ref_ms=statistics.median(r["median_ms"] for r in ref),
                        same=all(a["digest"] == b["digest"] for a, b in zip(new, ref)))
@@ -147,15 +155,15 @@ def main(argv: list[str] | None = None) -> int:
     maps = [int(m) for m in args.maps.split(",")]
     materialise(MANIFEST, SUITE)
     with reference_checkout(args.reference, args.reference_dir) as ref:
-        print(f"| layout | world | agents | map | step median ms, this | at {args.reference} | ratio "
-              "| same decisions |")
-        print("|---|---|---:|---:|---:|---:|---:|---|")
+        print(f"| layout | world | agents | map | step CPU median ms, this | at {args.reference} | ratio "
+              f"| wall median ms, this | at {args.reference} | same decisions |")
+        print("|---|---|---:|---:|---:|---:|---:|---:|---:|---|")
         rows = []
         for r in compare({"this": ROOT, "reference": ref}, layouts, maps, warmup, ticks, args.repeats):
             rows.append(r)
-            print(f"| {r['layout']} | {r['size']} | {r['agents']} | {r['map']} | {r['this_ms']:.3f} | "
-                  f"{r['ref_ms']:.3f} | {r['ref_ms'] / r['this_ms']:.2f}x | {'yes' if r['same'] else 'no'} |",
-                  flush=True)
+            print(f"| {r['layout']} | {r['size']} | {r['agents']} | {r['map']} | {r['this_cpu_ms']:.3f} | "
+                  f"{r['ref_cpu_ms']:.3f} | {r['ref_cpu_ms'] / r['this_cpu_ms']:.2f}x | {r['this_ms']:.3f} | "
+                  f"{r['ref_ms']:.3f} | {'yes' if r['same'] else 'no'} |", flush=True)
         if args.json:
             args.json.write_text(json.dumps(rows, indent=1) + "\n", encoding="utf-8")
     return 0
