@@ -90,6 +90,11 @@ class FarMemory:
 
     # ------------------------------------------------------------------ frames
 
+    @property
+    def cell(self) -> tuple[int, int]:
+        """The agent's cell, (x, y) from the attach cell, as a tuple (`pos`)."""
+        return self._cell
+
     def to_map(self, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(rows, cols) on the map of cells given relative to the attach cell."""
         cells = np.asarray(cells, np.int64).reshape(-1, 2)

@@ -38,6 +38,7 @@ class SealGuard:
         self._squares: dict[tuple[int, tuple[int, ...]], np.ndarray] = {}  # `_square`'s masks
         self._judged: tuple[tuple, np.ndarray] | None = None  # `judge`: (inputs, verdict) of the last one
         self._grids: tuple[tuple, tuple[np.ndarray, ...]] | None = None  # `_remembered`: (key, grids)
+        self._mask: tuple[tuple, np.ndarray] | None = None  # `_found_mask`: (key, mask)
 
     def _nothing(self, shape: tuple[int, ...]) -> np.ndarray:
         """An empty mask, read-only (most steps no goal is near: nothing is unsafe)."""
@@ -64,17 +65,30 @@ class SealGuard:
         Why: the check runs only near the agent. A site it found sealing became a goal
         again one cell farther off, and the agent turned back at that cell's edge, to and
         fro, for ever (a one-cell slot of water whose far end it had not seen)."""
-        if not self._found and not unsafe.any():
+        any_unsafe = unsafe.any()
+        if not self._found and not any_unsafe:
             return unsafe   # nothing remembered, nothing new: the rest would change nothing
         judged = goals & self._square(SEAL_RADIUS, goals.shape)
-        for cell in map(tuple, self.far.from_map(*np.nonzero(judged)).tolist()):
-            self._found.pop(cell, None)
-        for cell in map(tuple, self.far.from_map(*np.nonzero(unsafe)).tolist()):
-            self._found[cell] = tick
+        if judged.any():
+            for cell in map(tuple, self.far.from_map(*np.nonzero(judged)).tolist()):
+                self._found.pop(cell, None)
+        if any_unsafe:
+            for cell in map(tuple, self.far.from_map(*np.nonzero(unsafe)).tolist()):
+                self._found[cell] = tick
         self._found = {k: t for k, t in self._found.items() if tick - t <= SEAL_MEMORY}
         if not self._found:
             return unsafe
-        return unsafe | self.far.map_mask(np.array(list(self._found), np.int64))
+        return unsafe | self._found_mask()
+
+    def _found_mask(self) -> np.ndarray:
+        """The sites found sealing lately (`_found`) that lie on the map, as a mask (read-only),
+        kept while they and the agent's cell stay the same (most steps both do)."""
+        key = (self.far.cell, frozenset(self._found))
+        if self._mask is None or self._mask[0] != key:
+            mask = self.far.map_mask(np.array(list(self._found), np.int64))
+            mask.setflags(write=False)
+            self._mask = (key, mask)
+        return self._mask[1]
 
     def judge(self, goals: np.ndarray, open_sites: np.ndarray, blocked: np.ndarray,
               supply: np.ndarray) -> np.ndarray:
