@@ -203,20 +203,30 @@ class FarMemory:
             self.bricks = self.bricks[~on]
         return back
 
-    def _wall_window(self) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
-        """The map cells that lie in the world and their world-grid cells, as open meshes:
+    def _wall_window(self) -> tuple[tuple[slice, slice], tuple[slice, slice]]:
+        """The map cells that lie in the world and their world-grid cells, as slices:
         `layer[map_ix].T` is the map's window in world-grid order, `grid[world_ix]` the same
-        cells of a world grid. Kept until the agent moves a cell."""
+        cells of a world grid. Kept until the agent moves a cell.
+
+        The window is a rectangle (x grows with the map's column, y falls with its row), so
+        slices say it; a step with a cell move reads it a few times, and slicing is a view
+        where index arrays copied."""
         assert self.bounds is not None  # asked only when there are walls, i.e. a known extent
         bounds = self.bounds
 
         def compute():
             x0, y0, x1, y1 = bounds
             idx = np.arange(self.size)
-            gx = self.pos[0] + idx - self.centre - x0       # per map column
-            gy = self.pos[1] + self.centre - idx - y0       # per map row
+            gx = self.pos[0] + idx - self.centre - x0       # per map column, rising
+            gy = self.pos[1] + self.centre - idx - y0       # per map row, falling
             cols, rows = np.flatnonzero((gx >= 0) & (gx < x1 - x0)), np.flatnonzero((gy >= 0) & (gy < y1 - y0))
-            return np.ix_(rows, cols), np.ix_(gx[cols], gy[rows])
+            if cols.size == 0 or rows.size == 0:
+                nothing = slice(0, 0)
+                return (nothing, nothing), (nothing, nothing)
+            c0, c1, r0, r1 = int(cols[0]), int(cols[-1]), int(rows[0]), int(rows[-1])
+            y_last = int(gy[r1])
+            world_y = slice(int(gy[r0]), y_last - 1 if y_last > 0 else None, -1)
+            return (slice(r0, r1 + 1), slice(c0, c1 + 1)), (slice(int(gx[c0]), int(gx[c1]) + 1), world_y)
         return self._cached("wall_window", (), None, compute)
 
     def save_walls(self, obstacles: np.ndarray, discs: np.ndarray | None = None,

@@ -213,3 +213,26 @@ def test_the_step_marks_are_the_numpy_expressions(seed, size, bounded):
     assert np.array_equal(got.marks, marks)
     assert np.array_equal(got.open_sites, marks[CONFIG] & ~marks[BRICK])
     assert np.array_equal(got.walls, marks[OBSTACLE] | marks[FOOD] | marks[WATER] | (marks[BRICK] & marks[CONFIG]))
+
+
+@settings(max_examples=200, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), size=st.sampled_from([5, 7, 11, 41]))
+def test_the_map_window_on_the_world_is_the_index_meshes(seed, size):
+    # far memory's window as it was written with np.ix_ index meshes (the reference), on
+    # worlds the map covers, overlaps on any side, or misses.
+    from agent_runtime.far_memory import FarMemory
+    rng = np.random.default_rng(seed)
+    x0, y0 = (int(v) for v in rng.integers(-30, 1, 2))
+    w, h = (int(v) for v in rng.integers(1, 40, 2))
+    far = FarMemory(size, np.zeros((0, 2), np.int64), (x0, y0, x0 + w, y0 + h))
+    far.move(*(int(v) for v in rng.integers(-45, 45, 2)), np.zeros((size, size), bool))
+    idx = np.arange(size)
+    gx, gy = far.pos[0] + idx - far.centre - x0, far.pos[1] + far.centre - idx - y0
+    cols, rows = np.flatnonzero((gx >= 0) & (gx < w)), np.flatnonzero((gy >= 0) & (gy < h))
+    layer, world = rng.random((size, size)) < 0.5, rng.random((w, h)) < 0.5
+    want_world = world.copy()
+    want_world[np.ix_(gx[cols], gy[rows])] = layer[np.ix_(rows, cols)].T
+    want_map = np.zeros((size, size), bool)
+    want_map[np.ix_(rows, cols)] = world[np.ix_(gx[cols], gy[rows])].T
+    assert np.array_equal(far.on_world(world, layer), want_world)
+    assert np.array_equal(far.on_map(world), want_map)
