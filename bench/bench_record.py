@@ -4,6 +4,7 @@
     python3 -m bench.bench_record --scenario scenarios/fig6.toml --reps 3
     python3 -m bench.bench_record --main-job           # also: the size of a recording of the README's main job
     python3 -m bench.bench_record --record-priority normal,low,idle   # the recorder's priorities side by side
+    python3 -m bench.bench_record --reps 12 --reference main          # this tree and main, side by side
 
 Each repetition runs `conag run SCENARIO --agents N --max-ticks T` as a subprocess,
 alternating without and with `--record` (so a slow spell of a shared machine hits both),
@@ -16,6 +17,13 @@ about 300 ticks, a second, too short to time. Two figures per run:
 * CPU seconds per 1,000 ticks of every process of the run, and of the recorder alone,
   over the same span: the steadier figure on a shared machine, since the run is
   CPU-bound (its processes outnumber the cores) and the wall rate follows the CPU it needs.
+
+With `--reference REV` (a detached git worktree of REV, removed at the end) or
+`--reference-dir PATH` (an existing checkout), every repetition also runs the same builds on
+the reference tree, right before or after this tree's (the two sides take turns going
+first), each side with its own code: two trees' costs measured on the same machine state.
+Every figure is printed per side. The recorded builds whose idle recorder starved and was
+raised to the normal priority (`conag.recording.recorder.PriorityGuard`) are counted.
 
 With `--record-priority P,Q,...` each repetition records once per CPU priority of the
 recorder (`conag run --record-priority`: normal, low, idle; default: only the default,
@@ -40,9 +48,12 @@ import subprocess
 import sys
 import tempfile
 import time
+from contextlib import nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 
+from bench.bench_agent_step import reference_checkout
+from bench.bench_scale import tree_label
 from conag.common import PRIORITIES, RECORDER_PRIORITY
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -111,30 +122,39 @@ class RunFigures:
     cpu_per_kilotick: float  # CPU seconds of all the run's processes per 1,000 ticks of the build
     recorder_per_kilotick: float  # of the recorder alone
     size: int               # bytes of the recording, or 0
+    raised: bool = False    # its idle recorder starved and ran at the normal priority from then on
+
+
+RAISED = "runs at the normal priority from now on"  # the recorder's warning when PriorityGuard raised it
 
 
 def one_run(scenario: str, agents: int | None, ticks: int, record: Path | None, port: int,
-            priority: str = RECORDER_PRIORITY) -> RunFigures:
-    """Run one build and time it (see the module)."""
+            priority: str = RECORDER_PRIORITY, tree: Path = ROOT) -> RunFigures:
+    """Run one build of the checkout `tree` and time it (see the module)."""
     cmd = [sys.executable, "-m", "conag", "run", scenario, "--headless", "--max-ticks", str(ticks),
            "--stall-ticks", "0", "--listen", f"tcp/127.0.0.1:{port}"]
     if agents is not None:
         cmd += ["--agents", str(agents)]
     if record is not None:
         cmd += ["--record", str(record), "--record-priority", priority]
-    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, text=True)
-    clock = BuildClock()
-    cpu: list[tuple[float, float]] = []   # (all, recorder) at the first and the newest progress line
-    for line in proc.stdout:
-        if clock.observe(line):
-            now = (tree_cpu(proc.pid), tree_cpu(proc.pid, only="conag record"))
-            cpu = [cpu[0] if cpu else now, now]
-    proc.wait()
+    env = {**os.environ, "PYTHONPATH": str(tree)}  # every process of the run imports this tree's code
+    with tempfile.TemporaryFile("w+") as err:
+        proc = subprocess.Popen(cmd, cwd=tree, env=env, stdout=subprocess.PIPE, stderr=err, text=True)
+        clock = BuildClock()
+        cpu: list[tuple[float, float]] = []   # (all, recorder) at the first and the newest progress line
+        for line in proc.stdout:
+            if clock.observe(line):
+                now = (tree_cpu(proc.pid), tree_cpu(proc.pid, only="conag record"))
+                cpu = [cpu[0] if cpu else now, now]
+        proc.wait()
+        err.seek(0)
+        stderr = err.read()
+    sys.stderr.write(stderr)
     rate, _ = clock.rate(cmd)
     assert clock.first is not None and clock.last is not None
     kiloticks = (clock.last[0] - clock.first[0]) / 1000
     return RunFigures(rate, (cpu[1][0] - cpu[0][0]) / kiloticks, (cpu[1][1] - cpu[0][1]) / kiloticks,
-                      record.stat().st_size if record is not None and record.exists() else 0)
+                      record.stat().st_size if record is not None and record.exists() else 0, RAISED in stderr)
 
 
 def slowdown(without: float, with_: float) -> float:
@@ -158,6 +178,27 @@ def _priorities(text: str) -> list[str]:
     return values
 
 
+def _summary(label: str, args, plain: list[RunFigures], recorded: dict[str, list[RunFigures]]) -> None:
+    def median(runs: list[RunFigures], field: str) -> float:
+        return statistics.median(getattr(r, field) for r in runs)
+
+    a, ca = median(plain, "rate"), median(plain, "cpu_per_kilotick")
+    for priority, runs in recorded.items():
+        b, cb = median(runs, "rate"), median(runs, "cpu_per_kilotick")
+        pairs = sorted(100 * slowdown(p.rate, r.rate) for p, r in zip(plain, runs, strict=True))
+        print(f"{label}{args.scenario}, {args.agents or 'its'} agents, {args.reps} repetitions, recorder at "
+              f"priority {priority}: paired slowdown "
+              f"{100 * paired_slowdown([r.rate for r in plain], [r.rate for r in runs]):.1f}% "
+              f"(pairs {', '.join(f'{x:.1f}' for x in pairs)}); "
+              f"median {a:.0f} ticks/s without, {b:.0f} with recording: "
+              f"unpaired slowdown {100 * slowdown(a, b):.1f}% "
+              f"(ranges {min(r.rate for r in plain):.0f}-{max(r.rate for r in plain):.0f} and "
+              f"{min(r.rate for r in runs):.0f}-{max(r.rate for r in runs):.0f}); CPU per 1000 ticks "
+              f"{ca:.2f} s without, {cb:.2f} s with (+{100 * (cb - ca) / ca:.1f}%), the recorder "
+              f"{median(runs, 'recorder_per_kilotick'):.2f} s; recorders raised to normal: "
+              f"{sum(r.raised for r in runs)} of {len(runs)}", flush=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--scenario", default="scenarios/nested_squares.toml")
@@ -172,42 +213,41 @@ def main(argv: list[str] | None = None) -> int:
                         f"(default {RECORDER_PRIORITY})")
     p.add_argument("--main-job", action="store_true",
                    help="also record the README's main job (fig6 until complete) and print the file's size")
+    p.add_argument("--reference", metavar="REV",
+                   help="also run every repetition on a git worktree of REV (e.g. main), side by side")
+    p.add_argument("--reference-dir", type=Path, metavar="PATH",
+                   help="also run every repetition on this existing checkout, side by side")
     args = p.parse_args(argv)
     agents = args.agents or None
-    plain: list[RunFigures] = []
-    recorded: dict[str, list[RunFigures]] = {n: [] for n in args.record_priority}
-    with tempfile.TemporaryDirectory() as tmp:
-        for n in range(args.warmup):
-            w = one_run(args.scenario, agents, args.ticks, None, args.port)
-            print(f"warm-up {n + 1}: {w.rate:.0f} ticks/s, not counted", flush=True)
+    reference = args.reference_dir is not None or args.reference is not None
+    with (reference_checkout(args.reference, args.reference_dir) if reference else nullcontext()) as ref, \
+            tempfile.TemporaryDirectory() as tmp:
+        trees = {"": ROOT} if ref is None else {
+            f"[this {tree_label(ROOT, 'this')}] ": ROOT,
+            f"[reference {tree_label(ref, args.reference or str(ref))}] ": ref}
+        plain: dict[str, list[RunFigures]] = {side: [] for side in trees}
+        recorded = {side: {n: [] for n in args.record_priority} for side in trees}
+        for side, tree in trees.items():
+            for n in range(args.warmup):
+                w = one_run(args.scenario, agents, args.ticks, None, args.port, tree=tree)
+                print(f"{side}warm-up {n + 1}: {w.rate:.0f} ticks/s, not counted", flush=True)
         for rep in range(args.reps):
-            plain.append(one_run(args.scenario, agents, args.ticks, None, args.port))
-            a = plain[-1]
-            for priority, runs in recorded.items():
-                runs.append(one_run(args.scenario, agents, args.ticks, Path(tmp) / f"r{rep}-{priority}.mcap",
-                                    args.port, priority))
-                b = runs[-1]
-                print(f"rep {rep + 1}: {a.rate:.0f} ticks/s without, {b.rate:.0f} with recording "
-                      f"at priority {priority} ({100 * slowdown(a.rate, b.rate):+.1f}%, {b.size / 1e6:.2f} MB); "
-                      f"CPU s per 1000 ticks "
-                      f"{a.cpu_per_kilotick:.2f} without, {b.cpu_per_kilotick:.2f} with "
-                      f"(recorder {b.recorder_per_kilotick:.2f})", flush=True)
-
-        def median(runs: list[RunFigures], field: str) -> float:
-            return statistics.median(getattr(r, field) for r in runs)
-
-        a, ca = median(plain, "rate"), median(plain, "cpu_per_kilotick")
-        for priority, runs in recorded.items():
-            b, cb = median(runs, "rate"), median(runs, "cpu_per_kilotick")
-            print(f"{args.scenario}, {agents or 'its'} agents, {args.reps} repetitions, recorder at "
-                  f"priority {priority}: paired slowdown "
-                  f"{100 * paired_slowdown([r.rate for r in plain], [r.rate for r in runs]):.1f}%; "
-                  f"median {a:.0f} ticks/s without, {b:.0f} with recording: "
-                  f"unpaired slowdown {100 * slowdown(a, b):.1f}% "
-                  f"(ranges {min(r.rate for r in plain):.0f}-{max(r.rate for r in plain):.0f} and "
-                  f"{min(r.rate for r in runs):.0f}-{max(r.rate for r in runs):.0f}); CPU per 1000 ticks "
-                  f"{ca:.2f} s without, {cb:.2f} s with (+{100 * (cb - ca) / ca:.1f}%), the recorder "
-                  f"{median(runs, 'recorder_per_kilotick'):.2f} s")
+            order = list(trees.items())
+            for side, tree in order[rep % len(order):] + order[:rep % len(order)]:  # sides take turns going first
+                plain[side].append(one_run(args.scenario, agents, args.ticks, None, args.port, tree=tree))
+                a = plain[side][-1]
+                for priority, runs in recorded[side].items():
+                    out = Path(tmp) / f"r{rep}-{priority}-{len(runs)}.mcap"
+                    runs.append(one_run(args.scenario, agents, args.ticks, out, args.port, priority, tree=tree))
+                    b = runs[-1]
+                    out.unlink(missing_ok=True)
+                    print(f"{side}rep {rep + 1}: {a.rate:.0f} ticks/s without, {b.rate:.0f} with recording "
+                          f"at priority {priority} ({100 * slowdown(a.rate, b.rate):+.1f}%, {b.size / 1e6:.2f} MB"
+                          f"{', recorder raised to normal' if b.raised else ''}); CPU s per 1000 ticks "
+                          f"{a.cpu_per_kilotick:.2f} without, {b.cpu_per_kilotick:.2f} with "
+                          f"(recorder {b.recorder_per_kilotick:.2f})", flush=True)
+        for side in trees:
+            _summary(side, args, plain[side], recorded[side])
         if args.main_job:
             out = Path(tmp) / "main.mcap"
             t0 = time.monotonic()

@@ -38,7 +38,7 @@ import time
 import traceback
 from dataclasses import dataclass, field
 
-from conag.exit_codes import EXIT_INTERRUPTED
+from conag.exit_codes import EXIT_INTERRUPTED, exit_words
 
 # Set before numpy loads, in the server and so in every child: OpenBLAS would otherwise
 # start a thread per core at import, and a process with threads must not fork.
@@ -226,6 +226,15 @@ class ForkServerError(RuntimeError):
     """The fork server could not start or could not spawn."""
 
 
+def not_started(code: int | None, timeout: float) -> str:
+    """Why the fork server did not start, from its exit code (None: it is still running). Only
+    a server that exited by itself printed why (a traceback, on the supervisor's stderr); one
+    killed by a signal printed nothing."""
+    if code is None:
+        return f"the fork server did not say it was ready within {timeout:g} s"
+    return f"the fork server {exit_words(code)} before it was ready" + (" (its error is above)" if code > 0 else "")
+
+
 @dataclass
 class Forked:
     """One agent process spawned by the fork server, with the parts of `subprocess.Popen`
@@ -277,8 +286,12 @@ class ForkServer:
         self._early_exits: dict[int, int] = {}   # exits read before the pid's reply was handled
         ready = self._read_line(start_timeout)
         if ready is None or "ready" not in ready:
+            try:
+                code: int | None = self.proc.wait(0.5)  # its output ended: it has exited, or is exiting
+            except subprocess.TimeoutExpired:
+                code = None
             self.close()
-            raise ForkServerError("the fork server did not start (its error is above)")
+            raise ForkServerError(not_started(code, start_timeout))
         self._reader = threading.Thread(target=self._read, name="forkserver-reader", daemon=True)
         self._reader.start()
 

@@ -46,6 +46,7 @@ from pathlib import Path
 
 from conag.agent_settings import AgentSettings
 from conag.common import RECORDER_PRIORITY
+from conag.exit_codes import exit_words
 from conag.forkserver import Forked, ForkServer, ForkServerError
 from conag.noise_flags import to_note
 from conag.secure import bus_flags, run_bus_options, secure_bus
@@ -503,17 +504,6 @@ class EarlyDeaths:
                   f"goes on without it (`conag restart {agent}` starts it again)", flush=True)
         if self._told and self.run_bus.last_tick <= 0 and self.fleet.all_exited():
             raise RuntimeError("every agent process exited before the world's first tick: nothing is left to build")
-
-
-def exit_words(code: int) -> str:
-    """How a process ended, from its return code: "exited (code 1)", "was killed (SIGKILL)"."""
-    if code < 0:
-        try:
-            name = signal.Signals(-code).name
-        except ValueError:
-            name = f"signal {-code}"
-        return f"was killed ({name})"
-    return f"exited (code {code})"
 
 
 def _wait_until(*conditions: Callable[[], bool], poll: float = 0.1) -> None:

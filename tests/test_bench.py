@@ -56,3 +56,12 @@ def test_checkpoint_benchmark_quick_run_prints_its_table():
     assert r.returncode == 0, r.stderr
     rows = [line for line in r.stdout.splitlines() if line.startswith("| nested_squares")]
     assert len(rows) == 1 and float(rows[0].split("|")[2].split()[0]) > 0
+
+
+def test_recorder_benchmark_replays_a_build_into_the_recorder_and_prints_its_cpu():
+    r = subprocess.run([sys.executable, "-m", "bench.bench_recorder", "--scenario", "scenarios/quick_wall.toml",
+                        "--agents", "1", "--reps", "1"], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    cpu = [line for line in r.stdout.splitlines() if "CPU s per 1000 ticks (median" in line]
+    assert len(cpu) == 2 and all(float(line.split("recorder ")[1].split()[0]) > 0 for line in cpu), r.stdout
+    assert sum("us per bus message" in line for line in r.stdout.splitlines()) == 2, r.stdout

@@ -88,3 +88,28 @@ def test_a_stop_signal_inside_a_library_call_is_a_stop_not_a_crash():
     wrapped.__cause__ = _Stopped()
     assert _interrupted(wrapped)
     assert not _interrupted(SystemError("a real crash")) and not _interrupted(None)
+
+
+@pytest.mark.parametrize("ending, words", [
+    ("kill -KILL $$", "the fork server was killed (SIGKILL) before it was ready"),
+    ("echo 'conag fork server: cannot load' >&2; exit 3",
+     "the fork server exited (code 3) before it was ready (its error is above)"),
+])
+def test_a_fork_server_that_never_starts_says_how_it_ended(tmp_path, monkeypatch, ending, words):
+    # "its error is above" only where the server printed one: a SIGKILL prints nothing
+    fake = tmp_path / "python3"
+    fake.write_text(f"#!/bin/sh\n{ending}\n")
+    fake.chmod(0o755)
+    monkeypatch.setattr("sys.executable", str(fake))
+    with pytest.raises(ForkServerError) as exc:
+        ForkServer(warm=False, start_timeout=30)
+    assert str(exc.value) == words
+
+
+def test_a_fork_server_that_hangs_is_given_up_after_its_timeout(tmp_path, monkeypatch):
+    fake = tmp_path / "python3"
+    fake.write_text("#!/bin/sh\nexec cat >/dev/null\n")   # silent until its input ends
+    fake.chmod(0o755)
+    monkeypatch.setattr("sys.executable", str(fake))
+    with pytest.raises(ForkServerError, match=r"did not say it was ready within 0\.5 s"):
+        ForkServer(warm=False, start_timeout=0.5)

@@ -173,6 +173,27 @@ def test_a_recording_holds_foxglove_channels_that_an_outside_reader_decodes_as_t
     assert [e.key for e in read_recording(out).entries] == [k for k, _ in messages]
 
 
+
+def test_a_scene_made_from_kept_primitives_is_the_scene_made_afresh():
+    # A translator keeps each disc's and site's primitive for the next views: a disc that
+    # moves, a site that fills and sizes from a Welcome must show as a fresh translator shows them.
+    from dataclasses import replace
+
+    from conag.foxglove.convert import Geometry
+
+    kept = Translator()
+    views = [_view(10), replace(_view(20), disc_xs=(1.5, 3.0, 7.25)),            # the brick moved
+             replace(_view(30), disc_xs=(1.5, 3.0, 7.25), site_filled=(True, True))]  # a site filled
+    for geometry in (Geometry.default(), Geometry(2.0, 0.3, 0.75)):
+        kept.geometry = geometry
+        for v in views:
+            fresh = Translator()
+            fresh.geometry, fresh._agents = geometry, set(kept._agents)
+            assert kept.scene(v, 5).encode() == fresh.scene(v, 5).encode()
+    from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
+
+    assert_scene_matches(SceneUpdate.FromString(kept.scene(views[-1], 5).encode()), views[-1])
+
 def test_a_recording_without_foxglove_channels_has_the_bus_channels_only(tmp_path):
     out = tmp_path / "r.mcap"
     with McapRecorder(out) as rec:

@@ -76,6 +76,50 @@ def test_an_idle_recorder_that_starves_runs_at_the_normal_priority_from_then_on(
     assert raised[-1] != -1
 
 
+
+class _Sample:
+    def __init__(self, key: str, data: bytes, work: float, now: list[float]):
+        self.key_expr, self._data, self._work, self._now = key, data, work, now
+
+    @property
+    def payload(self):
+        return self
+
+    def to_bytes(self) -> bytes:
+        self._now[0] += self._work   # writing this message takes `work` seconds of the clock
+        return self._data
+
+
+class _Inbox:
+    def __init__(self, samples):
+        self.samples = list(samples)
+
+    def try_recv(self):
+        return self.samples.pop(0) if self.samples else None
+
+
+def test_a_long_drain_is_work_not_starving_but_a_gap_between_two_messages_is(tmp_path):
+    from conag.recording.recorder import STARVED, PriorityGuard, RecordReport, _drain
+
+    def drain(gaps: list[float]) -> tuple[int, list[float]]:
+        """Drain one message per entry of `gaps`, each taking that long on the clock; what the guard raised."""
+        now, raised = [0.0], []
+        report = RecordReport()
+        guard = PriorityGuard(True, report, clock=lambda: now[0], raise_priority=lambda: raised.append(now[0]) or True)
+        key = keys.command("w0", "a1")
+        inbox = _Inbox(_Sample(key, encode(AgentCommand("a1", t, 0.0, 0.0, "none")), gap, now)
+                       for t, gap in enumerate(gaps))
+        with McapRecorder(tmp_path / f"r{len(gaps)}.mcap") as rec:
+            n = _drain(inbox, rec, keys.status("w0"), report, lambda: 0, guard.turn, most=len(gaps) - 1)
+        return n, raised
+
+    # 20 messages of 0.2 STARVED each: four times STARVED in one drain, never that long between two
+    n, raised = drain([STARVED * 0.2] * 20)
+    assert n == 19 and raised == []   # at most `most` at a time; not raised
+    # the same drain with one message held up for longer than STARVED (the recorder had no CPU)
+    n, raised = drain([STARVED * 0.2] * 10 + [STARVED * 1.5] + [STARVED * 0.2] * 10)
+    assert n == 20 and raised == [pytest.approx(STARVED * 3.5)]
+
 @pytest.mark.slow
 @pytest.mark.timeout(600)
 def test_a_recorder_whose_world_link_was_closed_names_the_ticks_it_lacks(tmp_path, endpoint):

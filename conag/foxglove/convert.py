@@ -68,6 +68,7 @@ TF = "/tf"
 LOG = "/log"
 PROGRESS = "/progress"
 SCANS_EVERY = 10  # the world's default view_every: scans at the ticks views are published
+PRIMITIVES_KEPT = 4096  # disc and site primitives kept for the next views (emptied when full)
 COLOURS = {"food": "#3a9d23", "water": "#2a6fdb", "brick": "#b5462f", "wall": "#555555", "site": "#f2d27a",
            "filled": "#e0a100", "agent": "#6a3d9a", "dead": "#aaaaaa", "heading": "#111111"}  # the viewer's
 PROGRESS_SCHEMA = {
@@ -221,6 +222,9 @@ class Translator:
         self._walls: tuple | None = None
         self._agents: set[str] = set()
         self._frames: dict[str, SensorFrame] = {}  # per agent: its frame of a view tick, not yet translated
+        # A disc or a site looks the same from one view to the next unless it moved or filled:
+        # its primitive is made once and reused (most of a SceneUpdate's making, otherwise).
+        self._primitives: dict[tuple, Any] = {}
 
     def feed(self, key: str, data: bytes, log_time: int) -> list[Derived]:
         """What the message `data` published on `key` at `log_time` (ns) becomes (often nothing)."""
@@ -266,8 +270,7 @@ class Translator:
         g = self.geometry
         entities = [self._discs(v, kind, t, meta) for kind in ("food", "water", "brick")]
         entities.append(self._entity("sites", t, meta, cubes=[
-            fm.CubePrimitive(pose=_pose(x, y, 0.005), size=fm.Vector3(x=g.cell * 0.9, y=g.cell * 0.9, z=0.01),
-                             color=_colour("filled" if f else "site"))
+            self._kept(("site", g, x, y, f), _site_cube, g, x, y, f)
             for x, y, f in zip(v.site_xs, v.site_ys, v.site_filled)]))
         entities += [self._agent(v, i, t, meta) for i in range(len(v.agent_ids))]
         gone = self._agents - set(v.agent_ids)
@@ -279,12 +282,19 @@ class Translator:
     def _entity(self, eid: str, t: int, meta: list, **primitives) -> fm.SceneEntity:
         return fm.SceneEntity(timestamp=_stamp(t), frame_id=FRAME, id=eid, metadata=meta, **primitives)
 
+    def _kept(self, key: tuple, make: Callable[..., Any], *args: Any) -> Any:
+        """`make(*args)`, made once per `key` (what the primitive shows; one is never changed once made)."""
+        p = self._primitives.get(key)
+        if p is None:
+            if len(self._primitives) >= PRIMITIVES_KEPT:
+                self._primitives.clear()
+            p = self._primitives[key] = make(*args)
+        return p
+
     def _discs(self, v: WorldView, kind: str, t: int, meta: list) -> fm.SceneEntity:
-        d = 2 * self.geometry.disc_radius
-        size = fm.Vector3(x=d, y=d, z=0.1)
-        colour = _colour(kind)
+        g = self.geometry
         return self._entity(f"discs/{kind}", t, meta, cylinders=[
-            fm.CylinderPrimitive(pose=_pose(x, y, 0.05), size=size, bottom_scale=1.0, top_scale=1.0, color=colour)
+            self._kept(("disc", g, kind, x, y), _disc_cylinder, g, kind, x, y)
             for x, y, k in zip(v.disc_xs, v.disc_ys, v.disc_kinds) if k == kind])
 
     def _agent(self, v: WorldView, i: int, t: int, meta: list) -> fm.SceneEntity:
@@ -381,6 +391,17 @@ class Translator:
     def _on_timeout(self, lt: LockstepTimeout, t: int) -> Iterable[Derived]:
         yield _log(t, lt.tick, fm.LogLevel.Warning, "world",
                    f"tick {lt.tick}: stepped without the commands of {', '.join(lt.agent_ids)}")
+
+
+def _site_cube(g: Geometry, x: float, y: float, filled: bool) -> fm.CubePrimitive:
+    return fm.CubePrimitive(pose=_pose(x, y, 0.005), size=fm.Vector3(x=g.cell * 0.9, y=g.cell * 0.9, z=0.01),
+                            color=_colour("filled" if filled else "site"))
+
+
+def _disc_cylinder(g: Geometry, kind: str, x: float, y: float) -> fm.CylinderPrimitive:
+    d = 2 * g.disc_radius
+    return fm.CylinderPrimitive(pose=_pose(x, y, 0.05), size=fm.Vector3(x=d, y=d, z=0.1), bottom_scale=1.0,
+                                top_scale=1.0, color=_colour(kind))
 
 
 def _log(t: int, tick: int, level: fm.LogLevel, name: str, text: str) -> Derived:

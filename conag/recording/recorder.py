@@ -26,7 +26,11 @@ lacked ticks. So:
 
 * an idle recorder whose loop went `STARVED` seconds without the CPU runs at the priority
   its process started with (normal, as a rule) from then on (`PriorityGuard`; every thread,
-  zenoh's too), which gets its share of the CPU on any machine;
+  zenoh's too), which gets its share of the CPU on any machine. The loop checks between
+  any two messages it writes: a long drain of a backlog is work, not starving (counted
+  from one turn of the loop to the next, 1-2 s drains at normal load raised the recorder in
+  most runs of `bench.bench_record`, and a recorder at the normal priority slows the run it
+  records by about 10%);
 * its session announces a lease of `LEASE_MS` (zenoh's default is 10 s): the world and
   the agents wait that long for a silent recorder before they drop its link;
 * should the link be closed all the same, zenoh connects it again by itself, and the
@@ -59,7 +63,9 @@ from protocol.messages import WorldStatus
 log = logging.getLogger("conag.record")
 
 QUEUE_DEPTH = 65_536   # samples zenoh may hold for the writer; when full, zenoh's receiving thread waits
-IDLE_SLEEP = 0.002     # seconds the writer sleeps when nothing is waiting
+IDLE_SLEEP = 0.010     # seconds the writer sleeps when nothing is waiting (2 ms: 15% more of the recorder's CPU;
+                       # 10 ms leaves some 30 messages of a 3-agent run waiting, of QUEUE_DEPTH)
+DRAIN_BATCH = 1024     # messages the loop writes before it turns again (flushes every `flush_every`, watches the world)
 QUIET = 0.5            # once stopped, the recorder writes on until nothing has come for this long ...
 QUIET_LIMIT = 10.0     # ... or for at most this long
 STARVED = 1.0          # seconds the loop went without the CPU: an idle recorder then leaves the idle priority
@@ -91,6 +97,7 @@ class PriorityGuard:
         self.last = clock()
 
     def turn(self) -> None:
+        """The recorder got the CPU: called every turn of its loop and for every message it writes."""
         now = self.clock()
         late, self.last = now - self.last, now
         if self.armed and late >= STARVED:
@@ -127,10 +134,14 @@ def run_recorder(session: zenoh.Session, world_id: str, out: str | Path, stop: t
                                                                                          maps_every)))
             last_flush = time.monotonic()
             guard = PriorityGuard(idle, report)
+
+            def drain() -> int:
+                return _drain(inbox, recorder, status_key, report, clock, guard.turn, most=DRAIN_BATCH)
+
             while not stop.is_set():
                 guard.turn()
                 _watch_world(world_token, report, world_id)
-                if not _drain(inbox, recorder, status_key, report, clock):
+                if not drain():
                     time.sleep(IDLE_SLEEP)
                 if not report.heard_world.is_set() and report.status is not None:
                     report.heard_world.set()
@@ -142,7 +153,7 @@ def run_recorder(session: zenoh.Session, world_id: str, out: str | Path, stop: t
             # Stopped: the last messages may still be on their way (an idle recorder on a busy
             # machine reads its sockets late; the world's last frames came, an agent's last
             # commands had not): write on until the bus has been quiet for a while.
-            drain_until_quiet(lambda: _drain(inbox, recorder, status_key, report, clock))
+            drain_until_quiet(drain)
         # Undeclared: nothing more arrives; write what is still in the channel.
         _drain(inbox, recorder, status_key, report, clock)
     finally:
@@ -168,11 +179,13 @@ def drain_until_quiet(drain: Callable[[], int], quiet: float = QUIET, limit: flo
 
 
 def _drain(inbox, recorder: McapRecorder, status_key: str, report: RecordReport,
-           clock: Callable[[], int]) -> int:
-    """Write every sample waiting in `inbox`; returns how many (the channel, once closed
-    by the undeclare and emptied, says so with an error: nothing is left then)."""
+           clock: Callable[[], int], turn: Callable[[], None] = lambda: None, most: int | None = None) -> int:
+    """Write the samples waiting in `inbox` (at most `most`), calling `turn` before each
+    (`PriorityGuard.turn`); returns how many (the channel, once closed by the undeclare and
+    emptied, says so with an error: nothing is left then)."""
     n = 0
-    while True:
+    while most is None or n < most:
+        turn()
         try:
             sample = inbox.try_recv()
         except zenoh.ZError:
@@ -181,6 +194,7 @@ def _drain(inbox, recorder: McapRecorder, status_key: str, report: RecordReport,
             return n
         _write(recorder, str(sample.key_expr), sample.payload.to_bytes(), clock(), status_key, report)
         n += 1
+    return n
 
 
 def _write(recorder: McapRecorder, key: str, data: bytes, t: int, status_key: str, report: RecordReport) -> None:
