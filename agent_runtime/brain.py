@@ -17,7 +17,10 @@ Additions for worlds nobody tuned for (each documented where it is made):
   always excited");
 - an agent that makes no headway for `stuck_ticks` (two agents avoiding each other, a
   body pushing into something) backs off in a random direction for a random while, so
-  agents that block each other separate within a bounded number of ticks.
+  agents that block each other separate within a bounded number of ticks;
+- for big teams, off by default (issue 36): goals another agent in sight takes first are
+  left to it (`claims`), an agent with nothing to fetch waits near the supply, and a
+  searching agent leaves unseen ground nearer another agent to it.
 """
 
 from __future__ import annotations
@@ -709,19 +712,19 @@ class Brain:
             if gradient_step(field) not in (None, (0, 0)):
                 return self._navigate(field, heading)
             self.far.give_up_target()
-        if self.cfg.idle_wait and self._taken_from is None:
+        if self.cfg.idle_wait and self._taken_from is None and not self.searching():
             return self._wait(heading)
         return self._wander(heading)
 
     def _wait(self, heading: float) -> tuple[float, float]:
-        """With nothing to fetch and nothing to search, wait: near the supply (within
-        `idle_near` cells of a known free brick, by a way), off the open sites and the
-        cells beside them, and standing still once there.
+        """Knowing free bricks but nothing to fetch now (no goal site, or the bricks out of
+        reach), wait: near the supply (within `idle_near` cells of a known free brick, by
+        a way), off the open sites and the cells beside them, and standing still there.
 
         An idle agent that wanders walks for nothing, stands in the others' way and is
-        far from the next brick when one becomes its goal; with 32 agents idling was more
-        than half of the agent-ticks (issue 36). Beliefs go stale while standing, so after
-        `idle_patience` ticks of waiting it wanders one leg, and waits again."""
+        far from the next brick when one becomes its goal (issue 36). An agent that knows
+        no free brick searches instead (`_explore`). Beliefs go stale while standing, so
+        after `idle_patience` ticks of waiting it wanders one leg, and waits again."""
         self._waited = True
         self._idle += 1
         if self._idle > self.cfg.idle_patience:

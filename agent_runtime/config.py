@@ -52,7 +52,7 @@ class AgentConfig:
     off_own_brick: bool = True      # leave a brick just dropped on the side away from a pocket
     sequencing_fallback: bool = True  # plain goals when sequencing leaves none reachable
     # Additions for big teams (issue 36), off by default (docs/design.md says why):
-    idle_wait: bool = False         # with nothing to fetch, wait near the supply and off the sites, not wander
+    idle_wait: bool = False         # knowing bricks but nothing to fetch, wait near the supply, off the sites
     yield_goals: bool = False       # leave a brick or site to another agent in sight that is nearer to it
     spread_search: bool = False     # searching for bricks, leave unseen ground nearer another agent in sight to it
     # Refinements of the ESMs' sensing rule (agent_runtime.esm; off: the plain rule).
