@@ -132,3 +132,15 @@ def test_a_searching_agent_leaves_unseen_ground_nearer_another_agent_to_it():
     picks = {int(FarMemory(21, np.zeros((0, 2)), (-20, -5, 20, 5)).unseen_target(np.random.default_rng(s))[1]
                  > 10) for s in range(40)}
     assert picks == {0, 1}     # alone, it goes either way
+
+
+def test_the_waste_watcher_names_the_goal_a_gradient_ends_at():
+    from agent_runtime.spreading import distance_field
+    from experiments.team_waste import _goal_at_end
+
+    goals = grid([(0, 0), (8, 7)])
+    walls = grid([(5, 5), (5, 6), (5, 7), (5, 8), (6, 5)])
+    field = distance_field(goals, walls)
+    assert _goal_at_end(field, 4) == (0, 0)            # from the centre, the nearer goal
+    assert _goal_at_end(field[2:, 2:], 4) == (6, 5)    # from (6, 6), below the wall: (8, 7)
+    assert _goal_at_end(distance_field(np.zeros((9, 9), bool), walls), 4) is None
