@@ -17,7 +17,10 @@ Additions for worlds nobody tuned for (each documented where it is made):
   always excited");
 - an agent that makes no headway for `stuck_ticks` (two agents avoiding each other, a
   body pushing into something) backs off in a random direction for a random while, so
-  agents that block each other separate within a bounded number of ticks.
+  agents that block each other separate within a bounded number of ticks;
+- for big teams, off by default (issue 36): goals another agent in sight takes first are
+  left to it (`claims`), an agent with nothing to fetch waits near the supply, and a
+  searching agent leaves unseen ground nearer another agent to it.
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ import numpy as np
 from numba import njit
 
 from agent_runtime import steering
+from agent_runtime.claims import claimed_by_others
 from agent_runtime.config import AgentConfig
 from agent_runtime.esm import AGENT, BRICK, CONFIG, FOOD, OBSTACLE, WATER, EgocentricMaps, Sensing
 from agent_runtime.far_memory import FarMemory, on_border
@@ -117,6 +121,9 @@ class Brain:
         self._unstick_heading = 0.0
         self._leg_heading = 0.0            # the current straight leg of Explore ...
         self._leg_left = 0                 # ... and the ticks it has to go
+        self._idle = 0                     # ticks waited in a row (`idle_wait`)
+        self._waited = False               # whether this step waited (`_wait`) ...
+        self._standing = False             # ... and stood still doing so
         self.unsticks = 0                  # how often it had to back off
         self.searched = 0                  # squares of the world first seen while searching for bricks
         self._tick = welcome.tick
@@ -318,10 +325,25 @@ class Brain:
             unsafe = self.seals.unsafe(config_goals, open_sites, obstacles, supply_bricks, self._tick)
             if unsafe.any():
                 config_goals = config_goals & ~unsafe
+        if self.cfg.yield_goals:
+            brick_goals = self._yield(brick_goals)
+            if self._taken_from is not None:
+                config_goals = self._yield(config_goals)
         # Bricks that are not goals (the structure's, and with sequencing the unmatched free
         # ones) are in the way: a path must not lead through one to a matched brick beyond.
         config_obstacles, brick_obstacles = nm_obstacles(i.in_the_way, m[BRICK], brick_goals, self.centre)
         return (config_goals, config_obstacles), (brick_goals, brick_obstacles)
+
+    def _yield(self, goals: np.ndarray) -> np.ndarray:
+        """`goals` less those another agent in sight takes first (`claims`), unless that
+        leaves none: two agents heading for one brick cost the loser its walk, and a
+        guess about the others must never leave this one with nothing to do."""
+        others = self.layers()[AGENT]
+        if not goals.any() or not others.any():
+            return goals
+        c, frac = self.centre, self.maps.frac
+        left = goals & ~claimed_by_others(goals, others, c - float(frac[1]), c + float(frac[0]))
+        return left if left.any() else goals
 
     def _nav_inputs(self, m: np.ndarray) -> NavInputs:
         """`nav_inputs` of the marks `m`, made once per step (`m` is the step's own array)."""
@@ -450,10 +472,13 @@ class Brain:
             self._layers = None
 
     def _decide(self, frame: SensorFrame, ranges: np.ndarray) -> Step:
+        self._waited = self._standing = False
         plans = self.plan()
         state = self.state_nodes(frame, plans)
         choice = self.network.choose(state)
         speed, turn, action, behaviour = self._select(frame, ranges, plans, choice.arm, choice.motor)
+        if not self._waited:
+            self._idle = 0
         speed, turn, action, behaviour = self._unstick(frame, speed, turn, action, behaviour)
         if self.cfg.off_own_brick:
             speed, turn = self._off_own_brick(frame, ranges[_CH["brick"]], speed, turn)
@@ -544,7 +569,7 @@ class Brain:
         self._trail[self._trail_next] = self._odo
         self._trail_next = (self._trail_next + 1) % len(self._trail)
         self._trail_len = min(self._trail_len + 1, self.cfg.stuck_ticks)
-        moving = behaviour not in _STILL_IS_FINE
+        moving = behaviour not in _STILL_IS_FINE and not self._standing
         if len(self._moving) == self._moving.maxlen and not self._moving[0]:
             self._still -= 1   # the oldest drops out
         self._moving.append(moving)
@@ -668,7 +693,9 @@ class Brain:
         if not self.cfg.explore_sweep:
             # The paper's Explore (§4.1): a random walk.
             return steering.explore(self.rng, self.cfg.explore_turn, self.cfg.cruise_speed)
-        target = self.far.unseen_target(self.rng) if self.searching() else None
+        target = None
+        if self.searching():
+            target = self.far.unseen_target(self.rng, self._others() if self.cfg.spread_search else None)
         if target is not None:
             m = self.layers()
             obstacles = self._free_centre(m[FOOD] | m[WATER] | m[BRICK] | m[OBSTACLE] | m[AGENT])
@@ -681,7 +708,55 @@ class Brain:
             if gradient_step(field) not in (None, (0, 0)):
                 return self._navigate(field, heading)
             self.far.give_up_target()
+        if self.cfg.idle_wait and self._taken_from is None and not self.searching():
+            return self._wait(heading)
         return self._wander(heading)
+
+    def _wait(self, heading: float) -> tuple[float, float]:
+        """Knowing free bricks but nothing to fetch now (no goal site, or the bricks out of
+        reach), wait: near the supply (within `idle_near` cells of a known free brick, by
+        a way), off the open sites and the cells beside them, and standing still there.
+
+        An idle agent that wanders walks for nothing, stands in the others' way and is
+        far from the next brick when one becomes its goal (issue 36). An agent that knows
+        no free brick searches instead (`_explore`). Beliefs go stale while standing, so
+        after `idle_patience` ticks of waiting it wanders one leg, and waits again."""
+        self._waited = True
+        self._idle += 1
+        if self._idle > self.cfg.idle_patience:
+            if self._idle == self.cfg.idle_patience + 1:
+                self._leg_left = 0   # a fresh leg
+            move = self._wander(heading)
+            if self._leg_left <= 0:
+                self._idle = 0
+            return move
+        c = self.centre
+        m = self.layers()
+        fixed = m[FOOD] | m[WATER] | m[OBSTACLE] | self._recalled
+        spot = ~(fixed | m[BRICK] | _beside(m[CONFIG] & ~m[BRICK]))
+        goals = spot
+        bricks = m[BRICK] & ~m[CONFIG]
+        far = self.far.far_bricks()
+        if bricks.any() or len(far):
+            # The way to the supply: round fixed things and the structure, not round agents,
+            # who move (the supply is often out of reach only because they crowd it).
+            to_supply = self._field(bricks, self._free_centre(fixed | (m[BRICK] & m[CONFIG])), far)
+            near = spot & (to_supply <= self.cfg.idle_near)
+            if near.any():
+                goals = near
+            elif np.isfinite(to_supply[c, c]):
+                return self._navigate(to_supply, heading)
+        if not goals[c, c]:
+            field = self.fields.distance(goals, self._free_centre(fixed | m[BRICK] | m[AGENT]))
+            if gradient_step(field) not in (None, (0, 0)):
+                return self._navigate(field, heading)
+        self._standing = True
+        return 0.0, 0.0
+
+    def _others(self) -> np.ndarray:
+        """The cells of the other agents in sight, as the far memory holds cells (x, y)."""
+        rows, cols = np.nonzero(self.layers()[AGENT])
+        return self.far.from_map(rows, cols)
 
     def _wander(self, heading: float) -> tuple[float, float]:
         """Wander in straight legs of random heading and length, a new leg when something
@@ -754,6 +829,17 @@ def _mouth_side_kernel(held, sites, depth):
             if (0 <= r < n and 0 <= c < m and sites[r, c] and np.isfinite(depth[r, c])
                     and depth[r, c] <= depth[rr, cc] + 1e-9):
                 out[r, c] = True
+    return out
+
+
+def _beside(cells: np.ndarray) -> np.ndarray:
+    """`cells` and their 8 neighbours (a bool grid)."""
+    out = cells.copy()
+    out[1:] |= cells[:-1]
+    out[:-1] |= cells[1:]
+    rows = out.copy()
+    out[:, 1:] |= rows[:, :-1]
+    out[:, :-1] |= rows[:, 1:]
     return out
 
 

@@ -35,6 +35,8 @@ class AgentConfig:
                                     # filled by another agent: no planned path may cross it
     stuck_ticks: int = 120          # no headway for this many ticks (net < stuck_distance cells)
     stuck_distance: float = 1.5     # ... makes the agent back off for stuck_ticks/4 to /2 ticks
+    idle_near: float = 3.0          # `idle_wait`: wait within this many cells (by a way) of a known free brick ...
+    idle_patience: int = 600        # ... and after this many ticks of waiting take one leg of wandering
     # Additions beyond paper §4 and §6, each switchable by name (docs/design.md, "The paper's
     # agent and what we added"); `preset("paper")` switches every one of them off.
     agents_as_obstacles: bool = True  # other agents in sight are obstacles on both NMs
@@ -49,6 +51,10 @@ class AgentConfig:
     enclosed_sites: bool = True     # open sites no way reaches are believed filled
     off_own_brick: bool = True      # leave a brick just dropped on the side away from a pocket
     sequencing_fallback: bool = True  # plain goals when sequencing leaves none reachable
+    # Additions for big teams (issue 36), off by default (docs/design.md says why):
+    idle_wait: bool = False         # knowing bricks but nothing to fetch, wait near the supply, off the sites
+    yield_goals: bool = False       # leave a brick or site to another agent in sight that is nearer to it
+    spread_search: bool = False     # searching for bricks, leave unseen ground nearer another agent in sight to it
     # Refinements of the ESMs' sensing rule (agent_runtime.esm; off: the plain rule).
     ghost_association: bool = True  # a reading explains a cell already marked; other brick marks in its band are ghosts
     clear_margins: bool = True      # a sector clears only cells well in front of its reading, well inside its range
@@ -68,6 +74,8 @@ class AgentConfig:
                 raise ValueError(f"agent.{f.name} must be a finite number >= 0")
         if not (isinstance(self.stuck_ticks, int) and self.stuck_ticks >= 8):
             raise ValueError("agent.stuck_ticks must be an integer >= 8")
+        if not (isinstance(self.idle_patience, int) and self.idle_patience >= 1):
+            raise ValueError("agent.idle_patience must be an integer >= 1")
         if not isinstance(self.goal_sequencing, bool):
             raise ValueError("agent.goal_sequencing must be true or false")
 
@@ -90,14 +98,15 @@ class AgentConfig:
 
         `preset` is the one it was made from (`--agent`); by default the first preset
         (PRESETS order) with the fewest additions off beyond it, among those it only
-        switches additions off from.
+        switches additions off from (if none, the one it differs from in fewest additions).
         """
         if preset is None:
             mine = self.additions()
+            # An addition off in every preset (on here) is a change of the nearest one.
             candidates = [name for name in PRESETS
                           if all(on or not mine[a] for a, on in AgentConfig.preset(name).additions().items())]
-            preset = min(candidates, key=lambda name: sum(AgentConfig.preset(name).additions().values()) -
-                         sum(mine.values()))
+            preset = min(candidates or list(PRESETS), key=lambda name: sum(
+                on != mine[a] for a, on in AgentConfig.preset(name).additions().items()))
         base = AgentConfig.preset(preset)
         without = [a for a in ADDITIONS if getattr(base, a) and not getattr(self, a)]
         changed = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
@@ -119,7 +128,10 @@ class AgentConfig:
 # The additions beyond the paper, in the order AgentConfig declares them.
 ADDITIONS = ("agents_as_obstacles", "explore_sweep", "unstick", "give_way", "agents_in_the_way", "closed_sites",
              "supply_beyond", "mouth_side", "seal_guard", "enclosed_sites", "off_own_brick", "sequencing_fallback",
+             "idle_wait", "yield_goals", "spread_search",
              "ghost_association", "clear_margins", "site_core", "obstacle_trust")
+# Additions that the default agent leaves off (docs/design.md says why for each).
+OFF_BY_DEFAULT = ("idle_wait", "yield_goals", "spread_search")
 # Named agents: "default" is the best agent, "paper" the agent as the paper describes it
 # (as far as its additions can be switched off; far memory, the obstacle layer and needs
 # that last until they are met cannot be yet). The paper's agent keeps ghost association:

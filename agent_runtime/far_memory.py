@@ -332,10 +332,12 @@ class FarMemory:
             self._centres.setflags(write=False)
         return self._centres
 
-    def unseen_target(self, rng: np.random.Generator) -> np.ndarray | None:
+    def unseen_target(self, rng: np.random.Generator, others: np.ndarray | None = None) -> np.ndarray | None:
         """(row, col) on the map (possibly beyond it) of the nearest square not yet seen, a
         little randomised so agents spread out; when all are seen, start over. None when
-        the world's extent is unknown."""
+        the world's extent is unknown. `others`: cells (x, y, as `sites`) of other agents
+        in sight; a new square is then one nearer this agent than any of them, if there
+        is such a square (`AgentConfig.spread_search`)."""
         if self.seen is None:
             return None
         self._target_age += 1
@@ -350,7 +352,15 @@ class FarMemory:
                 self._marked = None   # the squares round the agent are unseen again
             free = np.argwhere(~self.seen)
             centres = self._block_centres()[~self.seen]
-            d = np.hypot(centres[:, 0] - self.pos[0], centres[:, 1] - self.pos[1]) * rng.uniform(1.0, 1.5, len(free))
+            mine = np.hypot(centres[:, 0] - self.pos[0], centres[:, 1] - self.pos[1])
+            d = mine * rng.uniform(1.0, 1.5, len(free))
+            if others is not None and len(others):
+                # Agents that search side by side see the same ground: leave the squares
+                # nearer another to it (each draws the same line from its own side).
+                theirs = np.min(np.hypot(centres[:, None, 0] - others[None, :, 0],
+                                         centres[:, None, 1] - others[None, :, 1]), axis=1)
+                if (mine <= theirs).any():
+                    d = np.where(mine <= theirs, d, np.inf)
             self._target = tuple(free[int(np.argmin(d))])
         rows, cols = self.to_map(self._block_centres()[self._target][None])
         return np.array([rows[0], cols[0]])

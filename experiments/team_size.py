@@ -33,13 +33,14 @@ import sys
 import time
 from collections import Counter
 from concurrent.futures import as_completed
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
-from agent_runtime.config import AgentConfig
+from agent_runtime.config import ADDITIONS, AgentConfig
 from conag import sim
+from conag.agent_settings import split_names
 from experiments.generalisation import DEFAULT_STALL, distance_bound, stall_limit
 from experiments.report import RESULTS_DOC, write_section
 from experiments.workers import pool
@@ -132,10 +133,10 @@ class Run:
     seconds: float
 
 
-def run_one(name: str, text: str, agents: int, seed: int) -> Run:
+def run_one(name: str, text: str, agents: int, seed: int, cfg: AgentConfig | None = None) -> Run:
     began = time.perf_counter()
     sc: Scenario = parse_scenario(text, f"<{name}>")
-    run = sim.start(sc, agents=agents, seed=seed, cfg=AgentConfig())
+    run = sim.start(sc, agents=agents, seed=seed, cfg=cfg or AgentConfig())
     starts = [tuple(int(v) for v in cell[::-1]) for cell in sc.to_cell(run.world.agent_poses()[:, :2])]
     result = run.run(sc.max_ticks, stall_ticks=stall_limit(sc, DEFAULT_STALL))
     status = run.world.status()
@@ -212,9 +213,10 @@ def report(rows: list[dict], command: str, note: str) -> str:
                                   "hours on 2 cores and has not been run for this table.\n")
     return f"""## Team size: 1 to 64 agents (issue 36) {{#team-size}}
 
-`{command}`{note}. The default agent, in-process and lockstep; a run stops when complete,
-stalled (no site filled for {DEFAULT_STALL} ticks, or the world's cells per agent if more) or at
-the layout's `max_ticks`. Speed-up = mean ticks with 1 agent / mean ticks with N (ideal: N).
+`{command}`{note}. The default agent (or the one `--with`/`--without` make), in-process and
+lockstep; a run stops when complete, stalled (no site filled for {DEFAULT_STALL} ticks, or the
+world's cells per agent if more) or at the layout's `max_ticks`. Speed-up = mean ticks with 1
+agent / mean ticks with N (ideal: N).
 The curves: `python3 -m experiments.team_size --plot` (out/team_size.png, not committed).
 {subset}
 {tables(rows)}
@@ -255,6 +257,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--layouts", nargs="+", help="only these layouts (names as in the tables)")
     ap.add_argument("--teams", type=int, nargs="+", help=f"team sizes (default {' '.join(map(str, TEAMS))})")
     ap.add_argument("--seeds", type=int, nargs="+", help=f"seeds (default {' '.join(map(str, SEEDS))})")
+    ap.add_argument("--with", dest="on", default="", metavar="NAMES",
+                    help="additions to switch on (comma-separated, agent_runtime.config.ADDITIONS)")
+    ap.add_argument("--without", default="", metavar="NAMES", help="additions to switch off (comma-separated)")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", type=Path, default=None, help="folder for team_size.json and .md")
     ap.add_argument("--plot", action="store_true", help="draw the curves of team_size.json (in --out, default "
@@ -277,14 +282,18 @@ def main(argv: list[str] | None = None) -> int:
         plot(json.loads(src.read_text(encoding="utf-8"))["rows"], target)
         print(target)
         return 0
+    flags = {**dict.fromkeys(split_names(args.on), True), **dict.fromkeys(split_names(args.without), False)}
+    if set(flags) - set(ADDITIONS):
+        ap.error(f"unknown addition(s): {', '.join(sorted(set(flags) - set(ADDITIONS)))}")
+    cfg = replace(AgentConfig(), **flags)
     every = layouts()
     names = args.layouts or (list(QUICK_LAYOUTS) if args.quick else list(every))
     teams = args.teams or (QUICK_TEAMS if args.quick else TEAMS)
     seeds = args.seeds or (QUICK_SEEDS if args.quick else SEEDS)
-    full = not (args.quick or args.layouts or args.teams or args.seeds)
+    full = not (args.quick or args.layouts or args.teams or args.seeds or flags)
     out = args.out or (ROOT / "experiments" if full else ROOT / "out" / "team_size-quick")
     out.mkdir(parents=True, exist_ok=True)
-    jobs = [(n, every[n], a, s) for n in names for a in teams for s in seeds]
+    jobs = [(n, every[n], a, s, cfg) for n in names for a in teams for s in seeds]
     jobs.sort(key=lambda j: -j[2])  # the big teams first: they take longest
     runs = []
     with pool(args.jobs) as ex:
@@ -299,11 +308,13 @@ def main(argv: list[str] | None = None) -> int:
     order = {n: i for i, n in enumerate(names)}
     runs.sort(key=lambda r: (order[r.layout], r.agents, r.seed))
     rows = summarise(runs)
-    picked = [("--layouts", args.layouts), ("--teams", args.teams), ("--seeds", args.seeds)]
+    picked = [("--layouts", args.layouts), ("--teams", args.teams), ("--seeds", args.seeds),
+              ("--with", [args.on] if args.on else None), ("--without", [args.without] if args.without else None)]
     command = " ".join(["python3 -m experiments.team_size", *(["--quick"] if args.quick else []),
                         *(f"{flag} {' '.join(map(str, v))}" for flag, v in picked if v)])
+    agent = "".join(f"; {'with' if on else 'without'} {name}" for name, on in flags.items())
     note = "" if full else (f" (layouts {', '.join(names)}; teams {', '.join(map(str, teams))}; seeds "
-                            f"{', '.join(map(str, seeds))})")
+                            f"{', '.join(map(str, seeds))}{agent})")
     (out / "team_size.json").write_text(json.dumps(dict(command=command, note=note, rows=rows,
                                                         runs=[asdict(r) for r in runs]), indent=1) + "\n",
                                         encoding="utf-8")

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent_runtime.config import ADDITIONS, PRESETS, AgentConfig
+from agent_runtime.config import ADDITIONS, OFF_BY_DEFAULT, PRESETS, AgentConfig
 from agent_runtime.esm import Sensing
 from conag import sim
 from conag.agent_settings import AgentSettings
@@ -39,6 +39,7 @@ def test_the_record_of_an_agent_gives_that_agent_back(base, off, on, map_size, s
 
 @pytest.mark.parametrize("cfg, record", [
     (AgentConfig(), {"preset": "default", "without": [], "changed": {}}),
+    (AgentConfig(yield_goals=True), {"preset": "default", "without": [], "changed": {"yield_goals": True}}),
     (AgentConfig.preset("paper"), {"preset": "paper", "without": [], "changed": {}}),
     (AgentConfig(unstick=False, map_size=31),
      {"preset": "default", "without": ["unstick"], "changed": {"map_size": 31}}),
@@ -52,7 +53,7 @@ def test_a_config_made_without_a_preset_is_recorded_by_the_nearest_preset(cfg, r
 def test_the_paper_preset_switches_every_addition_off_but_ghost_association():
     paper = AgentConfig.preset("paper").additions()
     assert [name for name, on in paper.items() if on] == ["ghost_association"]
-    assert all(AgentConfig().additions().values())
+    assert [name for name, on in AgentConfig().additions().items() if not on] == list(OFF_BY_DEFAULT)
 
 
 def test_the_agent_flags_are_recorded_as_the_run_asked_for_them():
@@ -61,7 +62,7 @@ def test_the_agent_flags_are_recorded_as_the_run_asked_for_them():
                                     "changed": {"goal_sequencing": False}}
     # A default agent with every addition off is still recorded as asked: the default, without them.
     asked = AgentSettings(without=ADDITIONS).describe()
-    assert asked["preset"] == "default" and asked["without"] == list(ADDITIONS)
+    assert asked["preset"] == "default" and asked["without"] == [a for a in ADDITIONS if a not in OFF_BY_DEFAULT]
     assert AgentSettings(learn=True, eta=0.2).describe() == {"preset": "default", "without": [], "changed": {},
                                                              "learn": True, "eta": 0.2}
 
