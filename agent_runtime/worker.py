@@ -6,7 +6,8 @@ reactive agents, a worker keeps no map and no blueprint: each step reads only th
 It builds what foremen mark (docs/society.md). The rules, first that applies wins:
 
 1. leaving: after a drop, or when stuck, go on along a set heading for a set while;
-2. drop: holding a brick on a `site` cue (the floor sensor says so);
+2. drop: holding a brick on a `site` cue (the floor sensor says so); with another body
+   within a cell, only at random, so two on one cue seldom drop on the same tick;
 3. grab: not holding, a brick within the gripper's reach in front, lying within
    `take_radius` of a `supply` cue (a worker cannot tell a free brick from a structure
    brick: it takes bricks only where a foreman says bricks are to be taken);
@@ -32,7 +33,7 @@ import numpy as np
 from protocol.messages import BEHAVIOURS, CHANNELS, CUE_KINDS, NO_READING, AgentState, SensorFrame, Welcome
 
 _OBSTACLES = [CHANNELS.index(c) for c in ("food", "water", "brick", "obstacle", "agent")]
-_BRICK = CHANNELS.index("brick")
+_BRICK, _AGENT = CHANNELS.index("brick"), CHANNELS.index("agent")
 _SITE, _SUPPLY = CUE_KINDS.index("site"), CUE_KINDS.index("supply")
 
 
@@ -47,10 +48,11 @@ class WorkerConfig:
     stuck_ticks: int = 60         # no headway for this long ...
     stuck_distance: float = 0.6   # ... (net cells moved) makes it leave at a random heading
     leg: tuple[int, int] = (20, 60)  # wander: ticks per straight leg, at least and at most
+    crowded_drop: float = 0.2     # with another body this near, drop with this probability per tick
 
     def __post_init__(self) -> None:
         if not (self.cruise_speed > 0 and self.clearance > 0 and self.take_radius > 0 and self.leave_ticks >= 1
-                and self.stuck_ticks >= 1 and 1 <= self.leg[0] <= self.leg[1]):
+                and self.stuck_ticks >= 1 and 1 <= self.leg[0] <= self.leg[1] and 0 < self.crowded_drop <= 1):
             raise ValueError("worker settings must be positive (leg: 1 <= least <= most)")
 
 
@@ -111,6 +113,8 @@ class Worker:
         if self._leave > 0:
             return self._leaving(frame, ranges, "avoid")
         if frame.holding and frame.cue_under == "site":
+            if self._crowded(ranges) and self.rng.random() >= self.cfg.crowded_drop:
+                return WorkerStep(0.0, 0.0, "none", "drop")
             self.drops += 1
             self._leave_at(frame.heading + math.pi, self.cfg.leave_ticks)
             return WorkerStep(0.0, 0.0, "drop", "drop")
@@ -134,6 +138,14 @@ class Worker:
         return self._wander(frame, ranges)
 
     # the rules' parts ----------------------------------------------------------------------
+    @staticmethod
+    def _crowded(ranges: np.ndarray) -> bool:
+        """Another body within a cell: it may stand on the same cue and drop on the same tick
+        (two bricks for one site). Both then drop only now and then, at random, until one has:
+        its brick covers the cue and the other sees none."""
+        agents = ranges[_AGENT]
+        return bool(((agents >= 0) & (agents < 1.0)).any())
+
     def _brick_by_supply(self, bricks: np.ndarray, supply: np.ndarray) -> int | None:
         """The sector of the nearest brick lying within take_radius of a supply cue in sight."""
         cue = _nearest(supply)
