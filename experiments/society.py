@@ -214,6 +214,8 @@ def main() -> int:
             outcomes.append(o)
             print(f"[{len(outcomes)}/{len(jobs)} {time.monotonic() - began:5.0f} s] {o.layout} {o.team}: "
                   f"{'complete' if o.completed else 'NOT complete'} in {o.ticks} ticks", file=sys.stderr, flush=True)
+            # As it goes: a sweep stopped part way still leaves its runs (--report-only tables them).
+            path.write_text(json.dumps([asdict(o) for o in outcomes], indent=1) + "\n", encoding="utf-8")
         outcomes.sort(key=lambda o: (order.index(o.team), o.layout))
         path.write_text(json.dumps([asdict(o) for o in outcomes], indent=1) + "\n", encoding="utf-8")
     text = markdown(outcomes, args, order)
