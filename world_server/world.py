@@ -122,6 +122,7 @@ class World:
         self._mark_at: dict[int, tuple[float, float, str]] = {}
         self._cue_ranges = np.zeros((0, len(CUE_KINDS), self.cfg.sensor_sectors))
         self._cue_under: list[str] = []
+        self._cue_inputs: tuple | None = None  # (cue arrays, present discs, `_uncovered_cues`) of the last change
         # Body positions as of the last step or attach, for status(): reading them from the
         # physics there would share its read buffer with a step (tests read status from
         # another thread while the server steps).
@@ -424,17 +425,24 @@ class World:
     def _sense_cues(self, pos: np.ndarray, seed: int) -> None:
         """Cue readings and the cue under each body (world_server/cues.py): a cue whose cell
         holds a disc is covered, neither sensed nor under anyone."""
-        cells, kinds = self.cues.arrays()
-        if len(cells):
-            _, disc_xy, _ = self.discs.present_arrays()
-            covered = np.isin(self._cell_code(self.scenario.to_world(cells)), self._cell_code(disc_xy))
-            cells, kinds = cells[~covered], kinds[~covered]
-        self._cue_ranges = sense_cues(pos, self.alive & self.solid, self.scenario.to_world(cells), kinds,
-                                      self.cfg.sensor_sectors, self.cfg.sensor_range,
-                                      noise=self.cfg.sensor_noise, seed=seed)
-        uncovered = {(int(c), int(r)): CUE_KINDS[k] for (c, r), k in zip(cells.tolist(), kinds.tolist())}
+        xy, kinds, uncovered = self._uncovered_cues()
+        self._cue_ranges = sense_cues(pos, self.alive & self.solid, xy, kinds, self.cfg.sensor_sectors,
+                                      self.cfg.sensor_range, noise=self.cfg.sensor_noise, seed=seed)
         under = self.scenario.to_cell(pos) if len(pos) else np.zeros((0, 2), np.int64)
-        self._cue_under = [uncovered.get((int(c), int(r)), "") for c, r in under.tolist()]
+        self._cue_under = [uncovered.get((c, r), "") for c, r in under.tolist()] if uncovered else [""] * len(pos)
+
+    def _uncovered_cues(self) -> tuple[np.ndarray, np.ndarray, dict[tuple[int, int], str]]:
+        """World centres and kinds of the cues no disc covers, and their kinds by (col, row):
+        worked out again only when the cues or the discs lying in the world change."""
+        cues, present = self.cues.arrays(), self.discs.present_arrays()
+        if self._cue_inputs is None or self._cue_inputs[0] is not cues or self._cue_inputs[1] is not present:
+            cells, kinds = cues
+            if len(cells):
+                covered = np.isin(self._cell_code(self.scenario.to_world(cells)), self._cell_code(present[1]))
+                cells, kinds = cells[~covered], kinds[~covered]
+            by_cell = {(c, r): CUE_KINDS[k] for (c, r), k in zip(cells.tolist(), kinds.tolist())}
+            self._cue_inputs = (cues, present, (self.scenario.to_world(cells), kinds, by_cell))
+        return self._cue_inputs[2]
 
     def _sensed_objects(self) -> tuple[np.ndarray, np.ndarray]:
         """Positions and sensor channels of the present discs and the fixed obstacle points.
