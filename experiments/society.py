@@ -160,8 +160,10 @@ def failures(outcomes: list[Outcome]) -> str:
 def markdown(outcomes: list[Outcome], args: argparse.Namespace, order: list[str]) -> str:
     layouts = sorted({o.layout for o in outcomes})
     command = "python3 -m experiments.society " + ("--quick" if args.quick else f"--jobs {args.jobs}")
-    which = f"the {QUICK_LAYOUTS} cheapest to build of" if args.quick else "all of"
-    return f"""## A society of foremen and workers (issue 37)
+    which = (f"the {QUICK_LAYOUTS} cheapest to build of" if args.quick
+             else "all of" if len(layouts) >= args.sample
+             else f"the sweep stopped part way: the first {len(layouts)} of")
+    return f"""## A society of foremen and workers (issue 37) {{#society}}
 
 `{command}` builds {len(layouts)} generated layouts ({which} the first {SAMPLE} of the suite
 of `experiments.generalisation` whose longer side is at most 30 cells, as `experiments.noise`)
@@ -202,6 +204,9 @@ def main() -> int:
     path = OUT / f"{stem}.json"
     if args.report_only:
         outcomes = [Outcome(**o) for o in json.loads(path.read_text(encoding="utf-8"))]
+        # A sweep stopped part way: only the layouts every team has built.
+        whole = {o.layout for o in outcomes if sum(p.layout == o.layout for p in outcomes) == len(order)}
+        outcomes = sorted((o for o in outcomes if o.layout in whole), key=lambda o: (order.index(o.team), o.layout))
     else:
         names = sample(args.sample)
         if args.quick:
