@@ -56,9 +56,10 @@ class Step:
 
     speed: float
     turn: float
-    action: str          # for the world: none, grab, drop, eat, drink
+    action: str          # for the world: none, grab, drop, eat, drink (a foreman's also mark, unmark)
     behaviour: str       # the motor behaviour that won
-    decision: Decision   # for the teacher
+    decision: Decision | None  # for the teacher (None: a mind without a construction network, a worker)
+    mark: tuple[float, float, str] | None = None  # mark / unmark: (dx, dy) world units from the body, cue kind
 
 
 @dataclass(frozen=True)
@@ -151,6 +152,11 @@ class Brain:
         self._drop_unseen = False  # that drop was before this brain started (`_brick_underfoot`)
         # Centre to centre, in cells, at which the world lets a dropped brick hold this body again.
         self._release = (welcome.agent_radius + welcome.disc_radius) / welcome.cell_size
+
+    @property
+    def odometry(self) -> np.ndarray:
+        """Where the agent is in its odometry frame: cells from where it attached (a copy)."""
+        return self._odo.copy()
 
     # sensing and planning --------------------------------------------------------------
     def perceive(self, frame: SensorFrame) -> np.ndarray:

@@ -105,7 +105,7 @@ class AgentFeeds:
         if self._last_report is None or not 0 <= tick - self._last_report < self.every:
             self.report(brain, tick)
         every = self.maps_every
-        if every and tick % every == 0:
+        if every and tick % every == 0 and hasattr(brain, "maps"):  # (a worker keeps no maps)
             for layer in map_snapshot(brain, tick):
                 self._maps.put(encode(layer))
 

@@ -38,8 +38,10 @@ import numpy as np
 from agent_runtime.brain import Brain
 from agent_runtime.config import AgentConfig
 from agent_runtime.feeds import AgentFeeds
+from agent_runtime.foreman_brain import ForemanBrain
 from agent_runtime.learning import Student
 from agent_runtime.student_link import StudentLink
+from agent_runtime.worker import Worker
 from agent_runtime.world_link import AttachError, WorldLink
 from protocol import keys
 from protocol.bus import undeclare
@@ -49,6 +51,7 @@ from protocol.messages import Decision
 log = logging.getLogger("conag.agent")
 WAIT_QUIET = 3.0    # seconds a world may be gone before the agent warns (a run ending stops its agents sooner)
 WAIT_REPORT = 30.0  # seconds between "waiting for world" lines
+ROLES = ("agent", "foreman", "worker")  # a ConAg agent; a foreman (a ConAg agent that marks); a reactive worker
 
 
 @dataclass(frozen=True)
@@ -99,6 +102,13 @@ class AgentOptions:
     recorded: bool = False            # wait (up to attach_timeout) for the run's recorder before attaching
     learning: Learning | None = None  # a learning student (paper §5.1)
     network: object | None = None     # replaces the engineered construction network (e.g. a trained Student)
+    role: str = "agent"               # "agent"; in a society "foreman" (marks cues) or "worker" (docs/society.md)
+
+    def __post_init__(self) -> None:
+        if self.role not in ROLES:
+            raise ValueError(f"an agent's role is one of {', '.join(ROLES)}, not {self.role!r}")
+        if self.role == "worker" and (self.learning is not None or self.network is not None):
+            raise ValueError("a worker has no construction network to learn or replace")
 
 
 def run_agent(session, opts: AgentOptions, stop=None, report: AgentReport | None = None) -> AgentReport:
@@ -128,7 +138,7 @@ class AgentProcess:
         w, a = opts.world_id, opts.agent_id
         self.link = WorldLink(session, w, a)
         self.feeds = AgentFeeds(session, w, a)  # before attaching: no blueprint change is missed
-        self.brain: Brain | None = None
+        self.brain: Brain | Worker | None = None
         self.tick = 0
         self.reattaches = 0  # worlds lost and found again
         self.teacher = StudentLink(session, w, a) if self.learning else None
@@ -150,9 +160,13 @@ class AgentProcess:
 
     def _new_brain(self, welcome) -> None:
         # Each incarnation gets its own stream: a restart must not replay the same choices.
-        self.brain = Brain(welcome, self.opts.cfg,
-                           np.random.default_rng([self.opts.seed, welcome.restarts, self.reattaches]),
-                           network=self.student)
+        rng = np.random.default_rng([self.opts.seed, welcome.restarts, self.reattaches])
+        role = self.opts.role
+        if role == "worker":
+            self.brain = Worker(welcome, rng=rng)
+        else:
+            kind = ForemanBrain if role == "foreman" else Brain
+            self.brain = kind(welcome, self.opts.cfg, rng, network=self.student)
         self.tick = welcome.tick - 1
 
     def serve(self, stop) -> None:
@@ -200,16 +214,16 @@ class AgentProcess:
                 student.learn(d.state, d.arm, d.motor, r.arm, r.motor, learning.eta)
         self.feeds.before_step(self.brain)
         step = self.brain.step(frame)
-        send = partial(self.link.send, frame.tick, step.speed, step.turn, step.action)
+        send = partial(self.link.send, frame.tick, step.speed, step.turn, step.action, step.mark)
         if outbox is None:
             send()
         else:
             outbox.append(send)
         if teacher is not None:
             teacher.publish(step.decision)
-        else:
+        elif step.decision is not None:  # (a worker has no construction network to report)
             self.decisions.put(encode(step.decision))
-        self.last_decision = step.decision
+            self.last_decision = step.decision
         self.tick = frame.tick
         self.report.ticks += 1
         self.feeds.after_step(self.brain, self.tick)

@@ -199,9 +199,12 @@ class WorldLink:
                     self._last_tick, self._last_time = frame.tick, self.clock()
                 return frame
 
-    def send(self, tick: int, speed: float = 0.0, turn: float = 0.0, action: str = "none") -> None:
-        """Publish the command (speed, turn, one-shot action) answering the frame of `tick`."""
-        self._pub.put(encode(AgentCommand(self.agent_id, tick, speed, turn, action)))
+    def send(self, tick: int, speed: float = 0.0, turn: float = 0.0, action: str = "none",
+             mark: tuple[float, float, str] | None = None) -> None:
+        """Publish the command (speed, turn, one-shot action) answering the frame of `tick`;
+        `mark`: a mark / unmark action's (dx, dy, cue kind)."""
+        dx, dy, kind = mark if mark is not None else (0.0, 0.0, "site")
+        self._pub.put(encode(AgentCommand(self.agent_id, tick, speed, turn, action, dx, dy, kind)))
 
     def close(self) -> None:
         """Undeclare everything; the world sees the token go and stops this body."""

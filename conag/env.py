@@ -8,7 +8,7 @@ seed seeds its noise); `step(actions)` sends every agent's command for the curre
 and returns the frames of the next one as observations.
 
 * Action, per agent: `{"speed": [0, max_speed], "turn": [-max_turn, max_turn], "action":
-  index into protocol.ACTIONS}` (world units per second, radians per tick; see
+  index into protocol.BODY_ACTIONS}` (world units per second, radians per tick; see
   docs/protocol.md).
 * Observation, per agent: `{"ranges": 5 x sectors readings (-1: nothing), "heading":
   radians, "odometry": the last tick's (dx, dy) on world axes, "holding": 0 or 1}`.
@@ -52,7 +52,7 @@ from agent_runtime.brain import Brain
 from agent_runtime.config import AgentConfig
 from agent_runtime.world_link import WorldLink
 from protocol.bus import BusOptions, open_session
-from protocol.messages import ACTIONS, CHANNELS, Decision, SensorFrame, Welcome
+from protocol.messages import BODY_ACTIONS, CHANNELS, Decision, SensorFrame, Welcome
 from teacher.core import Teacher
 from world_server.scenario import Scenario, load_scenario
 from world_server.server import WorldServer
@@ -137,7 +137,7 @@ class ConAgParallelEnv(ParallelEnv):
         self._act_space = {a: spaces.Dict({
             "speed": spaces.Box(0.0, cfg.max_speed, (1,), np.float32),
             "turn": spaces.Box(-cfg.max_turn, cfg.max_turn, (1,), np.float32),
-            "action": spaces.Discrete(len(ACTIONS)),
+            "action": spaces.Discrete(len(BODY_ACTIONS)),
         }) for a in self.possible_agents}
 
     def observation_space(self, agent: str) -> spaces.Space:  # noqa: ARG002 -- PettingZoo's signature
@@ -238,7 +238,7 @@ class ConAgParallelEnv(ParallelEnv):
                     self.command(a, 0.0, 0.0)
             else:
                 self.command(a, float(np.asarray(act["speed"]).reshape(-1)[0]),
-                             float(np.asarray(act["turn"]).reshape(-1)[0]), ACTIONS[int(act["action"])])
+                             float(np.asarray(act["turn"]).reshape(-1)[0]), BODY_ACTIONS[int(act["action"])])
         for a in self.agents:
             self.frames[a] = self._next(a, self.frames[a].tick)
         self._sent.clear()

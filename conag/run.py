@@ -50,6 +50,7 @@ from conag.exit_codes import exit_words
 from conag.forkserver import Forked, ForkServer, ForkServerError
 from conag.noise_flags import to_note
 from conag.secure import bus_flags, run_bus_options, secure_bus
+from conag.sim.society import DEFAULT_CUE_REACH, society_ids
 from protocol import keys
 from protocol.bus import Declarations, open_session
 from protocol.bus.acl import OBSERVER, TEACHER, WORLD, agent_user
@@ -96,6 +97,21 @@ class RunOptions:
     checkpoint_every: int = DEFAULT_EVERY  # ticks between the world's checkpoints (it is restarted from the last)
     noise: NoiseSettings = field(default_factory=NoiseSettings)  # the world's noise overrides (docs/noise.md)
     fork_server: bool = True          # single agent processes are forks of a preloaded server (conag/forkserver.py)
+    foremen: int = 0                  # a society (docs/society.md): foremen f1.. and reactive workers w1..
+    workers: int = 0                  # instead of ConAg agents a1..; its world has cues
+    cue_reach: float = DEFAULT_CUE_REACH  # how far a body marks, in a society's world
+
+    @property
+    def society(self) -> bool:
+        """Whether the run is a society of foremen and workers rather than of ConAg agents."""
+        return self.foremen + self.workers > 0
+
+    @property
+    def n_agents(self) -> int:
+        """How many agent processes the run starts."""
+        if self.society:
+            return self.foremen + self.workers
+        return self.agents if self.agents is not None else self.scenario.agents
 
 
 class RunEnding(RuntimeError):
@@ -115,7 +131,7 @@ class Fleet:
 
     def _bus_args(self, agent_id: str) -> list[str]:
         o = self.opts
-        n = o.agents if o.agents is not None else o.scenario.agents
+        n = o.n_agents
         processes = -(-n // max(o.per_process, 1))
         # The world is on its way: wait for it longer than a lone agent would. A hundred
         # interpreters starting on two cores took over 30 s before the first one attached.
@@ -148,6 +164,8 @@ class Fleet:
         o = self.opts
         cmd = [sys.executable, "-m", "conag", "agent", "--id", agent_id, *self._bus_args(agent_id),
                "--seed", str(o.seed if o.seed is not None else o.scenario.seed), *o.agent.argv()]
+        if o.society:
+            cmd += ["--role", "foreman" if agent_id.startswith("f") else "worker"]
         if o.weights_dir:
             weights = Path(o.weights_dir) / f"{agent_id}.json"
             cmd += ["--weights-out", str(weights)]
@@ -336,7 +354,7 @@ def run(opts: RunOptions, stop: threading.Event) -> dict:
     """Run the scenario; returns the run summary's JSON object (`RunSummary.as_dict`, also
     written to opts.summary)."""
     with tempfile.TemporaryDirectory(prefix="conag-run-") as tmp:  # gone however the run ends
-        n_agents = opts.scenario.agents if opts.agents is None else opts.agents
+        n_agents = opts.n_agents
         with secure_bus(opts, n_agents, Path(tmp)) as bus_opts:
             return _run(bus_opts, stop, Path(tmp))
 
@@ -407,7 +425,7 @@ def _checkpoint_tick(path: Path) -> int:
 
 
 def _run(opts: RunOptions, stop: threading.Event, tmp: Path) -> dict:
-    n_agents = opts.scenario.agents if opts.agents is None else opts.agents
+    n_agents = opts.n_agents
     world = WorldProcess(opts, n_agents, tmp / "final.json", tmp / "world.ckpt")
     world.start()
     final_path = world.final_path
@@ -432,7 +450,9 @@ def _run(opts: RunOptions, stop: threading.Event, tmp: Path) -> dict:
             k = max(opts.per_process, 1)
             if k == 1 and opts.fork_server:
                 fleet.server = _start_fork_server()
-            for first in range(1, n_agents + 1, k):
+            for agent_id in society_ids(opts.foremen, opts.workers):
+                fleet.start(agent_id)
+            for first in range(1, 0 if opts.society else n_agents + 1, k):
                 if k == 1:
                     fleet.start(f"a{first}")
                 else:
@@ -532,7 +552,7 @@ def _start_recorder(opts: RunOptions) -> subprocess.Popen:
     seed = opts.seed if opts.seed is not None else opts.scenario.seed
     cmd = [sys.executable, "-m", "conag", "record", opts.record, "--world-id", opts.world_id,
            *bus_flags(opts, OBSERVER), "--scenario", opts.scenario_path, "--seed", str(seed),
-           "--note", f"agents={opts.agents if opts.agents is not None else opts.scenario.agents}",
+           "--note", f"agents={opts.n_agents}",
            "--note", "agent_args=" + " ".join(opts.agent.argv()), "--maps-every", str(opts.maps_every),
            "--priority", opts.record_priority,
            "--note", f"checkpoint_every={opts.checkpoint_every}"]
@@ -563,8 +583,10 @@ def _start_world(opts: RunOptions, n_agents: int, final_path: Path, checkpoint: 
            "--checkpoint", str(checkpoint), "--checkpoint-every", str(opts.checkpoint_every)]
     if resume is not None:
         cmd += ["--resume", str(resume)]
-    else:  # a checkpoint holds the seed and the noise settings
+    else:  # a checkpoint holds the seed, the noise settings and the cues
         cmd += [*(["--seed", str(opts.seed)] if opts.seed is not None else []), *opts.noise.to_args()]
+        if opts.society:
+            cmd += ["--cue-reach", repr(opts.cue_reach)]
     if opts.profile:
         cmd += ["--profile", opts.profile]
     if opts.record:  # restarted, it lets the agents attach again only once the recorder is linked to it

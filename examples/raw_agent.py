@@ -19,15 +19,16 @@ p.add_argument("--connect", default="tcp/127.0.0.1:7447")
 p.add_argument("--id", default="x1")
 p.add_argument("--world", default="w0")
 args = p.parse_args()
-root = f"conag/v4/world/{args.world}/agent/{args.id}"
-pack = lambda t, f: msgpack.packb({"v": 4, "t": t, "f": f}, use_bin_type=True)  # noqa: E731
+root = f"conag/v5/world/{args.world}/agent/{args.id}"
+pack = lambda t, f: msgpack.packb({"v": 5, "t": t, "f": f}, use_bin_type=True)  # noqa: E731
+no_mark = [0.0, 0.0, "site"]  # AgentCommand's mark_dx, mark_dy, mark_kind: this agent never marks
 floats = lambda b: struct.unpack(f"<{len(b) // 8}d", b)  # noqa: E731 -- a bin of float64s
 
 conf = zenoh.Config()
 conf.insert_json5("scouting/multicast/enabled", "false")
 conf.insert_json5("connect/endpoints", json.dumps([args.connect]))
 with zenoh.open(conf) as session:
-    token = session.liveliness().declare_token(f"conag/v4/world/{args.world}/alive/agent/{args.id}")  # 1. token
+    token = session.liveliness().declare_token(f"conag/v5/world/{args.world}/alive/agent/{args.id}")  # 1. token
     frames = session.declare_subscriber(f"{root}/sensors", zenoh.handlers.RingChannel(1))  # 2. frames first
     errors = session.declare_subscriber(  # why the world rejected a command (CommandRejected.reason)
         f"{root}/error", lambda s: print(msgpack.unpackb(s.payload.to_bytes())["f"][2], file=sys.stderr))
@@ -56,7 +57,7 @@ with zenoh.open(conf) as session:
             bricks = floats(f[6])[2 * sectors:3 * sectors]  # channel 2 (brick), one reading per sector
             seen = [k for k in range(sectors) if bricks[k] >= 0]
             if not seen:  # none in sensor range: turn on the spot and look again
-                session.put(f"{root}/command", pack("AgentCommand", [args.id, tick, 0.0, 0.3, "none"]))
+                session.put(f"{root}/command", pack("AgentCommand", [args.id, tick, 0.0, 0.3, "none", *no_mark]))
                 continue
             k = min(seen, key=lambda k: bricks[k])
             bearing = (k + 0.5) * 2 * math.pi / sectors  # sector k: angles [k, k+1) * 2pi/sectors from east
@@ -67,6 +68,7 @@ with zenoh.open(conf) as session:
         there = dist < stop_at
         action = "drop" if holding and there else "grab" if there and abs(err) < 0.5 else "none"
         speed = 0.0 if there or abs(err) > 0.5 else min(max_speed, 1.5 * (dist - stop_at) + 0.2)
-        session.put(f"{root}/command", pack("AgentCommand", [args.id, tick, float(speed), float(err), action]))
+        command = [args.id, tick, float(speed), float(err), action, *no_mark]
+        session.put(f"{root}/command", pack("AgentCommand", command))
     print(f"dropped a brick at ({x:.2f}, {y:.2f}) at tick {last}" if f[9] else "gave up", flush=True)
     sys.exit(0 if f[9] else 1)

@@ -17,8 +17,10 @@ from protocol.keys import check_id
 # 2: the obstacle channel in sensor frames, site perturbations, Blueprint and AgentState.
 # 3: the world's constants in Welcome; CommandRejected; WorldStatus.seq; Perturbation.force.
 # 4: the world's epoch in Welcome and every SensorFrame (an agent refuses frames of another).
+# 5: cues (marks on the floor): SensorFrame.cues and cue_under, the mark / unmark actions and
+#    AgentCommand.mark_*, Welcome.cue_reach.
 # An incompatible change raises this and keys.ROOT together (see docs/protocol.md, Versioning).
-SCHEMA_VERSION = 4
+SCHEMA_VERSION = 5
 
 # Sensor channels, in the order of SensorFrame.ranges (channel-major).
 # Disc-like channels first (food, water, brick, obstacle: fixed `#` cells and the world's
@@ -26,8 +28,13 @@ SCHEMA_VERSION = 4
 CHANNELS = ("food", "water", "brick", "obstacle", "agent")
 # Disc kinds a scenario or a perturbation can name.
 DISC_KINDS = ("food", "water", "brick")
-# Gripper / consummatory actions an AgentCommand can carry besides the motors.
-ACTIONS = ("none", "grab", "drop", "eat", "drink")
+# Gripper / consummatory actions an AgentCommand can carry besides the motors; mark and
+# unmark put a cue on, or take one off, the cell at the command's mark offset.
+BODY_ACTIONS = ("none", "grab", "drop", "eat", "drink")  # what any body does (the env's action space)
+ACTIONS = (*BODY_ACTIONS, "mark", "unmark")
+# Kinds of cue (marks on the floor, sensed on a channel of their own: SensorFrame.cues):
+# "site" says "drop a brick here", "supply" says "take bricks from around here".
+CUE_KINDS = ("site", "supply")
 PERTURB_OPS = ("remove", "add", "move", "add_site", "remove_site")
 SITE_OPS = ("add_site", "remove_site")  # blueprint changes: a drop site at (x, y) appears or goes
 TICK_MODES = ("lockstep", "realtime")
@@ -80,7 +87,8 @@ class Hello:
 # The Welcome fields that state the world's constants: named as in the world's WorldConfig,
 # except drop_tolerance (half a cell), which the world works out.
 WELCOME_CONSTANTS = ("dt", "max_speed", "max_turn", "inertia", "agent_radius", "disc_radius", "grab_reach",
-                     "grab_cone", "drop_tolerance", "touch_margin", "sensor_noise", "odometry_noise")
+                     "grab_cone", "drop_tolerance", "touch_margin", "sensor_noise", "odometry_noise",
+                     "cue_reach")
 
 
 @dataclass(frozen=True)
@@ -128,6 +136,7 @@ class Welcome:
     sensor_noise: float = 0.0    # reading error: uniform, zero mean, std sensor_noise x distance
     odometry_noise: float = 0.0  # odometry error: normal, std odometry_noise x distance moved
     epoch: int = 0               # this run of the world: every SensorFrame it sends carries it
+    cue_reach: float = 0.0       # a body marks cells within this distance; 0: the world has no cues
 
     def __post_init__(self) -> None:
         check_id(self.world_id, "world id")
@@ -154,7 +163,10 @@ class SensorFrame:
     tick in the compass frame, as the wheel encoders and compass report it (noisy).
     The flags report the outcome of the action the agent sent for the previous tick.
     `epoch` is the Welcome's: a frame with another epoch is not from the world the agent
-    attached to.
+    attached to. In a world with cues (Welcome.cue_reach > 0), `cues` holds len(CUE_KINDS) x
+    sectors distances to the nearest cue of each kind, laid out as `ranges`, and `cue_under`
+    the kind of the cue in the cell under the body's centre ("" for none); a cue covered by
+    a disc is not seen. Without cues, `cues` is empty.
     """
 
     agent_id: str
@@ -170,11 +182,17 @@ class SensorFrame:
     ate: bool = False
     drank: bool = False
     epoch: int = 0
+    cues: tuple[float, ...] = ()
+    cue_under: str = ""
 
     def __post_init__(self) -> None:
         check_id(self.agent_id, "agent id")
         _finite(self)
         _require(self.tick >= 0, "SensorFrame.tick must be >= 0")
+        _require(len(self.cues) in (0, len(CUE_KINDS) * self.sectors),
+                 f"SensorFrame.cues must hold 0 or {len(CUE_KINDS)} x sectors values")
+        _require(all(c >= 0.0 or c == NO_READING for c in self.cues), "SensorFrame cue range < 0")
+        _require(self.cue_under in ("", *CUE_KINDS), f"SensorFrame.cue_under must be '' or one of {CUE_KINDS}")
         _require(self.epoch >= 0, "SensorFrame.epoch must be >= 0")
         _require(1 <= self.sectors <= MAX_SECTORS, "SensorFrame.sectors out of range")
         _require(
@@ -188,19 +206,28 @@ class SensorFrame:
 
 @dataclass(frozen=True)
 class AgentCommand:
-    """Agent -> world: motor command (forward speed, turn angle) and one action, for `tick`."""
+    """Agent -> world: motor command (forward speed, turn angle) and one action, for `tick`.
+
+    `mark` puts a cue of `mark_kind` on the cell holding the point (mark_dx, mark_dy) world
+    units from the body's centre (world axes), `unmark` takes the cue off that cell; the
+    offset must be within Welcome.cue_reach. Other actions ignore the mark fields.
+    """
 
     agent_id: str
     tick: int
     speed: float
     turn: float
     action: str = "none"
+    mark_dx: float = 0.0
+    mark_dy: float = 0.0
+    mark_kind: str = "site"
 
     def __post_init__(self) -> None:
         check_id(self.agent_id, "agent id")
         _finite(self)
         _require(self.tick >= 0, "AgentCommand.tick must be >= 0")
         _require(self.action in ACTIONS, f"AgentCommand.action must be one of {ACTIONS}")
+        _require(self.mark_kind in CUE_KINDS, f"AgentCommand.mark_kind must be one of {CUE_KINDS}")
 
 
 @dataclass(frozen=True)

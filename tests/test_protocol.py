@@ -305,7 +305,7 @@ def test_protocol_error_is_a_value_error():
     assert issubclass(ProtocolError, ValueError)
 
 
-@pytest.mark.parametrize("version", [0, 1, 2, 3, 5, -1, 2**40, "4", b"\x04", None, True, [4], {"v": 4}])
+@pytest.mark.parametrize("version", [0, 1, 2, 3, 4, 6, -1, 2**40, "5", b"\x05", None, True, [5], {"v": 5}])
 def test_wrong_schema_version(version):
     _bad(_pack("Hello", ["a1", 1], version=version))
 

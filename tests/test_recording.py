@@ -335,11 +335,13 @@ def test_a_stopped_recorder_writes_on_until_the_bus_is_quiet():
 
 def test_describe_prints_a_message_as_text_or_json_and_never_raises():
     line = describe(keys.command(W, "a1"), _cmd(3, speed=1.5))
-    assert line == f"{keys.command(W, 'a1')}: AgentCommand(agent_id='a1', tick=3, speed=1.5, turn=0, action='none')"
+    assert line == (f"{keys.command(W, 'a1')}: AgentCommand(agent_id='a1', tick=3, speed=1.5, turn=0, action='none', "
+                    "mark_dx=0, mark_dy=0, mark_kind='site')")
     assert "... 80 values" in describe("k", encode(SensorFrame("a1", 1, 0.0, 0.0, 0.0, 16, (1.0,) * 80, False)))
     doc = json.loads(describe("k", _cmd(3), as_json=True))
     assert doc == {"key": "k", "type": "AgentCommand",
-                   "message": {"agent_id": "a1", "tick": 3, "speed": 1.0, "turn": 0.0, "action": "none"}}
+                   "message": {"agent_id": "a1", "tick": 3, "speed": 1.0, "turn": 0.0, "action": "none",
+                               "mark_dx": 0.0, "mark_dy": 0.0, "mark_kind": "site"}}
     assert "not a ConAg message" in describe("k", b"\x00garbage")
     assert "error" in json.loads(describe("k", b"\x00garbage", as_json=True))
 

@@ -173,8 +173,8 @@ def test_bad_messages_of_every_kind_are_counted_and_ignored(bus, start_world):
     bad_commands = [
         b"\x00\xff garbage",                                           # not msgpack
         msgpack.packb([1, 2, 3]),                                      # not an envelope
-        envelope("AgentCommand", ["a1", 0, "fast", 0.0, "none"]),      # wrong type
-        envelope("AgentCommand", ["a1", 0, float("nan"), 0.0, "none"]),  # NaN
+        envelope("AgentCommand", ["a1", 0, "fast", 0.0, "none", 0.0, 0.0, "site"]),      # wrong type
+        envelope("AgentCommand", ["a1", 0, float("nan"), 0.0, "none", 0.0, 0.0, "site"]),  # NaN
         envelope("AgentCommand", ["a1", 0, 1.0]),                      # missing fields
         msgpack.packb({"v": 99, "t": "AgentCommand", "f": ["a1", 0, 1.0, 0.0, "none"]}),  # version
         envelope("Teleport", []),                                      # unknown type
@@ -263,9 +263,9 @@ def test_a_rejected_command_is_answered_with_a_reason_counted_and_not_applied(bu
     envelope = lambda f: msgpack.packb({"v": SCHEMA_VERSION, "t": "AgentCommand", "f": f})  # noqa: E731
     block = zenoh.CongestionControl.BLOCK
     rejected = [
-        (envelope(["a1", t, 1.0, 0.0]), "expected 5 fields"),                     # a field left out
-        (envelope(["a1", float(t), 1.0, 0.0, "none"]), "tick: expected int"),     # tick sent as 1.0
-        (envelope(["a1", t, 1.0, 0.0, "jump"]), "action must be one of"),         # unknown action
+        (envelope(["a1", t, 1.0, 0.0]), "expected 8 fields"),                     # fields left out
+        (envelope(["a1", float(t), 1.0, 0.0, "none", 0.0, 0.0, "site"]), "tick: expected int"),  # tick sent as 1.0
+        (envelope(["a1", t, 1.0, 0.0, "jump", 0.0, 0.0, "site"]), "action must be one of"),      # unknown action
         (encode(AgentCommand("a1", t + 1, 3.0, 0.0)), f"for tick {t + 1}"),        # one ahead
     ]
     if t > 0:

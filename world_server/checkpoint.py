@@ -35,6 +35,7 @@ from pathlib import Path
 import msgpack
 import numpy as np
 
+from protocol.messages import CUE_KINDS
 from world_server.config import WorldConfig
 from world_server.scenario import Scenario
 from world_server.world import AgentRecord, World
@@ -79,6 +80,7 @@ def world_state(world: World) -> dict:
         "ranges": _pack_array(world._ranges),
         "positions": _pack_array(pos), "velocities": _pack_array(vel),
         "pending_release": sorted([int(b), int(a)] for b, a in world._pending_release.items()),
+        "cues": [list(item) for item in world.cues.items()],
     }
 
 
@@ -123,6 +125,8 @@ def _load_into(world: World, state: dict) -> None:
         setattr(world, name, _unpack_array(state["arrays"][name]))
     world._ranges = _unpack_array(state["ranges"])
     world._pending_release = {int(b): int(a) for b, a in state["pending_release"]}
+    for col, row, kind in state.get("cues", []):  # (checkpoints from before cues hold none)
+        world.cues.place((int(col), int(row)), CUE_KINDS[int(kind)])
     world.rebuild_physics(_unpack_array(state["positions"]), _unpack_array(state["velocities"]))
 
 

@@ -32,6 +32,8 @@ class WorldConfig:
     odometry_heading_slip: float = 0.0   # std (radians) of the error of each step's reported direction
     occlusion: bool = False         # a sector reports only the nearest object of any channel in it
     aliasing: float = 0.0           # probability a sector reports the second nearest disc of its colour
+    cue_reach: float = 0.0          # cues (world_server/cues.py): a body marks cells within this distance
+                                    # of its centre; 0: the world has no cues (frames carry no cue channel)
     grab_reach: float = 1.2         # agent centre to brick centre
     grab_cone: float = math.pi / 3  # the gripper takes bricks within this angle of the heading
     touch_margin: float = 0.25      # eat/drink: surfaces closer than this count as touching (an
@@ -60,7 +62,7 @@ class WorldConfig:
         for name in ("sensor_noise", "odometry_noise", "touch_margin"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"world.{name} must be >= 0")
-        for name in ("odometry_distance_slip", "odometry_heading_slip"):
+        for name in ("odometry_distance_slip", "odometry_heading_slip", "cue_reach"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise ValueError(f"world.{name} must be a finite number >= 0, got {value!r}")

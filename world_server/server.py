@@ -501,7 +501,8 @@ class WorldServer:
             self._bad(f"command from {cmd.agent_id!r} for tick {cmd.tick}, but the world is at tick "
                       f"{self.world.tick} (answer the newest frame's tick)", cmd.agent_id)
         else:
-            self.world.set_command(cmd.agent_id, cmd.speed, cmd.turn, cmd.action)
+            self.world.set_command(cmd.agent_id, cmd.speed, cmd.turn, cmd.action,
+                                   (cmd.mark_dx, cmd.mark_dy, cmd.mark_kind))
             self.times.command(self.world.tick - cmd.tick)
             if cmd.tick == self.world.tick:
                 self._answered.add(cmd.agent_id)

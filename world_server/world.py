@@ -18,6 +18,7 @@ import numpy as np
 from protocol.messages import (
     ACTIONS,
     CHANNELS,
+    CUE_KINDS,
     DISC_KINDS,
     SITE_OPS,
     WELCOME_CONSTANTS,
@@ -29,13 +30,14 @@ from protocol.messages import (
     WorldStatus,
     WorldView,
 )
+from world_server.cues import CueBoard, sense_cues
 from world_server.discs import BRICK_DISC, FOOD_DISC, IN_WORLD, WATER_DISC, DiscStore
 from world_server.physics import Physics, motor_update
 from world_server.placement import body_cell, brick_drop_cell, extra_start_cells, reachable_cells
 from world_server.scenario import Scenario
 from world_server.sensors import sense, warm_up
 
-GRAB, DROP, EAT, DRINK = (ACTIONS.index(a) for a in ("grab", "drop", "eat", "drink"))
+GRAB, DROP, EAT, DRINK, MARK, UNMARK = (ACTIONS.index(a) for a in ("grab", "drop", "eat", "drink", "mark", "unmark"))
 OBSTACLE_CHANNEL = CHANNELS.index("obstacle")
 FLAGS = ("grabbed", "dropped", "ate", "drank")
 _LAYOUT_KINDS = {"F": FOOD_DISC, "W": WATER_DISC, "b": BRICK_DISC, "B": BRICK_DISC}
@@ -114,6 +116,13 @@ class World:
         self.flags = np.zeros((n, len(FLAGS)), bool)
         self._ranges = np.zeros((n, len(CHANNELS), self.cfg.sensor_sectors))
         self._pending_release: dict[int, int] = {}  # dropped brick -> agent index
+        # Cues (world_server/cues.py), when cue_reach > 0: the marks lying on the floor, the
+        # mark offsets of this tick's mark / unmark commands, and the last readings.
+        self.cues = CueBoard()
+        self._mark_at: dict[int, tuple[float, float, str]] = {}
+        self._cue_ranges = np.zeros((0, len(CUE_KINDS), self.cfg.sensor_sectors))
+        self._cue_under: list[str] = []
+        self._cue_inputs: tuple | None = None  # (cue arrays, present discs, `_uncovered_cues`) of the last change
         # Body positions as of the last step or attach, for status(): reading them from the
         # physics there would share its read buffer with a step (tests read status from
         # another thread while the server steps).
@@ -333,11 +342,15 @@ class World:
         return self._extra_start_xy
 
     # commands and ticks ----------------------------------------------------------------
-    def set_command(self, agent_id: str, speed: float, turn: float, action: str) -> bool:
-        """Record the latest command of a live agent; False if the agent is not attached."""
+    def set_command(self, agent_id: str, speed: float, turn: float, action: str,
+                    mark: tuple[float, float, str] | None = None) -> bool:
+        """Record the latest command of a live agent; False if the agent is not attached.
+        `mark`: (dx, dy, kind) of a mark / unmark action (AgentCommand.mark_*)."""
         rec = self.agents.get(agent_id)
         if rec is None or not rec.alive:
             return False
+        if action in ("mark", "unmark"):
+            self._mark_at[rec.index] = mark if mark is not None else (0.0, 0.0, CUE_KINDS[0])
         self.set_commands(np.array([rec.index]), np.array([speed]), np.array([turn]),
                           np.array([ACTIONS.index(action)]))
         return True
@@ -358,6 +371,7 @@ class World:
         # The turn and the action are one-shot; the speed is a set point that persists.
         self.turn[:] = 0.0
         self.action[:] = 0
+        self._mark_at.clear()
         self.physics.drive(vel, desired)
         self.physics.step()
         new_pos, _ = self.physics.state()
@@ -405,6 +419,30 @@ class World:
         self._ranges = sense(pos, self.alive, disc_xy, disc_kind, self.cfg.sensor_sectors,
                              self.cfg.sensor_range, self.size, noise=self.cfg.sensor_noise, seed=seed,
                              occlusion=self.cfg.occlusion, aliasing=self.cfg.aliasing, alias_seed=alias_seed)
+        if self.cfg.cue_reach > 0:
+            self._sense_cues(pos, seed)
+
+    def _sense_cues(self, pos: np.ndarray, seed: int) -> None:
+        """Cue readings and the cue under each body (world_server/cues.py): a cue whose cell
+        holds a disc is covered, neither sensed nor under anyone."""
+        xy, kinds, uncovered = self._uncovered_cues()
+        self._cue_ranges = sense_cues(pos, self.alive & self.solid, xy, kinds, self.cfg.sensor_sectors,
+                                      self.cfg.sensor_range, noise=self.cfg.sensor_noise, seed=seed)
+        under = self.scenario.to_cell(pos) if len(pos) else np.zeros((0, 2), np.int64)
+        self._cue_under = [uncovered.get((c, r), "") for c, r in under.tolist()] if uncovered else [""] * len(pos)
+
+    def _uncovered_cues(self) -> tuple[np.ndarray, np.ndarray, dict[tuple[int, int], str]]:
+        """World centres and kinds of the cues no disc covers, and their kinds by (col, row):
+        worked out again only when the cues or the discs lying in the world change."""
+        cues, present = self.cues.arrays(), self.discs.present_arrays()
+        if self._cue_inputs is None or self._cue_inputs[0] is not cues or self._cue_inputs[1] is not present:
+            cells, kinds = cues
+            if len(cells):
+                covered = np.isin(self._cell_code(self.scenario.to_world(cells)), self._cell_code(present[1]))
+                cells, kinds = cells[~covered], kinds[~covered]
+            by_cell = {(c, r): CUE_KINDS[k] for (c, r), k in zip(cells.tolist(), kinds.tolist())}
+            self._cue_inputs = (cues, present, (self.scenario.to_world(cells), kinds, by_cell))
+        return self._cue_inputs[2]
 
     def _sensed_objects(self) -> tuple[np.ndarray, np.ndarray]:
         """Positions and sensor channels of the present discs and the fixed obstacle points.
@@ -438,6 +476,22 @@ class World:
             self.flags[rec.index, 2] = self.discs.nearest(xy, touch, FOOD_DISC) >= 0
         elif action == DRINK:
             self.flags[rec.index, 3] = self.discs.nearest(xy, touch, WATER_DISC) >= 0
+        elif action in (MARK, UNMARK):
+            self._mark(rec, xy, action == MARK)
+
+    def _mark(self, rec: AgentRecord, xy: np.ndarray, put: bool) -> None:
+        """Put a cue on, or take one off, the cell at the command's mark offset from the body:
+        only in a world with cues, within `cue_reach`, inside the world and off `#` cells."""
+        dx, dy, kind = self._mark_at.get(rec.index, (0.0, 0.0, CUE_KINDS[0]))
+        if self.cfg.cue_reach <= 0 or np.hypot(dx, dy) > self.cfg.cue_reach:
+            return
+        col, row = (int(v) for v in self.scenario.to_cell((xy[0] + dx, xy[1] + dy))[0])
+        if not (0 <= col < self.scenario.cols and 0 <= row < self.scenario.rows):
+            return
+        if put and self.scenario.layout[row][col] != "#":
+            self.cues.place((col, row), kind)
+        elif not put:
+            self.cues.remove((col, row))
 
     def _drop(self, rec: AgentRecord, xy: np.ndarray) -> None:
         # The brick lands under the agent (paper §3); it ignores that agent until the agent
@@ -478,6 +532,9 @@ class World:
         rec = self.agents[agent_id]
         i = rec.index
         flags = dict(zip(FLAGS, self.flags[i].tolist()))
+        if self.cfg.cue_reach > 0 and i < len(self._cue_under):
+            flags["cues"] = tuple(self._cue_ranges[i].ravel().tolist())
+            flags["cue_under"] = self._cue_under[i]
         return SensorFrame(agent_id=agent_id, tick=self.tick, heading=float(self.heading[i]),
                            odom_dx=float(self.odometry[i, 0]), odom_dy=float(self.odometry[i, 1]),
                            sectors=self.cfg.sensor_sectors, ranges=tuple(self._ranges[i].ravel().tolist()),

@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from agent_runtime.learning import Student
-from agent_runtime.node import AgentOptions, AgentReport, Learning, run_agent
+from agent_runtime.node import ROLES, AgentOptions, AgentReport, Learning, run_agent
 from agent_runtime.world_link import AttachError
 from conag.agent_settings import AgentSettings, add_attach_args, add_kind_args
 from conag.common import bus_args, bus_options, stopped_by_signal
@@ -22,6 +22,9 @@ def configure(a: argparse.ArgumentParser) -> None:
                    help=f"cells per side of the agent's maps, odd (default {AgentSettings.map_size})")
     a.add_argument("--nearest-first", action="store_true",
                    help="no goal sequencing: always the nearest brick and site (the plain agent of paper §4)")
+    a.add_argument("--role", choices=ROLES, default="agent",
+                   help="agent: a ConAg agent (default); foreman: a ConAg agent that also marks cues for workers; "
+                        "worker: a reactive worker without maps that follows cues (docs/society.md)")
     add_kind_args(a)
     g = a.add_argument_group("learning (paper §5.1)")
     g.add_argument("--learn", action="store_true",
@@ -48,7 +51,7 @@ def agent_options(args: argparse.Namespace) -> AgentOptions:
     elif args.weights_in:
         network = Student.load(args.weights_in)  # a trained student, acting without learning
     return AgentOptions(args.world_id, args.id, settings.config(), args.seed, attach_timeout=args.attach_timeout,
-                        recorded=args.recorded, learning=learning, network=network)
+                        recorded=args.recorded, learning=learning, network=network, role=args.role)
 
 
 def run(args: argparse.Namespace) -> int:

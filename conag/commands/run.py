@@ -16,7 +16,7 @@ import time
 
 from conag import run as supervisor
 from conag.agent_settings import AgentSettings, add_kind_args
-from conag.argtypes import non_negative, positive
+from conag.argtypes import non_negative, positive, positive_float
 from conag.common import PRIORITIES, RECORDER_PRIORITY, stop_on_signals
 from conag.exit_codes import EXIT_ERROR, EXIT_INCOMPLETE, EXIT_INTERRUPTED, EXIT_STALLED, EXIT_USAGE
 from conag.foxglove.live import DEFAULT_PORT as FOXGLOVE_PORT
@@ -25,6 +25,7 @@ from conag.recording.gaps import describe_lost, lost_ticks
 from conag.recording.mcap_log import read_end, world_cut_short
 from conag.run import RunOptions
 from conag.runs import check_name, endpoint_in_use, free_endpoint, register, unregister
+from conag.sim.society import DEFAULT_CUE_REACH
 from conag.viewer.server import DEFAULT_PORT
 from world_server.buildability import check_layout
 from world_server.checkpoint import DEFAULT_EVERY
@@ -43,6 +44,13 @@ def configure(u: argparse.ArgumentParser) -> None:
     u.epilog = EPILOG
     u.add_argument("scenario")
     u.add_argument("--agents", type=int, help="number of agents (default: the scenario's)")
+    s = u.add_argument_group("a society of foremen and workers (docs/society.md)")
+    s.add_argument("--foremen", type=non_negative, default=0, metavar="F",
+                   help="instead of ConAg agents, F foremen (f1..fF: ConAg agents that mark cues for workers) ...")
+    s.add_argument("--workers", type=non_negative, default=0, metavar="W",
+                   help="... and W reactive workers (w1..wW: no maps, they follow the cues); the world gets cues")
+    s.add_argument("--cue-reach", type=positive_float, default=DEFAULT_CUE_REACH, metavar="R",
+                   help=f"how far (world units) a body marks, in a society's world (default {DEFAULT_CUE_REACH:g})")
     u.add_argument("--seed", type=int, help="override the scenario's seed")
     u.add_argument("--max-ticks", type=int, help="stop after this many ticks (default: the scenario's)")
     u.add_argument("--stall-ticks", type=non_negative, default=DEFAULT_STALL_TICKS, metavar="N",
@@ -130,6 +138,11 @@ def run_options(args: argparse.Namespace) -> RunOptions:
     if args.per_process < 1 or (args.per_process > 1 and (args.learn or args.secure is not None)):
         raise ValueError("--per-process must be >= 1, and 1 for learning agents (each saves its own weights) "
                          "and on a secure bus (each agent has its own credential)")
+    society = args.foremen + args.workers > 0
+    if society and (args.agents is not None or args.learn or args.teacher or args.per_process > 1
+                    or args.secure is not None):
+        raise ValueError("--foremen and --workers make the run's agents: they do not go with --agents, --learn, "
+                         "--teacher, --per-process or --secure")
     noise = noise_settings(args)
     scenario = noise.apply(load_scenario(args.scenario))
     if args.name is not None:
@@ -138,7 +151,8 @@ def run_options(args: argparse.Namespace) -> RunOptions:
         raise ValueError(f"{args.listen[0]} is in use (another world or `conag run` listens there): choose "
                          "another --listen, or leave it out for a free one")
     endpoint = args.listen[0] if args.listen else free_endpoint()
-    unbuildable = warn_if_unbuildable(args.scenario, scenario, args.agents)  # a repair experiment may want it
+    agents = args.foremen + args.workers if society else args.agents
+    unbuildable = warn_if_unbuildable(args.scenario, scenario, agents)  # a repair experiment may want it
     return RunOptions(scenario_path=args.scenario, scenario=scenario, endpoint=endpoint, world_id=args.world_id,
                       agents=args.agents, seed=args.seed, max_ticks=args.max_ticks, summary=args.summary,
                       headless=args.headless, quiet=args.quiet, agent=agent,
@@ -147,7 +161,8 @@ def run_options(args: argparse.Namespace) -> RunOptions:
                       view=args.view, foxglove=args.foxglove, maps_every=args.maps_every, secure=args.secure,
                       checkpoint_every=args.checkpoint_every, profile=args.profile,
                       per_process=args.per_process, agent_mode=args.agent_mode, noise=noise,
-                      fork_server=args.fork_server)
+                      fork_server=args.fork_server, foremen=args.foremen, workers=args.workers,
+                      cue_reach=args.cue_reach)
 
 
 def warn_if_unbuildable(path: str, scenario: Scenario, agents: int | None = None) -> str:

@@ -4,6 +4,7 @@ its checkpoint."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 
@@ -53,6 +54,9 @@ def configure(w: argparse.ArgumentParser) -> None:
     c.add_argument("--resume", metavar="FILE",
                    help="continue the world saved in checkpoint FILE from its tick (and go on checkpointing to FILE "
                         "unless --checkpoint says otherwise); a truncated or corrupt FILE is refused")
+    w.add_argument("--cue-reach", type=float, metavar="R",
+                   help="a world with cues (docs/society.md): bodies mark cells within R world units; 0: no cues "
+                        "(default: the scenario's world.cue_reach, 0)")
     add_noise_args(w)
     bus_args(w)
 
@@ -70,6 +74,9 @@ def run(args: argparse.Namespace) -> int:
         if args.scenario is None:
             raise ValueError("conag world needs a SCENARIO file (or --resume CHECKPOINT)")
         scenario = noise_settings(args).apply(load_scenario(args.scenario))
+        if args.cue_reach is not None:
+            scenario = dataclasses.replace(scenario, world=dataclasses.replace(scenario.world,
+                                                                             cue_reach=args.cue_reach))
         seed = scenario.seed if args.seed is None else args.seed
         world = World(scenario, np.random.default_rng(seed), world_id=args.world_id)
         if args.checkpoint:

@@ -70,7 +70,7 @@ class SimRun:
             self.behaviour_ticks.setdefault(frame.agent_id, Counter())[s.behaviour] += 1
             if self.on_step is not None:
                 self.on_step(frame.agent_id, s)
-            self.world.set_command(frame.agent_id, s.speed, s.turn, s.action)
+            self.world.set_command(frame.agent_id, s.speed, s.turn, s.action, s.mark)
         self.world.step()
         self._record_fills()
 

@@ -1,0 +1,242 @@
+"""The foreman's marking (issue 37 item 4; paper §6.3): where a ConAg agent puts cues for workers.
+
+The paper's future work: "a few 'foremen' equipped with the ConAg architecture ... mark the
+environment with cues for the worker agents", which build the simple parts. A foreman is a
+ConAg agent (its Brain builds as any agent does) that also reads its own maps to mark, on a
+tick its brain asks for no action, one cue at a time (docs/society.md):
+
+* a `supply` cue on open ground beside free bricks, away from the structure, where workers
+  may take bricks (a worker cannot tell a free brick from a structure brick: it takes bricks
+  only round a supply cue);
+* `site` cues on open sites it has just seen open, nearest first, while it has fewer than
+  `max_site_cues` out: only a site whose filling, together with every other site marked,
+  in any order, cuts no open ground off from the outside and leaves every marked site
+  enterable. Workers fill marked sites in whatever order they reach them, so the marked set
+  must be safe as a whole: filling fewer cells never disconnects more, so checking the
+  whole set covers every order (one flood for the ground, one per marked site);
+* it takes a cue off once its site is seen filled (a brick there), or a supply cue once no
+  free brick is left beside it.
+
+The cues it put out are kept as points in its odometry frame (cells from where it
+attached), so they stay put as the maps shift. Pure numpy over the Brain's maps; the shell
+sends the Mark (agent_runtime/society_node.py).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from agent_runtime.esm import BRICK, CONFIG, FOOD, OBSTACLE, WATER
+from agent_runtime.sealing import connected
+
+
+@dataclass(frozen=True)
+class ForemanConfig:
+    """How a foreman marks."""
+
+    reach: float = 4.5          # cells: it marks cells this near only (inside its sight and the world's cue_reach)
+    max_site_cues: int = 6      # site cues out at once
+    fresh: float = 5.0          # a site is marked only if seen open within this many steps
+    every: int = 4              # steps between two marking decisions
+    supply_clearance: int = 2   # a supply cue keeps this many cells (each axis) from any site
+
+    def __post_init__(self) -> None:
+        if not (self.reach > 0 and self.max_site_cues >= 0 and self.fresh > 0 and self.every >= 1
+                and self.supply_clearance >= 0):
+            raise ValueError("foreman settings must be positive (max_site_cues, supply_clearance >= 0)")
+
+
+@dataclass(frozen=True)
+class Mark:
+    """One marking action: put (`mark`) or take (`unmark`) a cue of `kind` on the cell whose
+    centre is (dx, dy) cells from the agent, world axes."""
+
+    action: str
+    dx: float
+    dy: float
+    kind: str
+
+
+@dataclass(frozen=True)
+class MapView:
+    """What marking reads of the maps, as bool grids [row, col] (the agent in `centre`):
+    open sites and how fresh, cells a body cannot enter, free bricks."""
+
+    open_sites: np.ndarray
+    fresh_sites: np.ndarray
+    filled_sites: np.ndarray
+    blocked: np.ndarray
+    free_bricks: np.ndarray
+    centre: tuple[int, int]
+
+    @classmethod
+    def of(cls, marks: np.ndarray, clear_age: np.ndarray, fresh: float) -> MapView:
+        """From the maps as marks (`Brain.layers()`) and the sites' ages (`maps.clear_age`)."""
+        sites, bricks = marks[CONFIG], marks[BRICK]
+        open_sites = sites & ~bricks
+        blocked = marks[OBSTACLE] | marks[FOOD] | marks[WATER] | bricks
+        n = marks.shape[1] // 2
+        return cls(open_sites, open_sites & (clear_age < fresh), sites & bricks, blocked, bricks & ~sites, (n, n))
+
+
+def marking_is_safe(view: MapView, marked: np.ndarray) -> bool:
+    """Whether workers may fill every cell of `marked` in any order: with all of them filled,
+    the open ground that reaches the outside now still reaches it, and each marked cell
+    still has a neighbour that does (so it can be entered while the others are filled).
+
+    The outside is the map's open border (the world goes on beyond it); on a map that holds
+    the whole world (its border is the world's edge), the largest open region, since the
+    foreman may stand in a pocket itself. Cells never seen count as open (the maps' reading
+    of them)."""
+    passable = ~view.blocked
+    reference = _outside(passable)
+    now = connected(reference, passable)
+    after = connected(reference & ~marked, passable & ~marked)
+    if (now & ~marked & ~after).any():
+        return False
+    return bool(np.all(_beside(after)[marked]))
+
+
+def site_candidates(view: MapView, marked: np.ndarray, reach: float) -> list[tuple[int, int]]:
+    """Fresh open sites within `reach` cells not marked yet, nearest first (ties in reading order)."""
+    rows, cols = np.nonzero(view.fresh_sites & ~marked)
+    d = np.hypot(rows - view.centre[0], cols - view.centre[1])
+    keep = d <= reach
+    order = np.lexsort((cols[keep], rows[keep], d[keep]))
+    return [(int(r), int(c)) for r, c in zip(rows[keep][order], cols[keep][order])]
+
+
+def supply_cell(view: MapView, reach: float, clearance: int) -> tuple[int, int] | None:
+    """Open ground within `reach` beside the most free bricks (8 neighbours), with no site
+    (open or filled) within `clearance` cells on each axis, so a worker taking bricks round it
+    cannot take a structure brick; nearest first among equals. None if there is none."""
+    sites = view.open_sites | view.filled_sites
+    near_site = _dilate(sites, clearance)
+    bricks = view.free_bricks.astype(np.int64)
+    padded = np.pad(bricks, 1)
+    n, m = bricks.shape
+    beside = np.zeros_like(bricks)
+    for dr in (-1, 0, 1):
+        for dc in (-1, 0, 1):
+            if dr or dc:
+                beside += padded[1 + dr:1 + dr + n, 1 + dc:1 + dc + m]
+    ok = ~view.blocked & ~sites & ~near_site & (beside > 0)
+    rows, cols = np.nonzero(ok)
+    if not len(rows):
+        return None
+    d = np.hypot(rows - view.centre[0], cols - view.centre[1])
+    keep = d <= reach
+    if not keep.any():
+        return None
+    order = np.lexsort((cols[keep], rows[keep], d[keep], -beside[rows[keep], cols[keep]]))
+    return int(rows[keep][order[0]]), int(cols[keep][order[0]])
+
+
+class Foreman:
+    """One foreman's cues and its next marking decision (`decide`), over its Brain's maps."""
+
+    def __init__(self, cfg: ForemanConfig | None = None):
+        self.cfg = cfg or ForemanConfig()
+        self.cues: list[tuple[float, float, str]] = []  # (x, y) in its odometry frame (cells), kind
+        self._step = 0
+        self.marks = self.unmarks = 0
+
+    def due(self) -> bool:
+        """Counts a step; True on every `every`-th, when it decides (marking is no reflex)."""
+        self._step += 1
+        return self._step % self.cfg.every == 0
+
+    def decide(self, marks: np.ndarray, clear_age: np.ndarray, odometry: np.ndarray, offset_of, cell_of,
+               ) -> Mark | None:
+        """The cue to put or take now, or None. `marks`: the maps as marks; `clear_age`
+        the sites' ages; `odometry` where the agent is in its odometry frame (cells);
+        `offset_of(row, col)` / `cell_of(dx, dy)` the maps' coordinates (EgocentricMaps)."""
+        view = MapView.of(marks, clear_age, self.cfg.fresh)
+        mine = [(cell_of(x - odometry[0], y - odometry[1]), kind) for x, y, kind in self.cues]
+        done = self._finished(view, mine, odometry)
+        if done is not None:
+            return done
+        cued = np.zeros_like(view.open_sites)
+        for (r, c), kind in mine:
+            if kind == "site" and 0 <= r < cued.shape[0] and 0 <= c < cued.shape[1]:
+                cued[r, c] = True
+        if not any(kind == "supply" for _, _, kind in self.cues):
+            cell = supply_cell(view, self.cfg.reach, self.cfg.supply_clearance)
+            if cell is not None:
+                return self._put(cell, "supply", odometry, offset_of)
+        if sum(kind == "site" for _, _, kind in self.cues) >= self.cfg.max_site_cues:
+            return None
+        for cell in site_candidates(view, cued, self.cfg.reach):
+            trial = cued.copy()
+            trial[cell] = True
+            if marking_is_safe(view, trial):
+                return self._put(cell, "site", odometry, offset_of)
+        return None
+
+    def _finished(self, view: MapView, mine, odometry: np.ndarray) -> Mark | None:
+        """Take off the first of its cues within reach whose job is done."""
+        n = view.open_sites.shape[0]
+        for k, ((r, c), kind) in enumerate(mine):
+            x, y, _ = self.cues[k]
+            dx, dy = x - odometry[0], y - odometry[1]
+            if not (0 <= r < n and 0 <= c < n) or math.hypot(dx, dy) > self.cfg.reach:
+                continue
+            if kind == "site":
+                done = not view.open_sites[r, c]
+            else:
+                done = not view.free_bricks[max(r - 1, 0):r + 2, max(c - 1, 0):c + 2].any()
+            if done:
+                del self.cues[k]
+                self.unmarks += 1
+                return Mark("unmark", dx, dy, kind)
+        return None
+
+    def _put(self, cell: tuple[int, int], kind: str, odometry: np.ndarray, offset_of) -> Mark:
+        dx, dy = offset_of(*cell)
+        self.cues.append((float(odometry[0] + dx), float(odometry[1] + dy), kind))
+        self.marks += 1
+        return Mark("mark", float(dx), float(dy), kind)
+
+
+def _outside(passable: np.ndarray) -> np.ndarray:
+    """The map's open border cells, else (a world inside the map) the largest open region."""
+    ref = np.zeros_like(passable)
+    ref[0, :] = ref[-1, :] = ref[:, 0] = ref[:, -1] = True
+    ref &= passable
+    if ref.any():
+        return ref
+    best, seen = ref, np.zeros_like(passable)
+    for i, j in zip(*np.nonzero(passable)):
+        if seen[i, j]:
+            continue
+        one = np.zeros_like(passable)
+        one[i, j] = True
+        region = connected(one, passable)
+        seen |= region
+        if np.count_nonzero(region) > np.count_nonzero(best):
+            best = region
+    return best
+
+
+def _beside(cells: np.ndarray) -> np.ndarray:
+    """Cells with a 4-neighbour in `cells`."""
+    out = np.zeros_like(cells)
+    out[1:] |= cells[:-1]
+    out[:-1] |= cells[1:]
+    out[:, 1:] |= cells[:, :-1]
+    out[:, :-1] |= cells[:, 1:]
+    return out
+
+
+def _dilate(cells: np.ndarray, k: int) -> np.ndarray:
+    """Cells within `k` cells of `cells` on each axis."""
+    n, m = cells.shape
+    padded = np.pad(cells, k)
+    out = np.zeros_like(cells)
+    for dr in range(-k, k + 1):
+        for dc in range(-k, k + 1):
+            out |= padded[k + dr:k + dr + n, k + dc:k + dc + m]
+    return out

@@ -1,0 +1,61 @@
+"""A society of foremen and workers (issue 37 item 4; docs/society.md): in process, and as
+processes under `conag run --foremen F --workers W`, its members killed and restarted."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from conag.sim.society import society_ids, start_society
+from tests.conftest import conag, free_port, run_acting_mid_build
+from world_server.scenario import load_scenario
+
+
+def _built_by(run) -> dict[str, int]:
+    st = run.world.status()
+    return dict(zip(st.agent_ids, st.agent_drops))
+
+
+def test_a_society_in_process_builds_with_its_workers_filling_marked_sites():
+    run = start_society(load_scenario("scenarios/quick_wall.toml"), foremen=1, workers=3, seed=1)
+    result = run.run(3000, stall_ticks=2000)
+    assert result.completed
+    drops = _built_by(run)
+    assert list(drops) == society_ids(1, 3) == ["f1", "w1", "w2", "w3"]
+    assert sum(drops[w] for w in ("w1", "w2", "w3")) >= 1     # workers filled sites the foreman marked
+    assert sum(drops.values()) == 3                            # no brick dropped anywhere but on a site
+
+
+def test_society_flags_do_not_go_with_agents_or_learning():
+    for extra in (["--agents", "3"], ["--learn"], ["--per-process", "2"]):
+        r = conag("run", "scenarios/quick_wall.toml", "--foremen", "1", "--workers", "2", *extra,
+                  "--listen", f"tcp/127.0.0.1:{free_port()}")
+        assert r.returncode == 2 and "--foremen and --workers" in r.stderr
+
+
+@pytest.mark.slow
+def test_fig19_in_process_one_foreman_and_six_workers_complete_every_site_on_its_site():
+    run = start_society(load_scenario("scenarios/fig19.toml"), foremen=1, workers=6)
+    assert run.run(20000, stall_ticks=5000).completed
+    drops = _built_by(run)
+    assert sum(drops.values()) == 19                           # 21 sites, 2 built from the start
+    assert sum(n for a, n in drops.items() if a.startswith("w")) >= 3
+
+
+@pytest.mark.slow
+def test_conag_run_fig19_with_a_foreman_and_six_workers_completes_through_kills_and_restarts(tmp_path):
+    out = tmp_path / "summary.json"
+
+    def kill_and_restart(ep: str, _run) -> list:
+        return [conag("restart", "f1", "--connect", ep), conag("kill", "w2", "--connect", ep),
+                conag("restart", "w2", "--connect", ep)]
+
+    answers = run_acting_mid_build("scenarios/fig19.toml", out, kill_and_restart, "--foremen", 1, "--workers", 6,
+                                   timeout=600)
+    assert all(a.returncode == 0 for a in answers), [a.stderr for a in answers]
+    s = json.loads(out.read_text())
+    assert s["completed"] and s["sites_filled"] == s["sites_total"] == 21
+    restarts = {a["id"]: a["restarts"] for a in s["agents"]}
+    assert sorted(restarts) == sorted(society_ids(1, 6))
+    assert restarts["f1"] == 1 and restarts["w2"] >= 1 and restarts["w1"] == 0

@@ -1,0 +1,84 @@
+"""The reactive worker (agent_runtime/worker.py): its rules on hand-made frames, and a worker
+in a world that fills a site a cue marks, taking bricks only by a supply cue."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from agent_runtime.worker import Worker
+from protocol.messages import CHANNELS, CUE_KINDS, NO_READING, SensorFrame
+from tests.conftest import make
+
+S = 16
+BRICK = CHANNELS.index("brick")
+SITE, SUPPLY = CUE_KINDS.index("site"), CUE_KINDS.index("supply")
+
+
+def sector(angle: float) -> int:
+    return int((angle % (2 * math.pi)) / (2 * math.pi / S))
+
+
+def frame(heading=0.0, holding=False, under="", bricks=(), sites=(), supplies=()) -> SensorFrame:
+    """A frame with bricks / cues at (angle, distance)."""
+    ranges = np.full((len(CHANNELS), S), NO_READING)
+    cues = np.full((len(CUE_KINDS), S), NO_READING)
+    for grid, ch, items in ((ranges, BRICK, bricks), (cues, SITE, sites), (cues, SUPPLY, supplies)):
+        for angle, d in items:
+            grid[ch, sector(angle)] = d
+    return SensorFrame("w1", 5, heading, 0.0, 0.0, S, tuple(ranges.ravel()), holding,
+                       cues=tuple(cues.ravel()), cue_under=under)
+
+
+def worker() -> Worker:
+    w = make("....\n.A..\n....", cue_reach=5.0)
+    return Worker(w.attach("w1"), rng=np.random.default_rng(0))
+
+
+def test_it_drops_a_held_brick_on_a_site_cue_and_then_backs_off():
+    w = worker()
+    assert w.step(frame(holding=True, under="site")).action == "drop"
+    after = w.step(frame(holding=False))
+    assert after.action == "none" and after.behaviour == "avoid"
+    assert w.step(frame(holding=True, under="supply")).action != "drop"
+
+
+def test_it_grabs_only_a_brick_by_a_supply_cue():
+    w = worker()
+    near_supply = frame(bricks=[(0.1, 1.0)], supplies=[(0.1, 2.0)])
+    assert w.step(near_supply).action == "grab"
+    nowhere = frame(bricks=[(0.1, 1.0)])
+    far_from_supply = frame(bricks=[(0.1, 1.0)], supplies=[(math.pi, 4.0)])
+    for f in (nowhere, far_from_supply):
+        assert worker().step(f).action != "grab"
+
+
+def test_holding_it_heads_for_the_nearest_site_cue():
+    w = worker()
+    s = w.step(frame(heading=0.0, holding=True, sites=[(math.pi / 2 + 0.1, 3.0), (math.pi + 0.1, 5.0)]))
+    assert s.behaviour == "config_nav" and s.turn > 0.5     # turning north, to the nearer cue
+
+
+def test_in_a_world_a_worker_fills_the_marked_site_from_the_supply():
+    # Bricks west, a site east; cues put as a foreman would: supply beside the bricks, site on the site.
+    w = make("""
+..........
+.bb.......
+.bb...A.+.
+..........
+..........
+""", sensor_noise=0.02, cue_reach=9.0)
+    welcome = w.attach("w1")
+    mind = Worker(welcome, rng=np.random.default_rng(3))
+    w.cues.place((3, 2), "supply")
+    w.cues.place((8, 2), "site")
+    w.step()
+    for _ in range(1500):
+        if w.completed():
+            break
+        s = mind.step(w.frame("w1"))
+        w.set_command("w1", s.speed, s.turn, s.action)
+        w.step()
+    assert w.completed()
+    assert w.status().agent_grabs == (1,)   # one brick taken, the one that filled the site
