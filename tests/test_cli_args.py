@@ -164,6 +164,7 @@ def test_every_subcommand_has_a_module_with_its_flags_and_its_run():
     [],
     ["--map-size", "31", "--nearest-first"],
     ["--agent", "paper", "--without", "unstick, seal_guard"],
+    ["--with", "anchor_maps"],
     ["--learn", "--eta", "0.25"],
 ])
 def test_the_agent_flags_conag_run_forwards_ask_an_agent_for_the_same_settings(argv):
