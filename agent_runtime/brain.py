@@ -18,6 +18,10 @@ Additions for worlds nobody tuned for (each documented where it is made):
 - an agent that makes no headway for `stuck_ticks` (two agents avoiding each other, a
   body pushing into something) backs off in a random direction for a random while, so
   agents that block each other separate within a bounded number of ticks.
+
+With `AgentConfig.anchor_maps` (off by default) the belief of where the agent is follows
+the landmarks it knows, structure bricks and the world's edge, so the maps stay true under
+odometry noise (`anchoring`).
 """
 
 from __future__ import annotations
@@ -148,7 +152,6 @@ class Brain:
         # `anchor_maps`: the belief of where the agent is, kept true by landmarks it sees.
         self.anchor = Anchor() if self.cfg.anchor_maps else None
         self._edge = edge_ring(self.far.bounds)
-        self.anchor_moved = 0.0            # cells the belief was moved by the anchor, in all
 
     # sensing and planning --------------------------------------------------------------
     def perceive(self, frame: SensorFrame) -> np.ndarray:
@@ -212,7 +215,6 @@ class Brain:
         fix = self.anchor.correct(ranges, position, Landmarks(self.far.sites, ~self.far.site_open, self._edge))
         if fix.any():
             self._shift_belief(float(fix[0]) * self.cell, float(fix[1]) * self.cell)
-            self.anchor_moved += float(np.hypot(*fix))
 
     def layers(self) -> np.ndarray:
         """The maps as marks (> 0.5), one bool grid per layer: within `step`, worked out once
