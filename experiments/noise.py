@@ -314,23 +314,30 @@ def markdown(outcomes: list[Outcome], args: argparse.Namespace, seconds: float |
     wall = (f" Wall time: {seconds / 60:.0f} min on {where} (niced, on a shared 2-core "
             "machine)." if seconds is not None else "")
     every = [s.name for s in SETTINGS]
+    part = {n: sorted({o.layout.split("-")[0] for o in outcomes if o.setting == n}) for n in settings}
+    part = {n: some for n, some in part.items() if len(some) < len(layouts)}
+    whole = [n for n in settings if n not in part]      # measured on every layout
     if args.quick:
         command = "python3 -m experiments.noise --quick"
-    elif settings == every:
+    elif whole == every:
         command = f"python3 -m experiments.noise --jobs {args.jobs}"
-    elif settings == list(GOAL_SETTINGS):
+    elif whole == list(GOAL_SETTINGS):
         command = f"python3 -m experiments.noise --goal --jobs {args.jobs}"
     else:
-        command = f"python3 -m experiments.noise --jobs {args.jobs} --settings \"{','.join(settings)}\""
+        command = f"python3 -m experiments.noise --jobs {args.jobs} --settings \"{','.join(whole)}\""
     missing = [n for n in (QUICK_SETTINGS if args.quick else every) if n not in settings]
     not_run = f"\n\nNot measured yet: {', '.join(missing)}." if missing else ""
+    if part:
+        runs = [f"{n}, {len(some)} layouts (`--settings \"{n}\" --layouts {','.join(some)}`)"
+                for n, some in part.items()]
+        not_run += " Measured on part of the sample only: " + "; ".join(runs) + "."
     which = f"the {QUICK_LAYOUTS} cheapest to build of" if args.quick else "all of"
     return f"""## Noise and occlusion (issue 37)
 
 `{command}` builds {len(layouts)} generated layouts ({which} the first {SAMPLE} of the suite of
 `experiments.generalisation` whose longer side is at most {MAX_SIDE} cells and that have at most
 {MAX_AGENTS} agents; {agents[0]} to {agents[-1]} agents, so larger teams and worlds are not covered)
-under {len(settings)} settings, in process (`conag.sim`, lockstep, the default agent), each run's
+under {len(whole)} settings, in process (`conag.sim`, lockstep, the default agent), each run's
 noise drawn from the layout's seed (re-running gives the same table). A run stops when complete,
 after {args.stall} ticks with no site filled, or at the layout's `max_ticks`.{wall}{not_run}
 
@@ -384,9 +391,10 @@ def plot(outcomes: list[Outcome], path: Path) -> Path:
     b.barh(y + 0.2, end, height=0.4, color="#c44e52", label="at the end")
     b.set_xlabel("map error (cells): configuration ESM against the truth")
     b.legend(loc="lower right", fontsize=8)
-    a.set_yticks(y, names)
-    a.invert_yaxis()
     layouts = len({o.layout for o in outcomes})
+    count = {n: len({o.layout for o in outcomes if o.setting == n}) for n in names}
+    a.set_yticks(y, [n if count[n] == layouts else f"{n}\n({count[n]} layouts only)" for n in names])
+    a.invert_yaxis()
     fig.suptitle(f"Noise and occlusion: {layouts} generated layouts per setting (experiments/noise.py)")
     fig.tight_layout()
     fig.savefig(path, dpi=90)
