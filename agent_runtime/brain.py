@@ -21,6 +21,10 @@ Additions for worlds nobody tuned for (each documented where it is made):
 - for big teams, off by default (issue 36): goals another agent in sight takes first are
   left to it (`claims`), an agent with nothing to fetch waits near the supply, and a
   searching agent leaves unseen ground nearer another agent to it.
+
+With `AgentConfig.anchor_maps` (off by default) the belief of where the agent is follows
+the landmarks it knows, structure bricks and the world's edge, so the maps stay true under
+odometry noise (`anchoring`).
 """
 
 from __future__ import annotations
@@ -33,6 +37,7 @@ import numpy as np
 from numba import njit
 
 from agent_runtime import steering
+from agent_runtime.anchoring import Anchor, Landmarks, edge_ring
 from agent_runtime.claims import claimed_by_others
 from agent_runtime.config import AgentConfig
 from agent_runtime.esm import AGENT, BRICK, CONFIG, FOOD, OBSTACLE, WATER, EgocentricMaps, Sensing
@@ -152,6 +157,9 @@ class Brain:
         self._drop_unseen = False  # that drop was before this brain started (`_brick_underfoot`)
         # Centre to centre, in cells, at which the world lets a dropped brick hold this body again.
         self._release = (welcome.agent_radius + welcome.disc_radius) / welcome.cell_size
+        # `anchor_maps`: the belief of where the agent is, kept true by landmarks it sees.
+        self.anchor = Anchor() if self.cfg.anchor_maps else None
+        self._edge = edge_ring(self.far.bounds)
 
     @property
     def odometry(self) -> np.ndarray:
@@ -166,21 +174,12 @@ class Brain:
         self._tick = frame.tick
         if frame.tick > self._attach_tick:  # the attach pose already includes the last move
             self._odo += (frame.odom_dx / self.cell, frame.odom_dy / self.cell)
-            layers = self.maps.maps
-            if any(self.maps.crossing(frame.odom_dx, frame.odom_dy, self.cell)):  # 1 step in 7 or so
-                free = (layers[BRICK] > 0.5) & (layers[CONFIG] <= 0.5)
-                walls = layers[OBSTACLE] > 0.5
-                discs = (layers[FOOD] > 0.5) | (layers[WATER] > 0.5)
-                ground = self.maps.known & ~walls & ~discs      # before the maps shift
-            kx, ky = self.maps.move(frame.odom_dx, frame.odom_dy, self.cell)
-            if kx or ky:
-                self.far.save_walls(walls, discs | self._recalled, ground)
-                back = self.far.move(kx, ky, free)
-                layers[BRICK][back] = 1.0
-                layers[OBSTACLE][self.far.load_walls()] = 1.0
-                self.far.config_layer(layers[CONFIG])
-                self._recalled = self.far.load_discs()
+            self._shift_belief(frame.odom_dx, frame.odom_dy)
+            if self.anchor is not None:
+                self.anchor.predict(math.hypot(frame.odom_dx, frame.odom_dy) / self.cell)
         self._track_source(frame)
+        if self.anchor is not None:
+            self._anchor_maps(ranges)
         self.maps.sense(ranges, self.sensor_range)
         # The world's edge is a wall; recalled discs on cells seen free since are gone
         # (eaten, moved); the maps as marks: what the step reads (`layers`).
@@ -199,6 +198,35 @@ class Brain:
             self.searched += new
         self.motivations.update(self.cfg, frame.ate, frame.drank)
         return ranges
+
+    def _shift_belief(self, dx: float, dy: float) -> None:
+        """Dead reckoning: the agent believes it moved (dx, dy) world units. The maps shift
+        by the whole cells crossed, and the far memory with them (what leaves the map is
+        remembered, what comes back onto it is written in again)."""
+        layers = self.maps.maps
+        if any(self.maps.crossing(dx, dy, self.cell)):  # 1 step in 7 or so
+            free = (layers[BRICK] > 0.5) & (layers[CONFIG] <= 0.5)
+            walls = layers[OBSTACLE] > 0.5
+            discs = (layers[FOOD] > 0.5) | (layers[WATER] > 0.5)
+            ground = self.maps.known & ~walls & ~discs      # before the maps shift
+        kx, ky = self.maps.move(dx, dy, self.cell)
+        if kx or ky:
+            self.far.save_walls(walls, discs | self._recalled, ground)
+            back = self.far.move(kx, ky, free)
+            layers[BRICK][back] = 1.0
+            layers[OBSTACLE][self.far.load_walls()] = 1.0
+            self.far.config_layer(layers[CONFIG])
+            self._recalled = self.far.load_discs()
+
+    def _anchor_maps(self, ranges: np.ndarray) -> None:
+        """`anchor_maps`: move the belief of where the agent is by what the landmarks it
+        sees say (`anchoring`), before this frame is written into the maps, so that its
+        readings land where the blueprint's sites are drawn."""
+        assert self.anchor is not None
+        position = self.far.pos.astype(np.float64) + self.maps.frac
+        fix = self.anchor.correct(ranges, position, Landmarks(self.far.sites, ~self.far.site_open, self._edge))
+        if fix.any():
+            self._shift_belief(float(fix[0]) * self.cell, float(fix[1]) * self.cell)
 
     def layers(self) -> np.ndarray:
         """The maps as marks (> 0.5), one bool grid per layer: within `step`, worked out once

@@ -61,11 +61,14 @@ class AgentConfig:
     site_core: bool = True          # a site cell is cleared of bricks only by the sectors covering its centre
     obstacle_trust: bool = True     # walls only from readings near enough to land in their cell; far food
                                     # and water never on a blueprint site
+    # Corrections for noisy worlds (docs/noise.md), off by default: CORRECTIONS.
+    anchor_maps: bool = False       # the belief of where the agent is follows structure bricks and the
+                                    # world's edge it sees (agent_runtime.anchoring), so the maps stay true
 
     def __post_init__(self) -> None:
         if not (isinstance(self.map_size, int) and self.map_size >= 5 and self.map_size % 2 == 1):
             raise ValueError("agent.map_size must be an odd integer >= 5")
-        for name in ADDITIONS:
+        for name in ADDITIONS + CORRECTIONS:
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"agent.{name} must be true or false")
         for f in dataclasses.fields(self):
@@ -132,6 +135,10 @@ ADDITIONS = ("agents_as_obstacles", "explore_sweep", "unstick", "give_way", "age
              "ghost_association", "clear_margins", "site_core", "obstacle_trust")
 # Additions that the default agent leaves off (docs/design.md says why for each).
 OFF_BY_DEFAULT = ("idle_wait", "yield_goals", "spread_search")
+# Corrections for a world the paper's agent assumed away (odometry noise, docs/noise.md), in
+# AgentConfig order. Unlike ADDITIONS they are off in the default agent: in a world without
+# noise they would only ever move a true belief by the sensors' noise.
+CORRECTIONS = ("anchor_maps",)
 # Named agents: "default" is the best agent, "paper" the agent as the paper describes it
 # (as far as its additions can be switched off; far memory, the obstacle layer and needs
 # that last until they are met cannot be yet). The paper's agent keeps ghost association:

@@ -1,7 +1,7 @@
 """What an agent process is asked to be: the typed form of `conag agent`'s agent flags.
 
 `conag agent`, `conag agents` and `conag run` read the same flags (--agent, --without,
---map-size, --nearest-first; --learn and --eta) into one `AgentSettings`, and the first two
+--with, --map-size, --nearest-first; --learn and --eta) into one `AgentSettings`, and the first two
 attach alike (`add_attach_args`). `conag run` checks
 them once and hands them, typed, to the supervisor (`conag.run.RunOptions.agent`), which
 starts the agent processes; `AgentSettings.argv` is the one place they become command-line
@@ -13,8 +13,12 @@ from __future__ import annotations
 import argparse
 from dataclasses import dataclass
 
-from agent_runtime.config import ADDITIONS, AgentConfig
+from agent_runtime.config import ADDITIONS, CORRECTIONS, OFF_BY_DEFAULT, AgentConfig
 from agent_runtime.node import Learning
+
+# What --with switches on: the corrections for noisy worlds and the additions the default agent
+# leaves off.
+SWITCH_ON = CORRECTIONS + OFF_BY_DEFAULT
 
 
 @dataclass(frozen=True)
@@ -24,6 +28,7 @@ class AgentSettings:
 
     preset: str = "default"
     without: tuple[str, ...] = ()     # additions switched off (agent_runtime.config.ADDITIONS)
+    with_: tuple[str, ...] = ()       # corrections and off-by-default additions switched on (SWITCH_ON)
     map_size: int = AgentConfig.map_size
     nearest_first: bool = False       # no goal sequencing (paper §4)
     learn: bool = False               # a student with random weights, learning from the teacher
@@ -35,7 +40,8 @@ class AgentSettings:
         a subcommand has no such flag)."""
         learn = getattr(args, "learn", False)
         eta = getattr(args, "eta", None)
-        return cls(preset=args.agent, without=split_names(args.without), map_size=args.map_size,
+        return cls(preset=args.agent, without=split_names(args.without),
+                   with_=split_names(getattr(args, "with_", None)), map_size=args.map_size,
                    nearest_first=args.nearest_first, learn=learn, eta=Learning.eta if eta is None else eta)
 
     def config(self) -> AgentConfig:
@@ -43,8 +49,11 @@ class AgentSettings:
         unknown = [n for n in self.without if n not in ADDITIONS]
         if unknown:
             raise ValueError(f"--without: unknown addition(s) {', '.join(unknown)}; known: {', '.join(ADDITIONS)}")
+        wrong = [n for n in self.with_ if n not in SWITCH_ON]
+        if wrong:
+            raise ValueError(f"--with: unknown name(s) {', '.join(wrong)}; known: {', '.join(SWITCH_ON)}")
         return AgentConfig.preset(self.preset, map_size=self.map_size, goal_sequencing=not self.nearest_first,
-                                  **dict.fromkeys(self.without, False))
+                                  **dict.fromkeys(self.without, False), **dict.fromkeys(self.with_, True))
 
     def describe(self) -> dict:
         """Which agent these settings run, as the run summary records it: the preset, the
@@ -65,6 +74,8 @@ class AgentSettings:
         flags += ["--agent", self.preset]
         if self.without:
             flags += ["--without", ",".join(self.without)]
+        if self.with_:
+            flags += ["--with", ",".join(self.with_)]
         return flags
 
 
@@ -81,6 +92,15 @@ def add_kind_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--without", metavar="NAMES",
                    help="switch these additions off, comma separated (e.g. unstick,seal_guard; "
                         "agent_runtime.config.ADDITIONS names them all)")
+
+
+def add_correction_args(p: argparse.ArgumentParser) -> None:
+    """--with, as `conag agent`, `conag agents` and `conag run` take it."""
+    p.add_argument("--with", dest="with_", metavar="NAMES",
+                   help="switch these on, comma separated: corrections for noisy worlds (anchor_maps: keep the "
+                        "maps anchored to structure bricks and the world's edge; docs/noise.md) and the additions "
+                        "for big teams the default agent leaves off (yield_goals, idle_wait, spread_search; "
+                        "docs/design.md)")
 
 
 def add_attach_args(a: argparse.ArgumentParser) -> None:

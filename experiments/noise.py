@@ -1,7 +1,9 @@
-"""Issue 37 item 2: what noise and occlusion do to a build (docs/noise.md).
+"""Issue 37 items 2 and 3: what noise and occlusion do to a build, and anchored maps (docs/noise.md).
 
-    python3 -m experiments.noise --quick        # 4 small layouts x 3 settings: noise_quick.md (minutes)
-    python3 -m experiments.noise --jobs 2       # the sample x every setting: noise.md, noise.png (about an hour)
+    python3 -m experiments.noise --quick        # 4 small layouts x 5 settings: noise_quick.md (minutes)
+    python3 -m experiments.noise --jobs 2       # the sample x every setting: noise.md, noise.png (hours)
+    python3 -m experiments.noise --goal         # the sample at item 3's goal, without and with anchored maps
+    python3 -m experiments.noise --settings "baseline,odometry 10%"   # some settings, merged into noise.json
     python3 -m experiments.noise --report-only  # the tables and the plot again from noise.json
     python3 -m experiments.noise --pictures     # docs/noise.md's picture (as experiments.pictures noise_maps)
     python3 -m experiments.noise --cluster tcp://HOST:8786   # on a Dask cluster (experiments/runner.py)
@@ -14,11 +16,14 @@ more than the two shared cores allow for ten settings). Each is built in process
 baseline, then one factor at a time
 (odometry noise 2, 5, 10, 20%; sensor noise 2x, 4x; occlusion on) and two combinations
 (10% + 2x + occlusion, the condition of issue 37 item 3's goal; 20% + 4x + occlusion,
-the worst). Not the full factorial: 30 settings x 40 layouts would take most of a day on
-the two shared cores. Odometry noise p means a distance slip of p and a heading slip of p
-radians per step (`WorldConfig.odometry_distance_slip`, `odometry_heading_slip`). Every
-run's randomness, the noise included, comes from the layout's seed: a run is reproduced
-exactly by running it again. A run stops when complete, after `--stall` ticks with no
+the worst), and the goal's condition without its odometry noise (2x + occlusion: what the
+agent achieves with maps that stay true, the ceiling for any correction of them); then
+five of them again with anchored maps (`AgentConfig.anchor_maps`). Not the full factorial:
+30 settings x 40 layouts would take most of a day on the two shared cores. Odometry noise
+p means a distance slip of p and a heading slip of p radians per step
+(`WorldConfig.odometry_distance_slip`, `odometry_heading_slip`). Every run's randomness,
+the noise included, comes from the layout's seed: a run is reproduced exactly by running
+it again. A run stops when complete, after `--stall` ticks with no
 site filled (as the generalisation suite), or at the layout's `max_ticks`.
 
 Reported per setting: completion; the median ticks of completed runs and, over layouts
@@ -70,6 +75,7 @@ class Setting:
     odometry: float       # distance and heading slip per step
     sensor: float         # times the scenario's sensor noise
     occlusion: bool
+    anchored: bool = False  # the agents correct their maps (AgentConfig.anchor_maps)
 
     @property
     def noise(self) -> NoiseSettings:
@@ -89,10 +95,20 @@ SETTINGS = (
     Setting("sensor 2x", 0.0, 2.0, False),
     Setting("sensor 4x", 0.0, 4.0, False),
     Setting("occlusion", 0.0, 1.0, True),
+    Setting("2x + occlusion", 0.0, 2.0, True),        # the goal's condition without its odometry noise
     Setting("10% + 2x + occlusion", 0.10, 2.0, True),
     Setting("20% + 4x + occlusion", 0.20, 4.0, True),
+    # The same agents with their maps anchored to landmarks (issue 37 item 3).
+    Setting("anchored: baseline", 0.0, 1.0, False, True),
+    Setting("anchored: odometry 10%", 0.10, 1.0, False, True),
+    Setting("anchored: odometry 20%", 0.20, 1.0, False, True),
+    Setting("anchored: 10% + 2x + occlusion", 0.10, 2.0, True, True),
+    Setting("anchored: 20% + 4x + occlusion", 0.20, 4.0, True, True),
 )
-QUICK_SETTINGS = ("baseline", "odometry 10%", "10% + 2x + occlusion")
+QUICK_SETTINGS = ("baseline", "odometry 10%", "10% + 2x + occlusion", "anchored: odometry 10%",
+                  "anchored: 10% + 2x + occlusion")
+# The goal of issue 37 item 3, without and with the correction: what `--goal` runs.
+GOAL_SETTINGS = ("10% + 2x + occlusion", "anchored: 10% + 2x + occlusion")
 BY_NAME = {s.name: s for s in SETTINGS}
 
 
@@ -201,7 +217,7 @@ def run_one(job: Job) -> Outcome:
     layout, setting = job.layout, job.setting
     sc = parse_scenario(job.text, layout) if job.text else load_scenario(LAYOUTS / layout)
     began = time.perf_counter()
-    run = sim.start(sc, cfg=AgentConfig(), noise=BY_NAME[setting].noise)
+    run = sim.start(sc, cfg=AgentConfig(anchor_maps=BY_NAME[setting].anchored), noise=BY_NAME[setting].noise)
     start_cells = sc.to_cell(run.world.discs.xy)
     errors = MapError(run)
     result = run.run(sc.max_ticks, stall_ticks=stall_limit(sc, job.stall), observers=[errors])
@@ -263,10 +279,10 @@ def _median(values: list[float], fmt: str) -> str:
 def table(outcomes: list[Outcome]) -> str:
     """One row per setting: completion, ticks, misplaced bricks, map error."""
     base = {o.layout: o for o in outcomes if o.setting == "baseline"}
-    lines = [("| setting | odometry | sensor noise | occlusion | completed | ticks (median, completed) "
+    lines = [("| setting | odometry | sensor noise | occlusion | maps anchored | completed | ticks (median, completed) "
               "| ticks / baseline (median) | misplaced bricks (runs with any) | map error, cells (mean) "
               "| map error at the end (mean) | time sites drawn a cell off |"),
-             "|---|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|"]
+             "|---|---:|---:|---|---|---:|---:|---:|---:|---:|---:|---:|"]
     for s in SETTINGS:
         runs = [o for o in outcomes if o.setting == s.name]
         if not runs:
@@ -277,6 +293,7 @@ def table(outcomes: list[Outcome]) -> str:
         misplaced = sum(o.misplaced for o in runs)
         lines.append(
             f"| {s.name} | {100 * s.odometry:g}% | {s.sensor:g}x | {'on' if s.occlusion else 'off'} "
+            f"| {'yes' if s.anchored else 'no'} "
             f"| {len(done)}/{len(runs)} ({100 * len(done) / len(runs):.0f}%) "
             f"| {_median([o.ticks for o in done], '.0f')} | {_median(ratios, '.2f') if ratios else '—'} "
             f"| {misplaced} ({sum(o.misplaced > 0 for o in runs)}) "
@@ -296,18 +313,39 @@ def markdown(outcomes: list[Outcome], args: argparse.Namespace, seconds: float |
     where = getattr(args, "where", None) or f"{args.jobs} worker processes"
     wall = (f" Wall time: {seconds / 60:.0f} min on {where} (niced, on a shared 2-core "
             "machine)." if seconds is not None else "")
-    command = "python3 -m experiments.noise " + ("--quick" if args.quick else f"--jobs {args.jobs}")
+    every = [s.name for s in SETTINGS]
+    part = {n: sorted({o.layout.split("-")[0] for o in outcomes if o.setting == n}) for n in settings}
+    part = {n: some for n, some in part.items() if len(some) < len(layouts)}
+    whole = [n for n in settings if n not in part]      # measured on every layout
+    if args.quick:
+        command = "python3 -m experiments.noise --quick"
+    elif whole == every:
+        command = f"python3 -m experiments.noise --jobs {args.jobs}"
+    elif whole == list(GOAL_SETTINGS):
+        command = f"python3 -m experiments.noise --goal --jobs {args.jobs}"
+    else:
+        command = f"python3 -m experiments.noise --jobs {args.jobs} --settings \"{','.join(whole)}\""
+    missing = [n for n in (QUICK_SETTINGS if args.quick else every) if n not in settings]
+    not_run = f"\n\nNot measured yet: {', '.join(missing)}." if missing else ""
+    if part:
+        runs = [f"{n}, {len(some)} layouts (`--settings \"{n}\" --layouts {','.join(some)}`)"
+                for n, some in part.items()]
+        not_run += " Measured on part of the sample only: " + "; ".join(runs) + "."
     which = f"the {QUICK_LAYOUTS} cheapest to build of" if args.quick else "all of"
     return f"""## Noise and occlusion (issue 37)
 
 `{command}` builds {len(layouts)} generated layouts ({which} the first {SAMPLE} of the suite of
 `experiments.generalisation` whose longer side is at most {MAX_SIDE} cells and that have at most
 {MAX_AGENTS} agents; {agents[0]} to {agents[-1]} agents, so larger teams and worlds are not covered)
-under {len(settings)} settings, in process (`conag.sim`, lockstep, the default agent), each run's
+under {len(whole)} settings, in process (`conag.sim`, lockstep, the default agent), each run's
 noise drawn from the layout's seed (re-running gives the same table). A run stops when complete,
-after {args.stall} ticks with no site filled, or at the layout's `max_ticks`.{wall}
+after {args.stall} ticks with no site filled, or at the layout's `max_ticks`.{wall}{not_run}
 
-The design is one factor at a time from the noise-free baseline, and two combinations, not the full
+The design is one factor at a time from the noise-free baseline, and three combinations (the goal's
+condition of issue 37 item 3, 10% + 2x + occlusion; the same without odometry noise, which no
+correction of the maps can improve on; and the worst), each with
+the default agent, and five of them again with its maps anchored (`anchor_maps`, issue 37 item 3;
+[Maps that stay true]({docs}noise.md#maps-that-stay-true)); not the full
 factorial of 5 odometry x 3 sensor x 2 occlusion settings (30 x {SAMPLE} runs would take most
 of a day on the two shared cores). Odometry noise p is a distance slip of p and a heading slip of p
 radians per step (`odometry_distance_slip`, `odometry_heading_slip`: the reported length of each
@@ -353,9 +391,10 @@ def plot(outcomes: list[Outcome], path: Path) -> Path:
     b.barh(y + 0.2, end, height=0.4, color="#c44e52", label="at the end")
     b.set_xlabel("map error (cells): configuration ESM against the truth")
     b.legend(loc="lower right", fontsize=8)
-    a.set_yticks(y, names)
-    a.invert_yaxis()
     layouts = len({o.layout for o in outcomes})
+    count = {n: len({o.layout for o in outcomes if o.setting == n}) for n in names}
+    a.set_yticks(y, [n if count[n] == layouts else f"{n}\n({count[n]} layouts only)" for n in names])
+    a.invert_yaxis()
     fig.suptitle(f"Noise and occlusion: {layouts} generated layouts per setting (experiments/noise.py)")
     fig.tight_layout()
     fig.savefig(path, dpi=90)
@@ -456,6 +495,16 @@ def draw_maps(path: Path, scenario: str = PICTURE_SCENARIO, ticks: int = PICTURE
 
 # ------------------------------------------------------------------ main
 
+def _kept(path: Path, rerun: list[str], only: list[str]) -> list[Outcome]:
+    """The runs of `path` (if any) but those of `rerun` settings on `only` layouts: a
+    partial run adds to them."""
+    if not path.exists():
+        return []
+    rows = json.loads(path.read_text(encoding="utf-8"))
+    return [Outcome(**r) for r in rows
+            if r["setting"] in BY_NAME and (r["setting"] not in rerun or r["layout"] not in only)]
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true",
@@ -467,9 +516,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--report-only", action="store_true", help="the tables and plot again from noise.json")
     ap.add_argument("--pictures", action="store_true",
                     help="draw the pictures of docs/noise.md (noise_maps.png): one agent's maps per option")
+    ap.add_argument("--settings", metavar="NAMES",
+                    help="run only these settings (names of SETTINGS, comma separated), merged into noise.json")
+    ap.add_argument("--layouts", metavar="NAMES",
+                    help="only the layouts of the sample whose file name contains one of these, comma separated")
+    ap.add_argument("--goal", action="store_true",
+                    help="run only the goal of issue 37 item 3 without and with anchored maps, merged into noise.json")
     args = ap.parse_args(argv)
     if args.jobs < 1 or args.stall < 1:
         ap.error("--jobs and --stall must be >= 1")
+    chosen = list(GOAL_SETTINGS) if args.goal else [n.strip() for n in (args.settings or "").split(",") if n.strip()]
+    unknown = [n for n in chosen if n not in BY_NAME]
+    if unknown:
+        ap.error(f"unknown setting(s) {', '.join(unknown)}; known: {', '.join(BY_NAME)}")
     args.out.mkdir(parents=True, exist_ok=True)
     if args.pictures:
         print(f"wrote {draw_maps(args.out / 'noise_maps.png')}")
@@ -487,8 +546,10 @@ def main(argv: list[str] | None = None) -> int:
         names = sample()
         if args.quick:
             names = quick_sample(names)
-        settings = QUICK_SETTINGS if args.quick else [s.name for s in SETTINGS]
-        began = time.monotonic()
+        if args.layouts:
+            names = [n for n in names if any(part.strip() in n for part in args.layouts.split(",") if part.strip())]
+        settings = chosen or (QUICK_SETTINGS if args.quick else [s.name for s in SETTINGS])
+        kept = _kept(args.out / f"{stem}.json", settings, names) if chosen or args.layouts else []
         where = runner.where_of(args, args.jobs)
         args.where = where.describe()
         try:
@@ -497,10 +558,13 @@ def main(argv: list[str] | None = None) -> int:
         except runner.ClusterError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 2
+        order = {s.name: i for i, s in enumerate(SETTINGS)}
+        outcomes = sorted(kept + outcomes, key=lambda o: (order[o.setting], o.layout))
         rows = [asdict(o) | ({"seconds": 0.0} if args.quick else {}) for o in outcomes]
         (args.out / f"{stem}.json").write_text(json.dumps(rows, indent=1) + "\n", encoding="utf-8")
         if not args.quick:
-            seconds = time.monotonic() - began
+            # Wall time of every run, summed (runs of several invocations are merged).
+            seconds = sum(o.seconds for o in outcomes) / args.jobs
             info = {"jobs": args.jobs, "stall": args.stall, "seconds": seconds, "where": args.where}
             (args.out / f"{stem}.meta.json").write_text(json.dumps(info) + "\n", encoding="utf-8")
     text = markdown(outcomes, args, seconds, plot_path="" if args.quick else "noise.png")

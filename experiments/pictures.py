@@ -12,6 +12,7 @@ seeds it used:
     lattice_nested       Fig. 14: nested squares
     lattice_learning     Fig. 11: learning the rule set, from lattice_learning.json
     noise_maps           docs/noise.md: one agent's maps under each noise option (seeded runs, a minute)
+    noise                completion and map error per noise setting, from experiments/noise.json
 
 Each experiment's full run draws its own pictures as well; this command draws them without
 running the experiments. By default it writes into experiments/, where the results pages
@@ -75,6 +76,13 @@ def noise_maps(out: Path) -> list[Path]:
     return [noise.draw_maps(out / "noise_maps.png")]
 
 
+def noise_sweep(out: Path) -> list[Path]:
+    from experiments import noise
+
+    rows = json.loads((HERE / "noise.json").read_text(encoding="utf-8"))
+    return [noise.plot([noise.Outcome(**r) for r in rows], out / "noise.png")]
+
+
 # name -> what draws it (lattice() draws all three lattice_* pictures at once)
 PICTURES: dict[str, Callable[[Path], list[Path]]] = {
     "fig9_learning": fig9_learning,
@@ -84,6 +92,7 @@ PICTURES: dict[str, Callable[[Path], list[Path]]] = {
     "lattice_nested": lattice,
     "lattice_learning": lattice_learning,
     "noise_maps": noise_maps,
+    "noise": noise_sweep,
 }
 
 

@@ -164,6 +164,8 @@ def test_every_subcommand_has_a_module_with_its_flags_and_its_run():
     [],
     ["--map-size", "31", "--nearest-first"],
     ["--agent", "paper", "--without", "unstick, seal_guard"],
+    ["--with", "anchor_maps"],
+    ["--with", "yield_goals,anchor_maps"],
     ["--learn", "--eta", "0.25"],
 ])
 def test_the_agent_flags_conag_run_forwards_ask_an_agent_for_the_same_settings(argv):
@@ -175,3 +177,15 @@ def test_the_agent_flags_conag_run_forwards_ask_an_agent_for_the_same_settings(a
     if not settings.learn:  # `conag agents` hosts no learners (conag run refuses --per-process for them)
         hosted = build_parser().parse_args(["agents", "--ids", "a1..a3", *settings.argv()])
         assert AgentSettings.from_args(hosted) == settings
+
+
+def test_with_switches_on_corrections_and_the_additions_the_default_agent_leaves_off():
+    from agent_runtime.config import OFF_BY_DEFAULT
+    from conag.agent_settings import AgentSettings
+
+    args = build_parser().parse_args(["run", "fig6.toml", "--with", "anchor_maps,yield_goals"])
+    cfg = AgentSettings.from_args(args).config()
+    assert cfg.anchor_maps and cfg.yield_goals
+    assert not any(getattr(cfg, name) for name in OFF_BY_DEFAULT if name != "yield_goals")
+    with pytest.raises(ValueError, match=r"unknown name.*unstick"):   # on by default: --without is its switch
+        AgentSettings.from_args(build_parser().parse_args(["run", "fig6.toml", "--with", "unstick"])).config()

@@ -8,7 +8,7 @@ import sys
 from agent_runtime.learning import Student
 from agent_runtime.node import ROLES, AgentOptions, AgentReport, Learning, run_agent
 from agent_runtime.world_link import AttachError
-from conag.agent_settings import AgentSettings, add_attach_args, add_kind_args
+from conag.agent_settings import AgentSettings, add_attach_args, add_correction_args, add_kind_args
 from conag.common import bus_args, bus_options, stopped_by_signal
 from conag.secure import check_agent_credential
 from protocol.bus import open_session
@@ -26,6 +26,7 @@ def configure(a: argparse.ArgumentParser) -> None:
                    help="agent: a ConAg agent (default); foreman: a ConAg agent that also marks cues for workers; "
                         "worker: a reactive worker without maps that follows cues (docs/society.md)")
     add_kind_args(a)
+    add_correction_args(a)
     g = a.add_argument_group("learning (paper §5.1)")
     g.add_argument("--learn", action="store_true",
                    help="be a student: random construction weights (from --seed) learned from the teacher")

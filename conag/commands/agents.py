@@ -8,7 +8,7 @@ import sys
 from agent_runtime.host import AgentHost, host_options, parse_ids, read_stop_requests
 from agent_runtime.node import AgentOptions
 from agent_runtime.world_link import AttachError
-from conag.agent_settings import AgentSettings, add_attach_args, add_kind_args
+from conag.agent_settings import AgentSettings, add_attach_args, add_correction_args, add_kind_args
 from conag.common import bus_args, bus_options, stopped_by_signal
 from protocol.bus import open_session
 
@@ -26,6 +26,7 @@ def configure(a: argparse.ArgumentParser) -> None:
                    help=f"cells per side of the agents' maps, odd (default {AgentSettings.map_size})")
     a.add_argument("--nearest-first", action="store_true", help="no goal sequencing (as conag agent)")
     add_kind_args(a)
+    add_correction_args(a)
     a.add_argument("--stdin-control", action="store_true",
                    help="read `stop ID` lines on stdin: stop that agent alone (conag run uses it for conag kill)")
     bus_args(a)

@@ -15,7 +15,7 @@ import threading
 import time
 
 from conag import run as supervisor
-from conag.agent_settings import AgentSettings, add_kind_args
+from conag.agent_settings import AgentSettings, add_correction_args, add_kind_args
 from conag.argtypes import non_negative, positive, positive_float
 from conag.common import PRIORITIES, RECORDER_PRIORITY, stop_on_signals
 from conag.exit_codes import EXIT_ERROR, EXIT_INCOMPLETE, EXIT_INTERRUPTED, EXIT_STALLED, EXIT_USAGE
@@ -102,6 +102,7 @@ def configure(u: argparse.ArgumentParser) -> None:
     u.add_argument("--nearest-first", action="store_true",
                    help="agents without goal sequencing (paper §4), for comparison with ConAg-TS (§6)")
     add_kind_args(u)
+    add_correction_args(u)
     add_noise_args(u)
     g = u.add_argument_group("learning (paper §5.1)")
     g.add_argument("--teacher", action="store_true", help="start a teacher process too")
