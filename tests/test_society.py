@@ -28,10 +28,17 @@ def test_a_society_in_process_builds_with_its_workers_filling_marked_sites():
 
 
 def test_society_flags_do_not_go_with_agents_or_learning():
+    from conag.cli import build_parser
+    from conag.commands.run import run_options
     for extra in (["--agents", "3"], ["--learn"], ["--per-process", "2"]):
-        r = conag("run", "scenarios/quick_wall.toml", "--foremen", "1", "--workers", "2", *extra,
-                  "--listen", f"tcp/127.0.0.1:{free_port()}")
-        assert r.returncode == 2 and "--foremen and --workers" in r.stderr
+        args = build_parser().parse_args(["run", "scenarios/quick_wall.toml", "--foremen", "1", "--workers", "2",
+                                          *extra])
+        with pytest.raises(ValueError, match="--foremen and --workers"):
+            run_options(args)
+    # and the command line says so, with the usage exit code (one process: the rest is the same check)
+    r = conag("run", "scenarios/quick_wall.toml", "--foremen", "1", "--workers", "2", "--agents", "3",
+              "--listen", f"tcp/127.0.0.1:{free_port()}")
+    assert r.returncode == 2 and "--foremen and --workers" in r.stderr
 
 
 @pytest.mark.slow
