@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from agent_runtime.esm import BRICK, CONFIG, FOOD, OBSTACLE, WATER
-from agent_runtime.sealing import connected
+from agent_runtime.sealing import border, connected, largest_region
 
 
 @dataclass(frozen=True)
@@ -203,22 +203,8 @@ class Foreman:
 
 def _outside(passable: np.ndarray) -> np.ndarray:
     """The map's open border cells, else (a world inside the map) the largest open region."""
-    ref = np.zeros_like(passable)
-    ref[0, :] = ref[-1, :] = ref[:, 0] = ref[:, -1] = True
-    ref &= passable
-    if ref.any():
-        return ref
-    best, seen = ref, np.zeros_like(passable)
-    for i, j in zip(*np.nonzero(passable)):
-        if seen[i, j]:
-            continue
-        one = np.zeros_like(passable)
-        one[i, j] = True
-        region = connected(one, passable)
-        seen |= region
-        if np.count_nonzero(region) > np.count_nonzero(best):
-            best = region
-    return best
+    ref = border(passable) & passable
+    return ref if ref.any() else largest_region(passable, passable)
 
 
 def _beside(cells: np.ndarray) -> np.ndarray:

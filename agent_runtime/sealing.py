@@ -133,7 +133,7 @@ def enclosed_sites(open_sites: np.ndarray, walls: np.ndarray, centre: tuple[int,
     # No wall, food or water lies on a site: such a mark is a disc mapped a cell off.
     walls = walls & ~open_sites
     walls[centre] = False           # the agent's own cell: it may stand on a brick it dropped
-    ways_in = _border(walls)
+    ways_in = border(walls)
     ways_in[centre] = True
     return open_sites & ~connected(ways_in, ~walls)
 
@@ -156,14 +156,14 @@ def pocket_beside(blocked: np.ndarray, cell: tuple[int, int]) -> np.ndarray:
     beside = np.zeros_like(walls)
     beside[cell] = True
     beside = _reached(beside) & free
-    outside = connected(_border(walls), free)
+    outside = connected(border(walls), free)
     if not outside.any():
-        outside = _largest_region(beside, free)
+        outside = largest_region(beside, free)
     inside = free & ~outside
     return connected(beside & inside, inside)
 
 
-def _largest_region(starts: np.ndarray, passable: np.ndarray) -> np.ndarray:
+def largest_region(starts: np.ndarray, passable: np.ndarray) -> np.ndarray:
     """The most cells any one of `starts` reaches through `passable` cells (none if no start);
     one distance field per region, not per start."""
     best, seen = np.zeros_like(passable), np.zeros_like(passable)
@@ -179,7 +179,7 @@ def _largest_region(starts: np.ndarray, passable: np.ndarray) -> np.ndarray:
     return best
 
 
-def _border(like: np.ndarray) -> np.ndarray:
+def border(like: np.ndarray) -> np.ndarray:
     """The grid's outermost cells: the world goes on beyond a map's border."""
     out = np.zeros_like(like)
     out[[0, -1], :] = out[:, [0, -1]] = True
