@@ -116,6 +116,12 @@ def reference_checkout(rev: str, directory: Path | None = None) -> Iterator[Path
                            check=False)
 
 
+def tree_label(tree: Path, fallback: str) -> str:
+    """A checkout's short commit hash (`fallback` if it is not a git checkout)."""
+    r = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=tree, capture_output=True, text=True, check=False)
+    return r.stdout.strip() if r.returncode == 0 and r.stdout.strip() else fallback
+
+
 def compare(trees: dict[str, Path], layouts, maps, warmup: int, ticks: int, repeats: int):
     """Rows of both sides' medians per (layout, map size), runs alternating between sides."""
     for layout in layouts:
@@ -155,8 +161,9 @@ def main(argv: list[str] | None = None) -> int:
     maps = [int(m) for m in args.maps.split(",")]
     materialise(MANIFEST, SUITE)
     with reference_checkout(args.reference, args.reference_dir) as ref:
-        print(f"| layout | world | agents | map | step CPU median ms, this | at {args.reference} | ratio "
-              f"| wall median ms, this | at {args.reference} | same decisions |")
+        label = args.reference if args.reference_dir is None else tree_label(ref, str(ref))
+        print(f"| layout | world | agents | map | step CPU median ms, this | at {label} | ratio "
+              f"| wall median ms, this | at {label} | same decisions |")
         print("|---|---|---:|---:|---:|---:|---:|---:|---:|---|")
         rows = []
         for r in compare({"this": ROOT, "reference": ref}, layouts, maps, warmup, ticks, args.repeats):

@@ -52,8 +52,7 @@ from contextlib import nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 
-from bench.bench_agent_step import reference_checkout
-from bench.bench_scale import tree_label
+from bench.bench_agent_step import reference_checkout, tree_label
 from conag.common import PRIORITIES, RECORDER_PRIORITY
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -34,9 +34,8 @@ import time
 from contextlib import nullcontext
 from pathlib import Path
 
-from bench.bench_agent_step import reference_checkout
+from bench.bench_agent_step import reference_checkout, tree_label
 from bench.bench_record import _proc_table
-from bench.bench_scale import tree_label
 
 ROOT = Path(__file__).resolve().parent.parent
 MODES = {"with Foxglove": [], "msgpack only": ["--msgpack-only"]}

@@ -71,7 +71,7 @@ import time
 from contextlib import nullcontext
 from pathlib import Path
 
-from bench.bench_agent_step import REFERENCE, reference_checkout
+from bench.bench_agent_step import REFERENCE, reference_checkout, tree_label
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENARIO = "scenarios/large/scale.toml"
@@ -383,12 +383,6 @@ def table(rows: list[dict], reference: str | None = None) -> str:
             f"| {s['world_ms']:.2f} / {s['agents_ms']:.1f} "
             f"| {p['step_ms']:.2f} / {p['publish_ms']:.2f} / {p['wait_ms']:.1f} |")
     return "\n".join(lines)
-
-
-def tree_label(tree: Path, fallback: str) -> str:
-    """A checkout's short commit hash (`fallback` if it is not a git checkout)."""
-    r = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=tree, capture_output=True, text=True, check=False)
-    return r.stdout.strip() if r.returncode == 0 and r.stdout.strip() else fallback
 
 
 def lockstep(trees: dict[str, Path], scenario: str, args) -> list[dict]:
