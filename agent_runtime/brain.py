@@ -111,7 +111,7 @@ class Brain:
         # The attach cell, in world cells: the origin of the agent's odometry frame.
         self._origin = np.floor(np.array([welcome.x, welcome.y]) / welcome.cell_size).astype(np.int64)
         self.far = FarMemory(self.cfg.map_size, self._site_cells(welcome.site_xs, welcome.site_ys),
-                             self._world_bounds(welcome))
+                             self._world_bounds(welcome), remember=self.cfg.far_memory)
         self.blueprint_version = welcome.blueprint_version
         self.far.config_layer(self.maps.maps[CONFIG])
         self.behaviour = NONE
@@ -202,7 +202,11 @@ class Brain:
     def _shift_belief(self, dx: float, dy: float) -> None:
         """Dead reckoning: the agent believes it moved (dx, dy) world units. The maps shift
         by the whole cells crossed, and the far memory with them (what leaves the map is
-        remembered, what comes back onto it is written in again)."""
+        remembered, what comes back onto it is written in again; without `far_memory`, as
+        in the paper, what shifts off the maps is gone)."""
+        if not self.cfg.far_memory:
+            self.far.move(*self.maps.move(dx, dy, self.cell), None)   # only the agent's cell
+            return
         layers = self.maps.maps
         if any(self.maps.crossing(dx, dy, self.cell)):  # 1 step in 7 or so
             free = (layers[BRICK] > 0.5) & (layers[CONFIG] <= 0.5)

@@ -23,6 +23,12 @@ has seen and remembers (`walls`, `discs`), counting ground never seen as open, a
 person plans a way through a half-known town; with the world's extent unknown it is the
 straight (octile) distance (`border_seed`).
 
+With `remember=False` (`AgentConfig.far_memory` off, the paper's agent) the maps forget
+as the paper's do: no brick, wall, food or water that leaves them is kept or comes back,
+and nothing beyond them is a goal. The agent's cell and the blueprint's sites, with what
+it believes of each, are still kept: stall reports read them, and so do the seal guard's
+check on the whole world and `anchor_maps` when they are on (both off in the paper's agent).
+
 Numpy and the compiled distance kernels (`border_seed`, spreading's), no bus.
 """
 
@@ -39,13 +45,17 @@ SQRT2_M1 = math.sqrt(2.0) - 1.0
 BLOCK = 5          # cells per side of the squares Explore keeps track of having seen
 PATIENCE = 300     # explore steps spent on one square before it counts as seen anyway
 MAX_FAR_BRICKS = 4096   # a bound on what is kept; the oldest are dropped first
+_NO_CELLS = np.zeros((0, 2), np.int64)
+_NO_CELLS.setflags(write=False)
 
 
 class FarMemory:
     """Sites and remembered bricks, as (x east, y north) cells relative to the attach cell."""
 
-    def __init__(self, size: int, sites: np.ndarray, bounds: tuple[int, int, int, int] | None = None):
+    def __init__(self, size: int, sites: np.ndarray, bounds: tuple[int, int, int, int] | None = None,
+                 remember: bool = True):
         self.size = size
+        self.remember = remember                         # off: what leaves the map is forgotten
         self.centre = size // 2
         self.pos = np.zeros(2, np.int64)                 # the agent's cell, (x, y) from the attach cell
         self._cell = (0, 0)                              # `pos` as a tuple: the caches' key (`move` keeps it)
@@ -173,11 +183,11 @@ class FarMemory:
 
     # ------------------------------------------------------------------ moving
 
-    def move(self, kx: int, ky: int, free_bricks: np.ndarray) -> np.ndarray:
+    def move(self, kx: int, ky: int, free_bricks: np.ndarray | None) -> np.ndarray:
         """The agent crossed kx cells east and ky north; `free_bricks` is the BRICK-but-not-site
-        mask as it was before the maps shifted. Bricks that leave the map are remembered;
-        returns the map mask of remembered bricks that came back onto it (to re-mark): free
-        bricks, and the bricks of sites believed filled.
+        mask as it was before the maps shifted (None when the maps forget). Bricks that
+        leave the map are remembered; returns the map mask of remembered bricks that came
+        back onto it (to re-mark): free bricks, and the bricks of sites believed filled.
 
         Why the sites: a brick deep in a one-cell slot is hidden from every sector by the
         brick in front of it. Come back with the site shown open, the agent took the
@@ -185,13 +195,16 @@ class FarMemory:
         reach it, for ever (gen-pocket 102); the sensors still clear a site seen empty."""
         if kx == 0 and ky == 0:
             return np.zeros((self.size, self.size), bool)
+        if not self.remember:
+            self._step(kx, ky)
+            return np.zeros((self.size, self.size), bool)
+        assert free_bricks is not None
         rows, cols = np.nonzero(free_bricks)
         leaving = ~self._on_map(rows + ky, cols - kx)
         if leaving.any():
             self._remember(self.from_map(rows[leaving], cols[leaving]))
         was_on = self._on_map(*self.to_map(self.sites))
-        self.pos += (kx, ky)
-        self._cell = (int(self.pos[0]), int(self.pos[1]))
+        self._step(kx, ky)
         back = np.zeros((self.size, self.size), bool)
         r, c = self.to_map(self.sites)
         entering = self._on_map(r, c) & ~was_on & ~self.site_open
@@ -202,6 +215,10 @@ class FarMemory:
             back[r[on], c[on]] = True
             self.bricks = self.bricks[~on]
         return back
+
+    def _step(self, kx: int, ky: int) -> None:
+        self.pos += (kx, ky)
+        self._cell = (int(self.pos[0]), int(self.pos[1]))
 
     def _wall_window(self) -> tuple[tuple[slice, slice], tuple[slice, slice]]:
         """The map cells that lie in the world and their world-grid cells, as slices:
@@ -234,7 +251,7 @@ class FarMemory:
         """Remember the fixed obstacles of the map (a bool layer) as it is now, the food and
         water (`discs`, for planning beyond the map only) and the ground seen free; call it
         before the map shifts. Cells on the map overwrite what was remembered of them."""
-        if self.walls is None or self.discs is None:
+        if self.walls is None or self.discs is None or not self.remember:
             return
         map_ix, window = self._wall_window()
         if ground is not None and self.ground is not None:
@@ -391,8 +408,11 @@ class FarMemory:
     # ------------------------------------------------------------------ beyond the border
 
     def far_open_sites(self) -> np.ndarray:
-        """(rows, cols) as a (k, 2) array of open sites that are beyond the map (read-only)."""
+        """(rows, cols) as a (k, 2) array of open sites that are beyond the map (read-only);
+        none when the maps forget."""
         def compute():
+            if not self.remember:
+                return _NO_CELLS
             rows, cols = self.to_map(self.sites[self.site_open])
             off = ~self._on_map(rows, cols)
             far = np.column_stack([rows[off], cols[off]])

@@ -28,7 +28,7 @@ import sys
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from agent_runtime.config import ADDITIONS, AgentConfig
+from agent_runtime.config import ADDITIONS, OFF_BY_DEFAULT, AgentConfig
 from experiments import runner
 from experiments.generalisation import DEFAULT_STALL, LAYOUTS, distance_bound, family_of, materialise, stall_limit
 from world_server.scenario import parse_scenario
@@ -57,9 +57,10 @@ class Run:
 
 
 def variants() -> dict[str, AgentConfig]:
-    """default, each addition off in turn, and the paper's agent."""
+    """default, each addition it has off in turn, and the paper's agent (an addition the
+    default leaves off, OFF_BY_DEFAULT, has no row: off, it is the default)."""
     out = {"default": AgentConfig.preset("default")}
-    out.update({f"-{name}": AgentConfig(**{name: False}) for name in ADDITIONS})
+    out.update({f"-{name}": AgentConfig(**{name: False}) for name in ADDITIONS if name not in OFF_BY_DEFAULT})
     out["paper"] = AgentConfig.preset("paper")
     return out
 

@@ -494,6 +494,37 @@ def test_bricks_that_leave_the_map_are_remembered_and_come_back():
     assert back[2, 4] and len(mem.bricks) == 0
 
 
+def test_without_far_memory_a_site_that_scrolls_off_the_map_is_forgotten():
+    # The paper's maps (far_memory off): what shifts off them is gone, and nothing beyond
+    # them pulls the agent; with far memory the same walk brings the site back (above).
+    for far_memory in (True, False):
+        brain = Brain(_welcome(([52.5], [50.5])), AgentConfig(map_size=11, far_memory=far_memory),
+                      np.random.default_rng(0))
+        assert brain.maps.maps[CONFIG][brain.centre, brain.centre + 2] == 1.0
+        for t in range(1, 41):                              # 8 cells west: the site leaves
+            brain.perceive(_frame(t, dx=-0.2))
+        brain.step(_frame(41, holding=True))
+        c = brain.centre
+        assert np.isfinite(brain.plans.config[c, c]) == far_memory   # beyond the border: a goal, or nothing
+        for t in range(42, 82):                             # 8 cells east, back where it started
+            brain.perceive(_frame(t, dx=0.2))
+        assert brain.maps.maps[CONFIG].sum() == (1 if far_memory else 0)
+        assert tuple(brain.far.pos) == (0, 0)               # the agent's own cell is still kept
+
+
+def test_a_memory_that_forgets_gives_back_no_brick_and_no_far_goal():
+    mem = FarMemory(5, np.array([[9, 0]]), remember=False)   # a site 9 cells east: off the map
+    free = np.zeros((5, 5), bool)
+    free[2, 4] = True                                   # a brick 2 cells east of the centre
+    for _ in range(3):                                  # 3 cells west: it leaves the map ...
+        assert not mem.move(-1, 0, free).any()
+    assert len(mem.bricks) == 0 and len(mem.far_bricks()) == 0   # ... and is not kept
+    assert mem.far_open_sites().shape == (0, 2)         # nor is the site beyond the map a goal
+    for _ in range(3):
+        assert not mem.move(1, 0, free).any()           # coming back brings nothing back
+    assert mem.cell == (0, 0)
+
+
 def test_a_brick_mapped_beyond_the_world_edge_is_remembered_on_the_edge():
     # Seen from afar, a brick by the edge was mapped a cell beyond it: back on the map it lay
     # in the edge's wall (no goal), off the map it was one, and the agent walked to and fro
