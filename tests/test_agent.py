@@ -11,6 +11,8 @@ import dataclasses
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from agent_runtime.config import AgentConfig
 from agent_runtime.motivations import Motivations
@@ -58,6 +60,20 @@ def test_hunger_and_thirst_grow_reset_and_latch():
     assert m.seeking_food                     # stays until it has eaten
     m.update(cfg, ate=True, drank=False)
     assert m.hunger == 0.0 and not m.seeking_food
+
+
+@given(st.floats(0.001, 0.5), st.lists(st.booleans(), max_size=200))
+def test_a_need_is_on_exactly_from_its_threshold_until_it_is_met(rate, ate):
+    # The paper's rule, with nothing latched on top: on while hunger is at or above the
+    # threshold, and since only eating lowers hunger, on from then until it has eaten.
+    cfg = AgentConfig(hunger_rate=rate)
+    m, was_on = Motivations(), False
+    for a in ate:
+        m.update(cfg, ate=a, drank=False)
+        assert m.seeking_food == (m.hunger >= cfg.need_threshold)
+        if was_on and not a:
+            assert m.seeking_food
+        was_on = m.seeking_food
 
 
 def _run(name, agents, max_ticks, cfg=None, seed=None):
