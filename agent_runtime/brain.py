@@ -171,6 +171,8 @@ class Brain:
         """Update maps and motivations from a frame; returns its readings as (channels, sectors)."""
         raw = np.asarray(frame.ranges, dtype=np.float64).reshape(len(CHANNELS), frame.sectors)
         ranges = np.where(raw != NO_READING, raw / self.cell, NO_READING)  # in cells from here on
+        if not self.cfg.obstacle_layer:
+            ranges[_CH["obstacle"]] = NO_READING   # the paper's ESMs map discs only: no wall is written
         self._tick = frame.tick
         if frame.tick > self._attach_tick:  # the attach pose already includes the last move
             self._odo += (frame.odom_dx / self.cell, frame.odom_dy / self.cell)
@@ -183,8 +185,8 @@ class Brain:
         self.maps.sense(ranges, self.sensor_range)
         # The world's edge is a wall; recalled discs on cells seen free since are gone
         # (eaten, moved); the maps as marks: what the step reads (`layers`).
-        marks, open_sites, walls = step_marks(self.maps.maps, self.far.outside_world(), self._recalled,
-                                              self.maps.known)
+        outside = self.far.outside_world() if self.cfg.obstacle_layer else None
+        marks, open_sites, walls = step_marks(self.maps.maps, outside, self._recalled, self.maps.known)
         self.far.observe_sites(self.maps.maps[BRICK], self.maps.clear_age)
         self.far.age_sites(self.maps.clear_age)
         enclosed = self._enclosed_sites(open_sites, walls) if self.cfg.enclosed_sites else None

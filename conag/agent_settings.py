@@ -88,7 +88,7 @@ def add_kind_args(p: argparse.ArgumentParser) -> None:
     """--agent and --without, as `conag agent`, `conag agents` and `conag run` take them."""
     p.add_argument("--agent", default="default", metavar="PRESET",
                    help="which agent: default (the best agent) or paper (the agent as the paper describes it, "
-                        "every switchable addition off but ghost association); see docs/design.md")
+                        "every addition off but ghost association); see docs/design.md")
     p.add_argument("--without", metavar="NAMES",
                    help="switch these additions off, comma separated (e.g. unstick,seal_guard; "
                         "agent_runtime.config.ADDITIONS names them all)")

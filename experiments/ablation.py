@@ -10,7 +10,7 @@ agents, named by `AgentConfig`:
 
 * `default`: the best agent, every addition on;
 * `-NAME`: the default with one addition switched off, for each of ADDITIONS;
-* `paper`: every switchable addition off but ghost association (`AgentConfig.preset("paper")`;
+* `paper`: every addition off but ghost association (`AgentConfig.preset("paper")`;
   `agent_runtime.config` says why).
 
 Per agent the table gives the layouts completed, the median ticks of the completed runs

@@ -4,6 +4,7 @@ Explore as the default and backing off when stuck."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import replace
 from pathlib import Path
@@ -510,6 +511,21 @@ def test_without_far_memory_a_site_that_scrolls_off_the_map_is_forgotten():
             brain.perceive(_frame(t, dx=0.2))
         assert brain.maps.maps[CONFIG].sum() == (1 if far_memory else 0)
         assert tuple(brain.far.pos) == (0, 0)               # the agent's own cell is still kept
+
+
+def test_without_the_obstacle_layer_neither_a_wall_nor_the_worlds_edge_is_mapped():
+    # An agent 2 cells from the west edge of a 10 x 10 world, a wall reading 2 cells east.
+    welcome = dataclasses.replace(_welcome(x=2.5, y=5.5), world_width=10.0, world_height=10.0)
+    ranges = np.full((len(CHANNELS), 16), NO_READING)
+    ranges[OBST, 0] = 2.0                               # sector 0: just north of east
+    frame = dataclasses.replace(_frame(1), ranges=tuple(ranges.ravel()))
+    for layer in (True, False):
+        brain = Brain(welcome, AgentConfig(obstacle_layer=layer), np.random.default_rng(0))
+        brain.perceive(frame)
+        m, c = brain.layers()[OBSTACLE], brain.centre
+        assert m[c, c + 2] == layer                     # the wall
+        assert m[c, c - 3] == layer                     # beyond the west edge (x < 0)
+        assert not m[c, c + 1] and not m[c, c - 1]      # the ground between is free either way
 
 
 def test_a_memory_that_forgets_gives_back_no_brick_and_no_far_goal():
