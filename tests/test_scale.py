@@ -267,3 +267,27 @@ def test_the_cpu_split_benchmark_reports_the_steady_span_of_a_run():
     assert "| agent | python3 |" in r.stdout and "| world | python3 |" in r.stdout
     busy = float(r.stdout.split("cores kept busy ")[1].split()[0])
     assert 0.2 < busy <= (os.cpu_count() or 1) + 0.1
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(1500)
+def test_a_crowd_in_hosts_builds_a_generated_layout_to_completion(tmp_path):
+    # Issue 31's 1,000 agents, shorter: a generated crowd starts spread over the floor
+    # (placement.spread_cells) and builds, in hosts, to the end.
+    from tests.conftest import conag, free_port
+    from world_server.generator import generate
+
+    gen = generate(CROWD_SEED, "ring", 60, CROWD, source="scattered", max_sites=24)
+    layout, out = tmp_path / "crowd.toml", tmp_path / "summary.json"
+    layout.write_text(gen.text, encoding="utf-8")
+    r = conag("run", layout, "--per-process", CROWD // 4, "--max-ticks", CROWD_TICKS, "--headless", "--summary",
+              out, "--listen", f"tcp/127.0.0.1:{free_port()}", timeout=1400)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    s = json.loads(out.read_text())
+    assert s["completed"] and s["sites_filled"] == s["sites_total"] == gen.sites, (s["ticks"], s["sites_filled"])
+    assert len(s["agents"]) == CROWD and sum(a["drops"] for a in s["agents"]) >= gen.sites
+    # every agent ticked: each reported the behaviour of its decision steps, as many as the world's ticks
+    assert all(sum(a["behaviour_ticks"].values()) > 0 for a in s["agents"])
+
+
+CROWD, CROWD_SEED, CROWD_TICKS = 200, 8, 3000
