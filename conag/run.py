@@ -93,6 +93,7 @@ class RunOptions:
     profile: str | None = None        # the world writes its loop's times here (conag world --profile)
     per_process: int = 1              # agents per agent process; > 1: `conag agents` hosts
     agent_mode: str = "auto"          # zenoh mode of agent processes: peer, client, auto (`agent_bus_mode`)
+    attach_timeout: float | None = None  # seconds each agent waits for the world (None: `attach_timeout`)
     secure: str | None = None         # a secure bus (conag/secure.py): a deployment dir; "" a fresh one
     checkpoint_every: int = DEFAULT_EVERY  # ticks between the world's checkpoints (it is restarted from the last)
     noise: NoiseSettings = field(default_factory=NoiseSettings)  # the world's noise overrides (docs/noise.md)
@@ -118,6 +119,13 @@ class RunEnding(RuntimeError):
     """A restart asked for while the run stops its processes."""
 
 
+def attach_timeout(processes: int) -> int:
+    """Seconds each agent process of a run waits for the world by default. The world is on
+    its way: wait for it longer than a lone agent would. A hundred interpreters starting on
+    two cores took over 30 s before the first one attached."""
+    return max(30, 2 * processes)
+
+
 @dataclass
 class Fleet:
     """The agent processes of a run, by id."""
@@ -133,10 +141,8 @@ class Fleet:
         o = self.opts
         n = o.n_agents
         processes = -(-n // max(o.per_process, 1))
-        # The world is on its way: wait for it longer than a lone agent would. A hundred
-        # interpreters starting on two cores took over 30 s before the first one attached.
         args = ["--world-id", o.world_id, *bus_flags(o, agent_user(agent_id)),
-                "--attach-timeout", str(max(30, 2 * processes))]
+                "--attach-timeout", str(o.attach_timeout or attach_timeout(processes))]
         if o.secure is None:  # a secure run's mode is its credential file's (a client of the router)
             args += ["--mode", agent_bus_mode(o.agent_mode, processes)]
         if o.record:  # attach once the recorder is heard: its link to the agent may come later than the world's

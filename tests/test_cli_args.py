@@ -189,3 +189,21 @@ def test_with_switches_on_corrections_and_the_additions_the_default_agent_leaves
     assert not any(getattr(cfg, name) for name in OFF_BY_DEFAULT if name != "yield_goals")
     with pytest.raises(ValueError, match=r"unknown name.*unstick"):   # on by default: --without is its switch
         AgentSettings.from_args(build_parser().parse_args(["run", "fig6.toml", "--with", "unstick"])).config()
+
+
+def test_conag_run_passes_its_attach_timeout_to_every_agent_process():
+    from conag import run as run_module
+    from conag.commands.run import run_options
+    from tests.conftest import SCENARIOS
+
+    path = str(SCENARIOS / "fig6.toml")
+
+    def timeout(*extra):
+        opts = run_options(build_parser().parse_args(["run", path, "--listen", "tcp/127.0.0.1:1", *extra]))
+        args = run_module.Fleet(opts)._bus_args("a1")
+        return args[args.index("--attach-timeout") + 1]
+
+    assert timeout() == "30" and timeout("--agents", "100") == "200"  # the default grows with the processes
+    assert timeout("--agents", "1000", "--per-process", "100", "--attach-timeout", "900") == "900.0"
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["run", path, "--attach-timeout", "0"])

@@ -133,6 +133,28 @@ def _connected(cells: set) -> bool:
     return seen == cells
 
 
+def test_a_team_starts_side_by_side_and_a_crowd_spread_over_the_floor():
+    def starts(gen):
+        return gen.scenario().cells_col_row("A").astype(float)
+
+    def nearest_other(cells):  # each start's distance to the nearest other start
+        d = np.hypot(*(cells[:, None, :] - cells[None, :, :]).transpose(2, 0, 1))
+        np.fill_diagonal(d, np.inf)
+        return d.min(axis=1)
+
+    team = starts(generate(8, "ring", 60, 12, source="scattered"))
+    assert nearest_other(team).max() == 1.0  # a blob: every start beside another
+    gen = generate(8, "ring", 60, 300, source="scattered")
+    _assert_good(gen, "ring", (60, 60), 300)
+    assert "300 agents starting spread over the floor" in gen.scenario().description
+    crowd = starts(gen)
+    assert nearest_other(crowd).min() >= 2.0  # no two starts touch, not even diagonally
+    # over the whole floor: every quarter of the world holds starts
+    for rows in (crowd[:, 1] < 30, crowd[:, 1] >= 30):
+        for cols in (crowd[:, 0] < 30, crowd[:, 0] >= 30):
+            assert (rows & cols).sum() >= 300 // 8
+
+
 def test_the_site_cap_holds():
     for seed in range(20):
         gen = generate(seed, str(FAMILIES[seed % len(FAMILIES)]), 40, 3, max_sites=32)
@@ -145,8 +167,8 @@ def test_bad_arguments_are_refused_clearly():
     for size in (14, 121, (15, 200)):
         with pytest.raises(ValueError, match="from 15 to 120"):
             generate(1, "wall", size)
-    for agents in (0, 13):
-        with pytest.raises(ValueError, match="from 1 to 12"):
+    for agents in (0, 1025):
+        with pytest.raises(ValueError, match="from 1 to 1024"):
             generate(1, "wall", 20, agents)
     with pytest.raises(ValueError, match="nested_rings needs max_sites >= 32"):
         generate(1, "nested_rings", 20, 1, max_sites=20)
@@ -234,8 +256,8 @@ def test_generate_suite_writes_one_file_a_line(tmp_path, capsys):
     (["--size", "14"], "size must be N or WxH with 15 <= N, W, H <= 120"),
     (["--size", "20x121"], "size must be N or WxH"),
     (["--size", "big"], "expected N or WxH"),
-    (["--agents", "0"], "agents must be from 1 to 12"),
-    (["--agents", "13"], "agents must be from 1 to 12"),
+    (["--agents", "0"], "agents must be from 1 to 1024"),
+    (["--agents", "1025"], "agents must be from 1 to 1024"),
 ])
 def test_generate_bad_input_is_a_usage_error(tmp_path, capsys, args, message):
     with pytest.raises(SystemExit) as info:

@@ -4,8 +4,9 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
-from world_server.placement import body_cell, brick_drop_cell, extra_start_cells, reachable_cells
+from world_server.placement import body_cell, brick_drop_cell, extra_start_cells, reachable_cells, spread_cells
 
 
 def grid(text: str) -> tuple[np.ndarray, np.ndarray]:
@@ -118,3 +119,35 @@ def test_extra_starts_without_a_start_are_in_reading_order_and_walled_off_cells_
     assert [tuple(c) for c in order.tolist()] == [(0, 0), (1, 0), (3, 0), (0, 1), (1, 1)]
     order = extra_start_cells(cells == ".", cells != "#", np.array([[3, 1]]))
     assert [tuple(c) for c in order.tolist()] == [(3, 0), (0, 0), (1, 0), (0, 1), (1, 1)]
+
+
+def test_spread_cells_go_into_the_largest_gap_first():
+    free = np.ones((10, 10), bool)
+    cells = [tuple(c) for c in spread_cells(free, 4, (0, 0)).tolist()]
+    # the far corner, then the two others (equally far from both: reading order)
+    assert cells == [(0, 0), (9, 9), (9, 0), (0, 9)]
+
+
+def test_spread_cells_cover_the_floor_evenly_and_only_free_cells():
+    rng = np.random.default_rng(5)
+    free = rng.random((40, 50)) > 0.3
+    free[:, 20] = False  # a wall
+    first = tuple(int(v) for v in np.argwhere(free)[0][::-1])
+    cells = spread_cells(free, 120, first)
+    assert cells.shape == (120, 2) and tuple(cells[0]) == first
+    assert free[cells[:, 1], cells[:, 0]].all() and len({tuple(c) for c in cells.tolist()}) == 120
+    # even: no free cell is farther from its nearest start than the closest two starts are
+    # from each other (each start went where the gap was widest, and gaps only shrink)
+    apart = np.hypot(*(cells[:, None, :] - cells[None, :, :]).transpose(2, 0, 1)).astype(float)
+    np.fill_diagonal(apart, np.inf)
+    floor = np.argwhere(free)[:, ::-1]
+    gap = np.hypot(*(floor[:, None, :] - cells[None, :, :]).transpose(2, 0, 1)).min(axis=1)
+    assert gap.max() <= apart.min()
+    assert apart.min() >= 3.0  # 120 starts on about 1,400 free cells: 3-4 cells apart
+
+
+def test_spread_cells_stop_when_the_floor_is_full_and_refuse_a_blocked_first_cell():
+    free = np.array([[True, False, True]])
+    assert [tuple(c) for c in spread_cells(free, 5, (0, 0)).tolist()] == [(0, 0), (2, 0)]
+    with pytest.raises(ValueError, match="not free"):
+        spread_cells(free, 1, (1, 0))

@@ -267,3 +267,32 @@ def test_the_cpu_split_benchmark_reports_the_steady_span_of_a_run():
     assert "| agent | python3 |" in r.stdout and "| world | python3 |" in r.stdout
     busy = float(r.stdout.split("cores kept busy ")[1].split()[0])
     assert 0.2 < busy <= (os.cpu_count() or 1) + 0.1
+
+
+# 200 agents in 4 hosts build a generated 60 x 60 layout (20 sites, 23 bricks in a pile);
+# a longer lockstep deadline than the default 1 s (see the test)
+CROWD, CROWD_SEED, CROWD_TICKS = 200, 2, 3000
+CROWD_WORLD = "\n[world]\nlockstep_timeout = 60.0\n"
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(1500)
+def test_a_crowd_in_hosts_builds_a_generated_layout_to_completion(tmp_path):
+    # Issue 31's 1,000 agents, shorter: a generated crowd starts spread over the floor
+    # (placement.spread_cells) and builds, in hosts, to the end.
+    from tests.conftest import conag, free_port
+    from world_server.generator import generate
+
+    gen = generate(CROWD_SEED, "multi", 60, CROWD, source="pile", max_sites=30)
+    layout, out = tmp_path / "crowd.toml", tmp_path / "summary.json"
+    # Lockstep waits for every host's answer: a host of 50 on a loaded machine can take
+    # longer than the default 1 s deadline, and a command that comes after its tick is dropped.
+    layout.write_text(gen.text + CROWD_WORLD, encoding="utf-8")
+    r = conag("run", layout, "--per-process", CROWD // 4, "--max-ticks", CROWD_TICKS, "--attach-timeout", 600,
+              "--headless", "--summary", out, "--listen", f"tcp/127.0.0.1:{free_port()}", timeout=1400)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    s = json.loads(out.read_text())
+    assert s["completed"] and s["sites_filled"] == s["sites_total"] == gen.sites, (s["ticks"], s["sites_filled"])
+    assert len(s["agents"]) == CROWD and sum(a["drops"] for a in s["agents"]) >= gen.sites
+    # every agent ticked: each reported the behaviours of its decision steps
+    assert all(sum(a["behaviour_ticks"].values()) > 0 for a in s["agents"])

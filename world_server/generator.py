@@ -17,7 +17,8 @@ TOML) and returns it with the parameters it chose. What varies:
   far apart; always every open site's brick plus a few spare, all obtainable;
 * obstacles: `#` walls with gaps, food and water walls and fields, world edges close to
   the structure;
-* 1 to 12 agents starting near the structure or far from it. Worlds are 15 to 120 cells
+* 1 to 12 agents starting side by side near the structure or far from it; asked for more
+  (up to 1,024), they start spread over the whole floor instead. Worlds are 15 to 120 cells
   a side, so in a large one the blueprint lies far beyond an agent's 41 x 41 cell maps
   and 6-cell sensors: the agents must find it.
 
@@ -35,7 +36,17 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from world_server.buildability import check_layout
-from world_server.layout_options import FAMILIES, MAX_AGENTS, MAX_SIZE, MIN_SIZE, SIZE_BANDS, SOURCES, SUITE_FAMILIES
+from world_server.layout_options import (
+    FAMILIES,
+    MAX_AGENTS,
+    MAX_SIZE,
+    MAX_TEAM,
+    MIN_SIZE,
+    SIZE_BANDS,
+    SOURCES,
+    SUITE_FAMILIES,
+)
+from world_server.placement import spread_cells
 from world_server.scenario import Scenario, parse_scenario
 
 # The generator's version: bump it with any change that makes a different file for the same
@@ -183,7 +194,7 @@ def _pick_size(rng: np.random.Generator, size) -> tuple[int, int]:
 
 def _pick_agents(rng: np.random.Generator) -> int:
     weights = np.array([4, 3, 3, 2, 2, 1.5, 1, 1, 1, 1, 1, 1])  # small teams are the common case
-    return int(rng.choice(np.arange(1, MAX_AGENTS + 1), p=weights / weights.sum()))
+    return int(rng.choice(np.arange(1, MAX_TEAM + 1), p=weights / weights.sum()))
 
 
 def _quota(count: int, shares: tuple[float, ...], rng: np.random.Generator) -> np.ndarray:
@@ -227,13 +238,19 @@ def _draw(rng, seed, family, cols, rows, agents, source, cap, attempt) -> Genera
     description = (f"Generated: {family} blueprint, {cols}x{rows} world, {sites} open sites"
                    f"{f' ({prefilled} more already built)' if prefilled else ''}, {bricks} free bricks "
                    f"({source}), {agents} agent{'s' if agents > 1 else ''} starting "
-                   f"{'near' if near else 'far from'} the structure; {world.obstacle_note()}.")
+                   f"{_where(agents, near)}; {world.obstacle_note()}.")
     how = (f"conag generate --seed {seed} --family {family} --size {cols}x{rows} --agents {agents} "
            f"--source {source} --max-sites {cap}")  # every choice explicit: the same file again
     name = f"gen-{family}-{seed}"
     text = _toml(name, seed, agents, ticks, description, layout, how)
     return GeneratedScenario(name, seed, family, cols, rows, agents, source, sites, prefilled, bricks, ticks,
                              attempt, text)
+
+
+def _where(agents: int, near: bool) -> str:
+    if agents > MAX_TEAM:
+        return "spread over the floor"
+    return f"{'near' if near else 'far from'} the structure"
 
 
 def _count(layout: list[str], ch: str) -> int:
@@ -451,7 +468,9 @@ class _World:
 
     def add_agents(self, rng, k: int, near: bool) -> bool:
         """k starts side by side (a breadth-first blob over free cells) from one cell near
-        the structure or as far from it as the world allows."""
+        the structure or as far from it as the world allows; more than MAX_TEAM spread
+        over the whole floor from that cell (`placement.spread_cells`): hundreds side by
+        side would be a clump in which every body blocks the others."""
         free = self.free()
         cells = np.argwhere(free)
         if len(cells) < k:
@@ -460,7 +479,10 @@ class _World:
         dist = np.min(np.abs(cells[:, None, :] - struct[None, ::max(1, len(struct) // 64), :]).sum(axis=2), axis=1)
         pool = cells[dist <= np.quantile(dist, 0.1)] if near else cells[dist >= np.quantile(dist, 0.9)]
         first = tuple(pool[rng.integers(len(pool))])
-        blob = _bfs_cells(free, first, k)
+        if k > MAX_TEAM:
+            blob = [(int(r), int(c)) for c, r in spread_cells(free, k, (int(first[1]), int(first[0])))]
+        else:
+            blob = _bfs_cells(free, first, k)
         if len(blob) < k:
             return False
         for r, c in blob:

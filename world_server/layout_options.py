@@ -10,5 +10,8 @@ SOLID_FAMILIES = ("block", "spiral", "corridor", "solid_hollow")
 FAMILIES = SUITE_FAMILIES + SOLID_FAMILIES
 SOURCES = ("pile", "scattered", "sources")   # one compact pile, single bricks, several piles far apart
 MIN_SIZE, MAX_SIZE = 15, 120                 # cells a side
-MAX_AGENTS = 12
+# A team of up to MAX_TEAM starts side by side, as the paper's agents do; a larger crowd
+# (up to MAX_AGENTS, the most a world's status message lists) is spread over the floor.
+MAX_TEAM = 12
+MAX_AGENTS = 1024
 SIZE_BANDS = ((15, 30), (31, 60), (61, 120))

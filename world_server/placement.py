@@ -8,6 +8,9 @@ agent's body where it overlaps nothing and the open world reaches (`body_cell`,
 coordinates (col, row), the centre of cell (c, r) being (c + 0.5, r + 0.5); they return
 the nearest cell that qualifies, by straight-line distance from the start, ties in
 reading order (row, then column), so the choice is deterministic.
+
+`spread_cells` is for a layout's author (the generator): the starts of a crowd, spread
+over the floor rather than packed together, since a packed crowd is every body's obstacle.
 """
 
 from __future__ import annotations
@@ -127,3 +130,23 @@ def extra_start_cells(empty: np.ndarray, passable: np.ndarray, starts: np.ndarra
     key = np.where(d < 0, np.iinfo(np.int64).max, d)
     order = np.argsort(key, kind="stable")  # stable: ties keep reading order
     return np.column_stack([ec[order], er[order]]).astype(np.int64)
+
+
+def spread_cells(free: np.ndarray, k: int, first: tuple[int, int]) -> np.ndarray:
+    """(k, 2) (col, row) of `k` `free` cells spread over the floor: `first` (a free cell,
+    (col, row)), then again and again the free cell farthest (straight-line) from every
+    cell chosen so far, ties in reading order (farthest-point sampling: each new start
+    goes into the largest gap left, so the spacing is even and as wide as the floor
+    allows). Fewer than `k` rows when there are fewer free cells."""
+    free = np.asarray(free, bool)
+    rows, cols = np.nonzero(free)  # reading order
+    if not free[first[1], first[0]]:
+        raise ValueError(f"the first cell {first} is not free")
+    at = int(np.flatnonzero((cols == first[0]) & (rows == first[1]))[0])
+    gap = np.full(rows.size, np.inf)
+    chosen = []
+    for _ in range(min(k, rows.size)):
+        chosen.append(at)
+        gap = np.minimum(gap, np.square(cols - cols[at]) + np.square(rows - rows[at]))
+        at = int(np.argmax(gap))  # the first of equals: reading order
+    return np.column_stack([cols[chosen], rows[chosen]]).astype(np.int64)

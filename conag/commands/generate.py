@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 
 from world_server.generator import GenerationError, generate, generate_suite
-from world_server.layout_options import FAMILIES, MAX_AGENTS, MAX_SIZE, MIN_SIZE, SOURCES
+from world_server.layout_options import FAMILIES, MAX_AGENTS, MAX_SIZE, MAX_TEAM, MIN_SIZE, SOURCES
 
 
 def configure(g: argparse.ArgumentParser) -> None:
@@ -19,7 +19,9 @@ def configure(g: argparse.ArgumentParser) -> None:
     g.add_argument("--family", choices=FAMILIES, help="blueprint family (default: drawn from the seed)")
     g.add_argument("--size", type=_size, metavar="N|WxH",
                    help=f"world size in cells, {MIN_SIZE} to {MAX_SIZE} a side (default: drawn)")
-    g.add_argument("--agents", type=_agents, metavar="K", help=f"1 to {MAX_AGENTS} agents (default: drawn)")
+    g.add_argument("--agents", type=_agents, metavar="K",
+                   help=f"1 to {MAX_AGENTS} agents (default: drawn); up to {MAX_TEAM} start side by side, "
+                        "more spread over the floor")
     g.add_argument("--source", choices=SOURCES, help="brick source (default: drawn)")
     g.add_argument("--max-sites", type=int, metavar="M", help="at most this many open sites")
     g.add_argument("--out", metavar="FILE", help="the scenario file to write (- prints it)")

@@ -89,6 +89,10 @@ def configure(u: argparse.ArgumentParser) -> None:
     u.add_argument("--per-process", type=int, default=1, metavar="K",
                    help="host up to K agents in each agent process (conag agents): less memory and a quicker "
                         "start-up for large teams; a crash of a host takes its K agents (default 1)")
+    u.add_argument("--attach-timeout", type=positive_float, metavar="S",
+                   help="seconds each agent waits for the world to answer its attach before it gives up "
+                        "(default: 30, or 2 per agent process if more); a host whose agent gives up exits with "
+                        "all its agents, so give a crowd on a busy machine longer")
     u.add_argument("--no-fork-server", dest="fork_server", action="store_false",
                    help="start every single agent process as a fresh interpreter; by default they are forks of a "
                         "server that has loaded the agent's modules and kernels once (quicker to start, and "
@@ -162,6 +166,7 @@ def run_options(args: argparse.Namespace) -> RunOptions:
                       view=args.view, foxglove=args.foxglove, maps_every=args.maps_every, secure=args.secure,
                       checkpoint_every=args.checkpoint_every, profile=args.profile,
                       per_process=args.per_process, agent_mode=args.agent_mode, noise=noise,
+                      attach_timeout=args.attach_timeout,
                       fork_server=args.fork_server, foremen=args.foremen, workers=args.workers,
                       cue_reach=args.cue_reach)
 
