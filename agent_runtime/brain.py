@@ -48,7 +48,7 @@ from agent_runtime.motivations import Motivations
 from agent_runtime.nav_inputs import NavInputs, nav_inputs, nm_obstacles, step_marks
 from agent_runtime.network import NONE, STATE_NODES, ActionNetwork, engineered
 from agent_runtime.seal_guard import SealGuard
-from agent_runtime.sealing import enclosed_sites, pocket_beside
+from agent_runtime.sealing import dilate, enclosed_sites, pocket_beside
 from agent_runtime.spreading import gradient_step
 from protocol.messages import BEHAVIOURS, CHANNELS, NO_READING, AgentState, Decision, SensorFrame, Welcome
 
@@ -773,7 +773,7 @@ class Brain:
         c = self.centre
         m = self.layers()
         fixed = m[FOOD] | m[WATER] | m[OBSTACLE] | self._recalled
-        spot = ~(fixed | m[BRICK] | _beside(m[CONFIG] & ~m[BRICK]))
+        spot = ~(fixed | m[BRICK] | dilate(m[CONFIG] & ~m[BRICK]))
         goals = spot
         bricks = m[BRICK] & ~m[CONFIG]
         far = self.far.far_bricks()
@@ -869,17 +869,6 @@ def _mouth_side_kernel(held, sites, depth):
             if (0 <= r < n and 0 <= c < m and sites[r, c] and np.isfinite(depth[r, c])
                     and depth[r, c] <= depth[rr, cc] + 1e-9):
                 out[r, c] = True
-    return out
-
-
-def _beside(cells: np.ndarray) -> np.ndarray:
-    """`cells` and their 8 neighbours (a bool grid)."""
-    out = cells.copy()
-    out[1:] |= cells[:-1]
-    out[:-1] |= cells[1:]
-    rows = out.copy()
-    out[:, 1:] |= rows[:, :-1]
-    out[:, :-1] |= rows[:, 1:]
     return out
 
 

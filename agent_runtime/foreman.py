@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from agent_runtime.esm import BRICK, CONFIG, FOOD, OBSTACLE, WATER
-from agent_runtime.sealing import border, connected, largest_region
+from agent_runtime.sealing import border, connected, dilate, largest_region
 
 
 @dataclass(frozen=True)
@@ -114,7 +114,7 @@ def supply_cell(view: MapView, reach: float, clearance: int) -> tuple[int, int] 
     (open or filled) within `clearance` cells on each axis, so a worker taking bricks round it
     cannot take a structure brick; nearest first among equals. None if there is none."""
     sites = view.open_sites | view.filled_sites
-    near_site = _dilate(sites, clearance)
+    near_site = dilate(sites, clearance)
     bricks = view.free_bricks.astype(np.int64)
     padded = np.pad(bricks, 1)
     n, m = bricks.shape
@@ -214,15 +214,4 @@ def _beside(cells: np.ndarray) -> np.ndarray:
     out[:-1] |= cells[1:]
     out[:, 1:] |= cells[:, :-1]
     out[:, :-1] |= cells[:, 1:]
-    return out
-
-
-def _dilate(cells: np.ndarray, k: int) -> np.ndarray:
-    """Cells within `k` cells of `cells` on each axis."""
-    n, m = cells.shape
-    padded = np.pad(cells, k)
-    out = np.zeros_like(cells)
-    for dr in range(-k, k + 1):
-        for dc in range(-k, k + 1):
-            out |= padded[k + dr:k + dr + n, k + dc:k + dc + m]
     return out

@@ -184,3 +184,14 @@ def border(like: np.ndarray) -> np.ndarray:
     out = np.zeros_like(like)
     out[[0, -1], :] = out[:, [0, -1]] = True
     return out
+
+
+def dilate(cells: np.ndarray, k: int = 1) -> np.ndarray:
+    """`cells` and every cell within `k` cells of one on each axis (8-neighbours for k = 1)."""
+    n, m = cells.shape
+    padded = np.pad(cells, k)
+    out = np.zeros_like(cells)
+    for dr in range(-k, k + 1):
+        for dc in range(-k, k + 1):
+            out |= padded[k + dr:k + dr + n, k + dc:k + dc + m]
+    return out
