@@ -85,6 +85,11 @@ class Plans:
 # source seen a cell off now and then flips the way to it, and an agent turned back and
 # forth beside a gap in a wall for 9,000 ticks (gen-letter 109).
 _STILL_IS_FINE = frozenset({"eat", "drink"})
+# The field cache's slots (`field_cache`) of the configuration and brick NMs, of their
+# plain fallbacks and of the needs' fields (by ESM layer).
+_NM_SLOTS = ("config", "brick")
+_PLAIN_SLOTS = ("plain config", "plain brick")
+_NEED_SLOTS = {FOOD: "food", WATER: "water"}
 # Cells by which a brick must be nearer than touching to count as one the body stands on.
 _OVERLAP_MARGIN = 0.2
 
@@ -147,7 +152,11 @@ class Brain:
         self.fields = FieldCache()   # navigation maps, computed again only when their inputs change
         self._layers: np.ndarray | None = None  # the maps thresholded at 0.5, during a step
         self._marks: np.ndarray | None = None   # the same, as `perceive` left them, for the step
-        self._enclosed: tuple[bytes, np.ndarray] | None = None  # (inputs, result) of the last check
+        # The last step's marks: `step_marks` hands them back when nothing changed, so
+        # whatever is worked out from the marks alone is known unchanged by identity.
+        self._last_marks: np.ndarray | None = None
+        self._need_fields: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # layer -> (marks, field)
+        self._enclosed: tuple[bytes, np.ndarray | None] | None = None  # (inputs, result) of the last check
         self._matching: tuple[bytes, Matching] | None = None  # (inputs, result) of the last matching
         self._inputs: tuple[np.ndarray, NavInputs] | None = None  # (the step's marks, `nav_inputs` of them)
         self._empty: np.ndarray | None = None   # an empty map mask, read-only
@@ -169,10 +178,10 @@ class Brain:
     # sensing and planning --------------------------------------------------------------
     def perceive(self, frame: SensorFrame) -> np.ndarray:
         """Update maps and motivations from a frame; returns its readings as (channels, sectors)."""
-        raw = np.asarray(frame.ranges, dtype=np.float64).reshape(len(CHANNELS), frame.sectors)
-        ranges = np.where(raw != NO_READING, raw / self.cell, NO_READING)  # in cells from here on
-        if not self.cfg.obstacle_layer:
-            ranges[_CH["obstacle"]] = NO_READING   # the paper's ESMs map discs only: no wall is written
+        # In cells from here on; without the obstacle layer the paper's ESMs map discs only,
+        # so no wall reading is kept.
+        ranges = _readings_in_cells(np.asarray(frame.ranges, dtype=np.float64), len(CHANNELS), self.cell,
+                                    -1 if self.cfg.obstacle_layer else _CH["obstacle"])
         self._tick = frame.tick
         if frame.tick > self._attach_tick:  # the attach pose already includes the last move
             self._odo += (frame.odom_dx / self.cell, frame.odom_dy / self.cell)
@@ -186,15 +195,18 @@ class Brain:
         # The world's edge is a wall; recalled discs on cells seen free since are gone
         # (eaten, moved); the maps as marks: what the step reads (`layers`).
         outside = self.far.outside_world() if self.cfg.obstacle_layer else None
-        marks, open_sites, walls = step_marks(self.maps.maps, outside, self._recalled, self.maps.known)
+        marks, open_sites, walls = step_marks(self.maps.maps, outside, self._recalled, self.maps.known,
+                                              self._last_marks)
         self.far.observe_sites(self.maps.maps[BRICK], self.maps.clear_age)
         self.far.age_sites(self.maps.clear_age)
         enclosed = self._enclosed_sites(open_sites, walls) if self.cfg.enclosed_sites else None
-        if enclosed is not None and enclosed.any():
+        if enclosed is not None:
             self.maps.maps[BRICK][enclosed] = 1.0
+            if not marks.flags.writeable:   # the last step's marks (unchanged since): read-only
+                marks = marks.copy()
             marks[BRICK] |= enclosed
             self.far.observe_sites(self.maps.maps[BRICK], self.maps.clear_age)
-        self._marks = marks
+        self._marks = self._last_marks = marks
         new = self.far.mark_seen(self.sensor_range - 1.0)
         if self.searching():
             self.searched += new
@@ -210,11 +222,14 @@ class Brain:
             self.far.move(*self.maps.move(dx, dy, self.cell), None)   # only the agent's cell
             return
         layers = self.maps.maps
-        if any(self.maps.crossing(dx, dy, self.cell)):  # 1 step in 7 or so
-            free = (layers[BRICK] > 0.5) & (layers[CONFIG] <= 0.5)
-            walls = layers[OBSTACLE] > 0.5
-            discs = (layers[FOOD] > 0.5) | (layers[WATER] > 0.5)
-            ground = self.maps.known & ~walls & ~discs      # before the maps shift
+        kx, ky = self.maps.crossing(dx, dy, self.cell)
+        if not (kx or ky):   # 6 steps in 7 or so: the maps only slide within the cell
+            self.maps.move(dx, dy, self.cell)
+            return
+        free = (layers[BRICK] > 0.5) & (layers[CONFIG] <= 0.5)
+        walls = layers[OBSTACLE] > 0.5
+        discs = (layers[FOOD] > 0.5) | (layers[WATER] > 0.5)
+        ground = self.maps.known & ~walls & ~discs      # before the maps shift
         kx, ky = self.maps.move(dx, dy, self.cell)
         if kx or ky:
             self.far.save_walls(walls, discs | self._recalled, ground)
@@ -241,15 +256,15 @@ class Brain:
             return self._layers
         return self.maps.maps > 0.5
 
-    def _enclosed_sites(self, open_sites: np.ndarray, walls: np.ndarray) -> np.ndarray:
-        """Open sites on the map that no way reaches (`sealing.enclosed_sites`): believed filled.
-        `open_sites`, `walls`: as `step_marks` gives them. Worked out again only when they
-        changed (read-only)."""
+    def _enclosed_sites(self, open_sites: np.ndarray, walls: np.ndarray) -> np.ndarray | None:
+        """Open sites on the map that no way reaches (`sealing.enclosed_sites`): believed filled
+        (None: none). `open_sites`, `walls`: as `step_marks` gives them. Worked out again
+        only when they changed (read-only)."""
         key = open_sites.tobytes() + walls.tobytes()
         if self._enclosed is None or self._enclosed[0] != key:
             found = enclosed_sites(open_sites, walls, (self.centre, self.centre))
             found.setflags(write=False)
-            self._enclosed = (key, found)
+            self._enclosed = (key, found if np.count_nonzero(found) else None)
         return self._enclosed[1]
 
     # the blueprint ------------------------------------------------------------------------
@@ -355,15 +370,15 @@ class Brain:
             matching = self.matching(supply_bricks, config_goals, obstacles, i.closed)
             config_goals, brick_goals = select_goals(matching, brick_goals, config_goals)
             held = open_sites & ~config_goals
-            if self.cfg.mouth_side and held.any():
+            if self.cfg.mouth_side and np.count_nonzero(held):
                 # Closed sites are passable for this: the depth of a site behind one must
                 # stay finite, or every site would count as "no deeper" than its neighbour.
-                depth = self.fields.distance(supply_bricks, obstacles)
+                depth = self.fields.distance(supply_bricks, obstacles, "depth")
                 config_goals &= ~_mouth_side(held, config_goals, depth)
         if self.cfg.goal_sequencing and self.cfg.seal_guard:
             # Also when sequencing gives way (plan's fallback): no site that seals another.
             unsafe = self.seals.unsafe(config_goals, open_sites, obstacles, supply_bricks, self._tick)
-            if unsafe.any():
+            if np.count_nonzero(unsafe):
                 config_goals = config_goals & ~unsafe
         if self.cfg.yield_goals:
             brick_goals = self._yield(brick_goals)
@@ -427,13 +442,13 @@ class Brain:
         sequenced = self.cfg.goal_sequencing and self.cfg.sequencing_fallback and self._nav_inputs(m).any_open
         plain = None
         for k, (goals, obstacles) in enumerate(self.nav_masks()):
-            field = self._field(goals, obstacles, far[k])
-            stuck = not (goals.any() or len(far[k])) if k == 0 else self._no_brick_here(goals, field)
+            field = self._field(goals, obstacles, far[k], _NM_SLOTS[k])
+            stuck = not (np.count_nonzero(goals) or len(far[k])) if k == 0 else self._no_brick_here(goals, field)
             if sequenced and stuck:
                 if plain is None:
                     plain = self.nav_masks(sequenced=False)
                 goals, obstacles = plain[k]
-                field = self._field(goals, obstacles, far[k])
+                field = self._field(goals, obstacles, far[k], _PLAIN_SLOTS[k])
             fields.append((field, goals, obstacles))
         (config, config_goals, config_obstacles), (brick, brick_goals, brick_obstacles) = fields
         matching = self._matching[1] if self.cfg.goal_sequencing and self._matching else None
@@ -452,16 +467,16 @@ class Brain:
         side of the map's edge (gen-nested_rings 11260025). Any free brick blocks nothing."""
         if not np.isfinite(field[self.centre, self.centre]):
             return True
-        return not goals.any() and bool(self._nav_inputs(self.layers()).brick_goals.any())
+        return not np.count_nonzero(goals) and bool(np.count_nonzero(self._nav_inputs(self.layers()).brick_goals))
 
-    def _field(self, goals: np.ndarray, obstacles: np.ndarray, beyond: np.ndarray) -> np.ndarray:
+    def _field(self, goals: np.ndarray, obstacles: np.ndarray, beyond: np.ndarray, slot: str) -> np.ndarray:
         """Distance field to `goals` and to the remembered cells `beyond` the map, which
-        enter at the border carrying the distance that remains."""
+        enter at the border carrying the distance that remains (`slot`: the field cache's)."""
         seed = self.far.border_costs(beyond, obstacles)
         if seed is None:
-            return self.fields.distance(goals, obstacles)
+            return self.fields.distance(goals, obstacles, slot)
         seed[goals & ~obstacles] = 0.0
-        return self.fields.seeded(seed, obstacles)
+        return self.fields.seeded(seed, obstacles, slot)
 
     def _nearest(self, cells: np.ndarray) -> tuple[float, float, float] | None:
         """Offset and straight-line distance (cells) to the nearest marked cell, or None
@@ -491,7 +506,7 @@ class Brain:
             "brick_available": plans.brick[c, c] < math.inf,
             "drop_site_available": plans.config[c, c] < math.inf,
         }
-        return np.fromiter((values[n] for n in STATE_NODES), np.float64, len(STATE_NODES))
+        return np.array([float(values[n]) for n in STATE_NODES])
 
     @staticmethod
     def _brick_within(plans: Plans, within: float) -> tuple[float, float] | None:
@@ -504,6 +519,7 @@ class Brain:
         """One decision: perceive the frame, plan, choose, and the command that carries it out."""
         ranges = self.perceive(frame)
         self._layers, self._marks = self._marks, None   # nothing changes the maps until the step ends
+        self._inputs = None   # made anew each step: they also read more than the marks
         assert self._layers is not None
         self._layers.setflags(write=False)  # shared by every reader this step
         try:
@@ -568,7 +584,7 @@ class Brain:
         blocked[self.centre, self.centre] = False
         outside = ~blocked & ~pocket
         outside[cell] = False
-        field = self.fields.distance(outside, blocked)
+        field = self.fields.distance(outside, blocked, "off own brick")
         if gradient_step(field) in (None, (0, 0)):
             return speed, turn
         return self._navigate(field, frame.heading)
@@ -650,7 +666,7 @@ class Brain:
 
     def searching(self) -> bool:
         """Is the agent looking for bricks: holding none and knowing of none?"""
-        return (self.plans is not None and self._taken_from is None and not self.plans.brick_goals.any()
+        return (self.plans is not None and self._taken_from is None and not np.count_nonzero(self.plans.brick_goals)
                 and not len(self.far.bricks))
 
     def _select(self, frame, ranges, plans, arm, motor):
@@ -678,9 +694,16 @@ class Brain:
         return (*self._construct(frame, ranges, plans, motor, arm), arm, motor if motor != NONE else "explore")
 
     def _need_field(self, layer: int) -> np.ndarray:
+        """The way to food or water (`layer`): a function of the marks alone, so kept while
+        they are the same object (`step_marks`)."""
         m = self.layers()
+        kept = self._need_fields.get(layer)
+        if kept is not None and kept[0] is m:
+            return kept[1]
         others = (m[FOOD] | m[WATER] | m[BRICK] | m[OBSTACLE]) & ~m[layer]
-        return self.fields.distance(m[layer], self._free_centre(others))
+        field = self.fields.distance(m[layer], self._free_centre(others), _NEED_SLOTS[layer])
+        self._need_fields[layer] = (m, field)
+        return field
 
     def _construct(self, frame, ranges, plans, motor, arm=NONE) -> tuple[float, float]:
         cruise = self.cfg.cruise_speed
@@ -716,7 +739,8 @@ class Brain:
             return False
         c = self.centre
         clear = plans.config_obstacles & ~(self.maps.maps[AGENT] > 0.5)
-        return bool(np.isfinite(self._field(plans.config_goals, clear, self.far.far_open_sites())[c, c]))
+        field = self._field(plans.config_goals, clear, self.far.far_open_sites(), "sites past agents")
+        return bool(np.isfinite(field[c, c]))
 
     def _explore(self, heading: float) -> tuple[float, float]:
         """Head for the nearest part of the world not yet seen (its extent came with the
@@ -742,9 +766,9 @@ class Brain:
             goals = np.zeros_like(obstacles)
             if self.maps.contains(*target):
                 goals[target[0], target[1]] = True
-                field = self.fields.distance(goals, obstacles)
+                field = self.fields.distance(goals, obstacles, "unseen")
             else:
-                field = self._field(goals, obstacles, target[None])
+                field = self._field(goals, obstacles, target[None], "unseen")
             if gradient_step(field) not in (None, (0, 0)):
                 return self._navigate(field, heading)
             self.far.give_up_target()
@@ -780,14 +804,14 @@ class Brain:
         if bricks.any() or len(far):
             # The way to the supply: round fixed things and the structure, not round agents,
             # who move (the supply is often out of reach only because they crowd it).
-            to_supply = self._field(bricks, self._free_centre(fixed | (m[BRICK] & m[CONFIG])), far)
+            to_supply = self._field(bricks, self._free_centre(fixed | (m[BRICK] & m[CONFIG])), far, "supply")
             near = spot & (to_supply <= self.cfg.idle_near)
             if near.any():
                 goals = near
             elif np.isfinite(to_supply[c, c]):
                 return self._navigate(to_supply, heading)
         if not goals[c, c]:
-            field = self.fields.distance(goals, self._free_centre(fixed | m[BRICK] | m[AGENT]))
+            field = self.fields.distance(goals, self._free_centre(fixed | m[BRICK] | m[AGENT]), "waiting spot")
             if gradient_step(field) not in (None, (0, 0)):
                 return self._navigate(field, heading)
         self._standing = True
@@ -886,6 +910,19 @@ def _nearest_cell(cells, centre, fx, fy):
                 if d < best:
                     best, br, bc = d, r, c
     return br >= 0, br, bc
+
+
+@njit(cache=True)
+def _readings_in_cells(raw, channels, cell, dropped):
+    """A frame's readings (flat, channel-major, world units) as (channels, sectors) in
+    cells; NO_READING stays, and so does every reading of channel `dropped` (-1: none)."""
+    sectors = raw.size // channels
+    out = np.empty((channels, sectors))
+    for ch in range(channels):
+        for k in range(sectors):
+            v = raw[ch * sectors + k]
+            out[ch, k] = NO_READING if (v == NO_READING or ch == dropped) else v / cell
+    return out
 
 
 @njit(cache=True)

@@ -119,6 +119,7 @@ class EgocentricMaps:
         self._sector_dirs: dict[int, np.ndarray] = {}
         self._geometry_key: tuple | None = None
         self._geometry: tuple[np.ndarray, ...] | None = None
+        self._geometry_buffers: dict[float, tuple[np.ndarray, ...]] = {}
 
     # ------------------------------------------------------------------ coordinates
 
@@ -212,7 +213,9 @@ class EgocentricMaps:
         structure bricks really do stand at the same distance. Without
         `sensing.ghost_association` every reading is written by the plain rule.
         """
-        r = np.ascontiguousarray(np.asarray(ranges, np.float64).reshape(len(CHANNELS), -1) / cell_size)
+        r = np.asarray(ranges, np.float64).reshape(len(CHANNELS), -1)
+        if cell_size != 1.0 or not r.flags.c_contiguous:   # (the brain's readings are in cells already)
+            r = np.ascontiguousarray(r / cell_size)
         sectors = r.shape[1]
         reach = sensor_range / cell_size
         cells, dist, (k, sector, starts), vx, vy, (_, core_sector, core_starts) = self._geometry_for(sectors, reach)
@@ -274,38 +277,73 @@ class EgocentricMaps:
     def _geometry_for(self, sectors: int, reach: float) -> tuple[np.ndarray, ...]:
         """(flat indices, distance, sector, east, north offsets) of the window's cells, seen from the agent now.
 
-        Cached per (frac, sectors, reach): an agent standing still reuses it.
+        Cached per (frac, sectors, reach): an agent standing still reuses it. The
+        arithmetic is compiled, the arctan2, hypot and arcsin stay numpy's (numba's libm
+        differs from numpy's vectorised ones by an ulp on about a tenth of the cells, which
+        can move a sector edge): three numpy calls a step, into kept buffers.
         """
         key = (float(self.frac[0]), float(self.frac[1]), sectors, reach)
         if key != self._geometry_key:
             cells, east, north = self._window(reach)
-            vx = east - key[0]
-            vy = north - key[1]
-            angle = np.arctan2(vy, vx)
-            dist = np.hypot(vx, vy)
+            vx, vy, angle, dist, ratio, half = self._buffers_for(reach)
+            _offsets(east, north, key[0], key[1], vx, vy)
+            np.arctan2(vy, vx, out=angle)
+            np.hypot(vx, vy, out=dist)
             # A cell has width: it overlaps every sector within half a cell of its centre's
             # direction (a disc on a sector border may be reported by either neighbour).
-            pairs = _sector_pairs(angle, dist, 0.5, sectors)
-            # A brick on a drop site lies within SITE_BRICK_OFFSET of the cell's centre (it is
-            # dropped there), so for site cells only the sectors of that core count.
-            core = _sector_pairs(angle, dist, SITE_BRICK_OFFSET, sectors)
+            # A brick on a drop site lies within SITE_BRICK_OFFSET of the cell's centre (it
+            # is dropped there), so for site cells only the sectors of that core count.
+            _half_angle_ratios(dist, _PAIR_RADII, ratio)
+            np.arcsin(ratio, out=half)
+            pairs, core = _pairs_both(angle, half, sectors / (2.0 * np.pi), sectors)
             self._geometry = (cells, dist, pairs, vx, vy, core)
             self._geometry_key = key
         assert self._geometry is not None
         return self._geometry
 
+    def _buffers_for(self, reach: float) -> tuple[np.ndarray, ...]:
+        """Kept arrays for `_geometry_for` (vx, vy, angle, dist, ratio, half), per window:
+        each step's geometry replaces the last one's, which nothing keeps."""
+        bufs = self._geometry_buffers.get(reach)
+        if bufs is None:
+            n = self._window(reach)[1].shape[0]
+            bufs = self._geometry_buffers[reach] = (*(np.empty(n) for _ in range(4)), np.empty((2, n)),
+                                                     np.empty((2, n)))
+        return bufs
 
-def _sector_pairs(angle: np.ndarray, dist: np.ndarray, radius: float, sectors: int):
-    """(cell of pair, sector, starts): every (cell, sector) pair where the sector comes
-    within `radius` cells of the cell's centre, grouped by cell in window order."""
-    # arcsin stays numpy's: numba's libm may differ by an ulp and move a sector edge.
-    half = np.arcsin(np.minimum(radius / np.maximum(dist, 1e-9), 1.0))
-    return _pairs_kernel(angle, half, sectors / (2.0 * np.pi), sectors)
+
+# The radii of `_geometry_for`'s two sector runs per cell: the whole cell, a site's core.
+_PAIR_RADII = np.array([0.5, SITE_BRICK_OFFSET])
+
+
+@njit(cache=True)
+def _offsets(east, north, f0, f1, vx, vy):
+    """(east, north) of the window's cells less the agent's offset in its cell, into vx, vy."""
+    for i in range(east.shape[0]):
+        vx[i] = east[i] - f0
+        vy[i] = north[i] - f1
+
+
+@njit(cache=True)
+def _half_angle_ratios(dist, radii, out):
+    """out[j, i] = min(radii[j] / max(dist[i], 1e-9), 1): the sine of the half angle a disc of
+    radius radii[j] at cell i spans (its arcsin is taken by numpy, see `_geometry_for`)."""
+    for j in range(radii.shape[0]):
+        for i in range(dist.shape[0]):
+            out[j, i] = min(radii[j] / max(dist[i], 1e-9), 1.0)
+
+
+@njit(cache=True)
+def _pairs_both(angle, half, per, sectors):
+    """`_pairs_kernel` for each row of `half`: (the whole cells' runs, the site cores' runs)."""
+    return _pairs_kernel(angle, half[0], per, sectors), _pairs_kernel(angle, half[1], per, sectors)
 
 
 @njit(cache=True)
 def _pairs_kernel(angle, half, per, sectors):
-    """`_sector_pairs` after the arcsin: each cell's run of sectors, in window order."""
+    """Every (cell, sector) pair where the sector comes within the half angle `half` of the
+    cell's centre direction `angle`, grouped by cell in window order: (cell of pair, sector,
+    starts)."""
     n = angle.shape[0]
     lo = np.empty(n, np.int64)
     span = np.empty(n, np.int64)

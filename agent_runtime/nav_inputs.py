@@ -61,14 +61,23 @@ class StepMarks(NamedTuple):
 
 
 _NOWHERE = np.zeros((1, 1), np.bool_)
+_NO_MARKS = np.zeros((1, 1, 1), np.bool_)
 
 
-def step_marks(maps: np.ndarray, outside: np.ndarray | None, recalled: np.ndarray, known: np.ndarray) -> StepMarks:
+def step_marks(maps: np.ndarray, outside: np.ndarray | None, recalled: np.ndarray, known: np.ndarray,
+               previous: np.ndarray | None = None) -> StepMarks:
     """After sensing: mark the cells beyond the world's edge (`outside`, None when its
     extent is unknown) as fixed obstacles in `maps`, forget the `recalled` discs on cells
-    seen free since (`known`; both in place), then threshold the maps."""
+    seen free since (`known`; both in place), then threshold the maps.
+
+    `previous`: the marks of the step before. Most steps nothing crosses 0.5, and then
+    `previous` itself is the marks: the same object, so what was worked out from it can
+    be known unchanged by identity (it is read-only; a caller that must add to it copies)."""
     has_outside = outside is not None
-    return StepMarks(*_marks_kernel(maps, outside if has_outside else _NOWHERE, has_outside, recalled, known))
+    same_shape = previous is not None and previous.shape == maps.shape
+    marks, open_sites, walls, same = _marks_kernel(maps, outside if has_outside else _NOWHERE, has_outside,
+                                                   recalled, known, previous if same_shape else _NO_MARKS, same_shape)
+    return StepMarks(previous if same and previous is not None else marks, open_sites, walls)
 
 
 def nm_obstacles(in_the_way: np.ndarray, bricks: np.ndarray, brick_goals: np.ndarray,
@@ -110,7 +119,7 @@ def _inputs_kernel(marks, recalled, extra_supply, clear_age, site_memory, agents
 
 
 @njit(cache=True)
-def _marks_kernel(maps, outside, has_outside, recalled, known):
+def _marks_kernel(maps, outside, has_outside, recalled, known, previous, compare):
     layers, n, m = maps.shape
     for r in range(n):
         for c in range(m):
@@ -118,10 +127,14 @@ def _marks_kernel(maps, outside, has_outside, recalled, known):
                 maps[OBSTACLE, r, c] = 1.0
             recalled[r, c] = recalled[r, c] & (known[r, c] ^ True)
     marks = np.empty((layers, n, m), np.bool_)
+    differ = False
     for layer in range(layers):
         for r in range(n):
             for c in range(m):
-                marks[layer, r, c] = maps[layer, r, c] > 0.5
+                mark = maps[layer, r, c] > 0.5
+                marks[layer, r, c] = mark
+                if compare:
+                    differ |= mark ^ previous[layer, r, c]
     open_sites = np.empty((n, m), np.bool_)
     walls = np.empty((n, m), np.bool_)
     for r in range(n):
@@ -129,7 +142,7 @@ def _marks_kernel(maps, outside, has_outside, recalled, known):
             brick, config = marks[BRICK, r, c], marks[CONFIG, r, c]
             open_sites[r, c] = config & (brick ^ True)
             walls[r, c] = marks[OBSTACLE, r, c] | marks[FOOD, r, c] | marks[WATER, r, c] | (brick & config)
-    return marks, open_sites, walls
+    return marks, open_sites, walls, compare and not differ
 
 
 @njit(cache=True)

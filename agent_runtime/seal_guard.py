@@ -65,7 +65,7 @@ class SealGuard:
         Why: the check runs only near the agent. A site it found sealing became a goal
         again one cell farther off, and the agent turned back at that cell's edge, to and
         fro, for ever (a one-cell slot of water whose far end it had not seen)."""
-        any_unsafe = unsafe.any()
+        any_unsafe = bool(np.count_nonzero(unsafe))
         if not self._found and not any_unsafe:
             return unsafe   # nothing remembered, nothing new: the rest would change nothing
         judged = goals & self._square(SEAL_RADIUS, goals.shape)
@@ -104,7 +104,7 @@ class SealGuard:
         open sites deeper in, gen-pocket 153) or, with the border counted open, open at a
         far end that was a wall (its mouth filled first, gen-pocket 117)."""
         c, r = self.centre, SEAL_RADIUS
-        if not goals[max(c - r, 0):c + r + 1, max(c - r, 0):c + r + 1].any():
+        if not np.count_nonzero(goals[max(c - r, 0):c + r + 1, max(c - r, 0):c + r + 1]):
             return self._nothing(goals.shape)   # no goal near: nothing to judge
         near = goals & self._square(SEAL_RADIUS, goals.shape)
         # Only open sites seen empty lately are ways through (a stale one may have been

@@ -55,19 +55,6 @@ _TIE = 1e-9
 _OPEN, _DONE, _WALL = 0, 1, 2
 
 
-@njit(cache=True)
-def _padded_state(obstacles):
-    """Cell states, flattened, with a one-cell wall border so neighbours never fall off."""
-    n, m = obstacles.shape
-    w = m + 2
-    state = np.full((n + 2) * w, _WALL, np.uint8)
-    for r in range(n):
-        for c in range(m):
-            if not obstacles[r, c]:
-                state[(r + 1) * w + c + 1] = _OPEN
-    return state
-
-
 @njit(cache=True, inline="always")
 def _settle_bucket(k, head, node, nxt, state, dist, bucket_of, off, w, used, pending):
     """Settle every cell of bucket k and relax its neighbours; returns (used, pending)."""
@@ -102,20 +89,61 @@ def _settle_bucket(k, head, node, nxt, state, dist, bucket_of, off, w, used, pen
     return used, pending
 
 
+class FieldWork:
+    """The kernels' buffers for one map shape, kept between calls: a field then allocates
+    only its result. The grids start clean (every cell unreached, the border a wall) and
+    the kernels leave them clean, resetting only the cells they reached. One owner at a
+    time (an agent's field cache): never share one between threads."""
+
+    def __init__(self, shape: tuple[int, int]):
+        n, m = shape
+        size = (n + 2) * (m + 2)
+        self.shape = (n, m)
+        self.state = np.full(size, _WALL, np.uint8)   # the interior is written by each call
+        self.dist = np.full(size, np.inf)
+        self.bucket_of = np.full(size, -1, np.int32)
+        # Up to two queue entries per cell from relaxations, and one per source of a seeded field.
+        self.node = np.empty(3 * size, np.int32)
+        self.nxt = np.empty(3 * size, np.int32)
+
+
 @njit(cache=True)
-def _field_kernel(goals, obstacles):
-    """dist[N, M] to the nearest free goal (see the comment above for the method)."""
+def _fill_state(obstacles, state):
+    """The padded grid's interior from `obstacles` (its one-cell wall border is never written)."""
+    n, m = obstacles.shape
+    w = m + 2
+    for r in range(n):
+        for c in range(m):
+            state[(r + 1) * w + c + 1] = _WALL if obstacles[r, c] else _OPEN
+
+
+@njit(cache=True)
+def _result_and_reset(n, m, dist, bucket_of, node, used):
+    """The interior of `dist` as a new (n, m) array; then every queued cell (every cell
+    reached) back to unreached, so the buffers are clean for the next call."""
+    w = m + 2
+    out = np.empty((n, m))
+    for r in range(n):
+        base = (r + 1) * w + 1
+        for c in range(m):
+            out[r, c] = dist[base + c]
+    for e in range(used):
+        u = node[e]
+        dist[u] = np.inf
+        bucket_of[u] = -1
+    return out
+
+
+@njit(cache=True)
+def _field_into(goals, obstacles, state, dist, bucket_of, node, nxt):
+    """dist[N, M] to the nearest free goal (see the comment above for the method), in the
+    clean buffers of a `FieldWork`."""
     n, m = goals.shape
     w = m + 2
-    state = _padded_state(obstacles)
-    size = state.size
-    dist = np.full(size, np.inf)
-    bucket_of = np.full(size, -1, np.int32)
+    _fill_state(obstacles, state)
     # Buckets are linked lists in a shared pool. A cell is queued once per bucket it
     # enters: first k+1 or k+2 (from a cell of bucket k), later only lower, never below
     # k+1; so at most 2 entries per cell, and the pool cannot overflow.
-    node = np.empty(2 * size, np.int32)
-    nxt = np.empty(2 * size, np.int32)
     head = np.full(4, -1, np.int32)
     off = _DR * w + _DC
     used = 0
@@ -134,23 +162,18 @@ def _field_kernel(goals, obstacles):
     while pending > 0:
         used, pending = _settle_bucket(k, head, node, nxt, state, dist, bucket_of, off, w, used, pending)
         k += 1
-    return dist.reshape((n + 2, w))[1:n + 1, 1:m + 1].copy()
+    return _result_and_reset(n, m, dist, bucket_of, node, used)
 
 
 @njit(cache=True)
-def _seeded_kernel(seed, obstacles):
+def _seeded_into(seed, obstacles, state, dist, bucket_of, node, nxt):
     """dist[N, M] to the cheapest source, a source cell starting at its own cost `seed`
-    (inf: not a source). The same bucket queue as `_field_kernel`; sources enter their
-    bucket only when the search reaches it, so the ring of four buckets still suffices."""
+    (inf: not a source), in the clean buffers of a `FieldWork`. The same bucket queue as
+    `_field_into`; sources enter their bucket only when the search reaches it, so the ring
+    of four buckets still suffices."""
     n, m = seed.shape
     w = m + 2
-    state = _padded_state(obstacles)
-    size = state.size
-    dist = np.full(size, np.inf)
-    bucket_of = np.full(size, -1, np.int32)
-    # Up to two entries per cell from relaxations, as in `_field_kernel`, plus one as a source.
-    node = np.empty(3 * size, np.int32)
-    nxt = np.empty(3 * size, np.int32)
+    _fill_state(obstacles, state)
     head = np.full(4, -1, np.int32)
     off = _DR * w + _DC
     count = 0
@@ -189,7 +212,17 @@ def _seeded_kernel(seed, obstacles):
                 pending += 1
         used, pending = _settle_bucket(k, head, node, nxt, state, dist, bucket_of, off, w, used, pending)
         k += 1
-    return dist.reshape((n + 2, w))[1:n + 1, 1:m + 1].copy()
+    return _result_and_reset(n, m, dist, bucket_of, node, used)
+
+
+@njit(cache=True)
+def _field_kernel(goals, obstacles):
+    """`_field_into` with buffers of its own (for a caller that keeps none)."""
+    n, m = goals.shape
+    size = (n + 2) * (m + 2)
+    state = np.full(size, _WALL, np.uint8)
+    return _field_into(goals, obstacles, state, np.full(size, np.inf), np.full(size, -1, np.int32),
+                       np.empty(3 * size, np.int32), np.empty(3 * size, np.int32))
 
 
 @njit(cache=True)
@@ -230,11 +263,14 @@ def _bool_grids(goals, obstacles) -> tuple[np.ndarray, np.ndarray]:
     return goals, obstacles
 
 
-def distance_field(goals: np.ndarray, obstacles: np.ndarray) -> np.ndarray:
+def distance_field(goals: np.ndarray, obstacles: np.ndarray, work: FieldWork | None = None) -> np.ndarray:
     """8-connected shortest-path distance (float64, [row, col]) from every cell to its
-    nearest goal; np.inf on obstacles and on cells that cannot reach a goal."""
+    nearest goal; np.inf on obstacles and on cells that cannot reach a goal. `work`: kept
+    buffers of this shape (`FieldWork`), to allocate only the result."""
     goals, obstacles = _bool_grids(goals, obstacles)
-    return _field_kernel(goals, obstacles)
+    if work is None or work.shape != goals.shape:
+        return _field_kernel(goals, obstacles)
+    return _field_into(goals, obstacles, work.state, work.dist, work.bucket_of, work.node, work.nxt)
 
 
 def reachable(sources: np.ndarray, passable: np.ndarray) -> np.ndarray:
@@ -247,7 +283,7 @@ def reachable(sources: np.ndarray, passable: np.ndarray) -> np.ndarray:
     return _reach_kernel(sources, passable)
 
 
-def seeded_distance_field(seed: np.ndarray, obstacles: np.ndarray) -> np.ndarray:
+def seeded_distance_field(seed: np.ndarray, obstacles: np.ndarray, work: FieldWork | None = None) -> np.ndarray:
     """Like `distance_field`, but every cell with a finite `seed` is a goal that starts at
     that cost instead of 0: the distance from each cell to min over goals g of
     (path to g + seed[g]). A goal beyond the map enters at the border this way, carrying
@@ -258,7 +294,9 @@ def seeded_distance_field(seed: np.ndarray, obstacles: np.ndarray) -> np.ndarray
         raise ValueError(f"seed {seed.shape} and obstacles {obstacles.shape} must be equal 2-D shapes")
     if np.any(seed < 0) or np.any(np.isnan(seed)):
         raise ValueError("seed costs must be >= 0 (inf: not a goal)")
-    return _seeded_kernel(seed, obstacles)
+    if work is None or work.shape != seed.shape:
+        work = FieldWork(seed.shape)
+    return _seeded_into(seed, obstacles, work.state, work.dist, work.bucket_of, work.node, work.nxt)
 
 
 def _default_decay(dist: np.ndarray) -> float:

@@ -14,7 +14,15 @@ from hypothesis import strategies as st
 from agent_runtime.brain import _extent, _mouth_side, _nearest_reading
 from agent_runtime.far_memory import _age_sites, _observe_sites
 from agent_runtime.field_cache import FieldCache
-from agent_runtime.spreading import _STEP, MOVES, distance_field, gradient_step, reachable, seeded_distance_field
+from agent_runtime.spreading import (
+    _STEP,
+    MOVES,
+    FieldWork,
+    distance_field,
+    gradient_step,
+    reachable,
+    seeded_distance_field,
+)
 from tests.test_spreading import grids
 
 
@@ -110,6 +118,22 @@ def test_the_cache_keeps_at_most_its_capacity_oldest_out_first():
     assert cache.misses == 4
     with pytest.raises(ValueError):
         FieldCache(capacity=0)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(5, 30))
+def test_kept_buffers_give_every_field_as_fresh_ones_do(seed, size):
+    """One FieldWork through a run of different maps, plain and seeded fields in turn:
+    each field equals the one made with buffers of its own (the buffers are left clean)."""
+    rng = np.random.default_rng(seed)
+    work = FieldWork((size, size))
+    for _ in range(6):
+        obstacles = rng.random((size, size)) < rng.uniform(0.0, 0.5)
+        goals = rng.random((size, size)) < 0.02
+        costs = np.where(rng.random((size, size)) < 0.03, rng.uniform(0.0, 9.0, (size, size)), np.inf)
+        assert np.array_equal(distance_field(goals, obstacles, work), distance_field(goals, obstacles))
+        assert np.array_equal(seeded_distance_field(costs, obstacles, work), seeded_distance_field(costs, obstacles))
+    assert np.all(np.isinf(work.dist)) and np.all(work.bucket_of == -1)
 
 
 def test_a_cached_seeded_field_is_the_seeded_kernels():
@@ -213,6 +237,16 @@ def test_the_step_marks_are_the_numpy_expressions(seed, size, bounded):
     assert np.array_equal(got.marks, marks)
     assert np.array_equal(got.open_sites, marks[CONFIG] & ~marks[BRICK])
     assert np.array_equal(got.walls, marks[OBSTACLE] | marks[FOOD] | marks[WATER] | (marks[BRICK] & marks[CONFIG]))
+    # Handed the last step's marks: they come back, the very object, exactly when nothing
+    # crossed 0.5; else new marks, as without them.
+    again = step_marks(maps, outside, recalled, known, got.marks)
+    assert again.marks is got.marks
+    layer, r, c = rng.integers(0, 6), rng.integers(0, size), rng.integers(0, size)
+    maps[layer, r, c] = 0.0 if marks[layer, r, c] else 1.0
+    if layer == OBSTACLE and outside is not None and outside[r, c]:
+        return   # marked beyond the world's edge again: unchanged
+    changed = step_marks(maps, outside, recalled, known, got.marks)
+    assert changed.marks is not got.marks and changed.marks[layer, r, c] != marks[layer, r, c]
 
 
 @settings(max_examples=200, deadline=None)
