@@ -84,7 +84,7 @@ SLOT = """
 
 
 def test_a_disc_mark_on_an_open_site_walls_in_no_site_behind_it():
-    # The world puts no wall, food or water on a drop site, so a water mark on one is a
+    # No layout puts a wall, food or water on a drop site, so a water mark on one is a
     # disc of the slot's wall mapped a cell off: the site behind it is still reachable,
     # and not believed filled.
     g = _grid(SLOT)
