@@ -91,13 +91,14 @@ def test_a_disc_mark_on_an_open_site_walls_in_no_site_behind_it():
     open_sites = _cells(g, "+~")
     walls = _cells(g, "#~")
     assert not enclosed_sites(open_sites, walls, centre=(0, 0)).any()
-    open_sites[2, 3] = False                 # the same mark on a cell that is no site is a
-    assert enclosed_sites(open_sites, walls, centre=(0, 0))[2, 2]   # wall: the site behind it is walled in
+    # The same mark on a cell that is no site is a wall: the site behind it is walled in.
+    open_sites[2, 3] = False
+    assert enclosed_sites(open_sites, walls, centre=(0, 0))[2, 2]
 
 
 def _guard(picture: str, stale: str = "") -> tuple[SealGuard, dict[str, np.ndarray]]:
     """A seal guard on a map holding `picture` in its middle (the agent, `A`, at the map's
-    centre), every cell seen free but walls, every open site seen empty just now except
+    centre), every cell seen free but walls and marks, every open site seen empty just now except
     those marked in `stale` (the same picture with `s` on them), which were seen long ago.
     Returns the guard and the judgement's inputs: open sites, blocked cells, the supply."""
     g = _grid(picture)
@@ -111,7 +112,7 @@ def _guard(picture: str, stale: str = "") -> tuple[SealGuard, dict[str, np.ndarr
     maps.maps[BRICK] = _cells(full, "B")
     open_sites = _cells(full, "+~")
     blocked = _cells(full, "#~B")
-    maps.known[:] = ~_cells(full, "#")
+    maps.known[:] = ~_cells(full, "#~")             # a cell marked water was never seen free
     maps.clear_age[open_sites] = 0.0
     if stale:
         s = _grid(stale)
