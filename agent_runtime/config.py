@@ -144,11 +144,12 @@ OFF_BY_DEFAULT = ("idle_wait", "yield_goals", "spread_search")
 # noise they would only ever move a true belief by the sensors' noise.
 CORRECTIONS = ("anchor_maps",)
 # Named agents: "default" is the best agent, "paper" the agent as the paper describes it:
-# every addition off but ghost association. By the plain rule a structure brick seen from
-# two places leaves a ghost free brick beside it that no sector clears (it lies at the real
-# brick's distance), the agents drive to it, and the paper's own Fig. 6 completed in 13 of
-# 20 seeds (20 of 20 with it; `python3 -m experiments.fig6 --agent paper --without
-# ghost_association`).
+# every addition off but ghost association. One object seen from two places is one object,
+# and the paper's agent built its own figures, so its maps kept no ghosts, whatever its
+# rule was. By the plain rule a structure brick seen from two places leaves a ghost free
+# brick beside it that no sector clears (it lies at the real brick's distance) and the
+# agents drive to it: Fig. 6 completed in 13 of 20 seeds (20 of 20 with it; `python3 -m
+# experiments.fig6 --agent paper --without ghost_association`).
 PRESETS: dict[str, dict[str, Any]] = {
     "default": {},
     "paper": {**dict.fromkeys(ADDITIONS, False), "ghost_association": True},

@@ -34,12 +34,14 @@ of `agent_runtime.config.AgentConfig` and of `Sensing`, are on by default:
   than the disc).
 * `site_core`: a blueprint site's cell is cleared of bricks by the sectors that cover its
   core (SITE_BRICK_OFFSET) only, since a brick on a site lies at its centre.
-* `obstacle_trust`: fixed obstacles are written only from readings near enough to put
-  them in their own cell (`obstacle_trust`), so a one-cell gap in a wall is never sealed
-  by a misplaced mark; and a farther food or water reading is never written on a
-  blueprint site: sites are where bricks go, so the disc is the one beside it. Far discs
-  of two water walls otherwise landed in the one-cell slot of sites between them, and (a
-  marked cell explains the same reading ever after) shut it for good (gen-pocket 20261127).
+* `obstacle_trust`: a mark that cannot be placed surely must not close a way, since a
+  marked cell explains the same reading ever after and the mark stays for good. So fixed
+  obstacles are written only from readings near enough to put them in their own cell
+  (`obstacle_trust`), and a one-cell gap in a wall is never sealed by a misplaced mark;
+  and a farther food or water reading is never written on a blueprint site: sites are
+  where bricks go (no layout puts a disc on one), so the disc is the one beside it (as
+  the far discs of two water walls landed in the one-cell slot of sites between them and
+  shut it, gen-pocket 20261127). Near readings are written wherever they land.
 
 Pure numpy, no bus. The per-sector geometry of the cells within sensor range is
 computed for a window of cell offsets fixed per sensor range, and cached per `frac`.
@@ -113,7 +115,7 @@ class EgocentricMaps:
         # Cells seen free of food, water and fixed obstacles at least once since they came
         # onto the map. Behind the nearest disc of a wall a sector sees nothing, so a map
         # shows a food wall as a few discs with gaps; `known` tells those unseen cells from
-        # cells seen open (the seal check in brain.py trusts only the latter).
+        # cells seen open (the seal guard, seal_guard.py, trusts only the latter).
         self.known = np.zeros((size, size), bool)
         self._windows: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._sector_dirs: dict[int, np.ndarray] = {}
@@ -222,9 +224,10 @@ class EgocentricMaps:
         dirs = self._dirs(sectors)
         # One compiled pass (`_sense_kernel`) does what the steps below say, in their order:
         # A cell is known empty when it is nearer than what every sector it overlaps saw;
-        # of a site cell, only the sectors where a brick on it could lie (`site_core`). Else
-        # a site in a pocket, beside structure bricks seen at about its distance, is never
-        # seen open again once a ghost lands on it, and the pocket's mouth is filled over it.
+        # of a site cell, only the sectors where a brick on it could lie (`site_core`):
+        # a cell is judged by where a thing on it can lie. Else a site beside structure
+        # bricks seen at about its distance (in a pocket, say) is never seen open again
+        # once a ghost lands on it, and the sites in front of it are filled over it.
         # Each reading may then be explained by any cell its wedge overlaps (see above;
         # `ghost_association`). With `obstacle_trust`, a fixed obstacle is written only
         # where the sector's centre angle lands in its own cell: farther off, the mark may

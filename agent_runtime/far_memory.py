@@ -189,10 +189,12 @@ class FarMemory:
         leave the map are remembered; returns the map mask of remembered bricks that came
         back onto it (to re-mark): free bricks, and the bricks of sites believed filled.
 
-        Why the sites: a brick deep in a one-cell slot is hidden from every sector by the
-        brick in front of it. Come back with the site shown open, the agent took the
-        hidden one's site for a goal behind a filled one and planned round the walls to
-        reach it, for ever (gen-pocket 102); the sensors still clear a site seen empty."""
+        Why the sites: what was seen stays as it was seen until it is seen otherwise, and
+        a filled site cannot always be seen filled again: a brick deep in a one-cell slot
+        is hidden from every sector by the brick in front of it. Come back with the site
+        shown open, the hidden one's site looks like a goal behind a filled one, and the
+        agent plans round the walls to reach it, for ever (as in gen-pocket 102); the
+        sensors still clear a site seen empty."""
         if kx == 0 and ky == 0:
             return np.zeros((self.size, self.size), bool)
         if not self.remember:
@@ -311,11 +313,13 @@ class FarMemory:
 
     def _remember(self, cells: np.ndarray) -> None:
         if self.bounds is not None:
-            # A brick by the world's edge, seen from afar, can be mapped a cell beyond it.
-            # Remembered there, it came back onto the map inside the edge's wall, where it
-            # is no goal, and left again as a remembered brick, which is one: the agent
-            # walked to and fro across a cell's edge for 50,000 ticks (gen-nested_rings
-            # 11230026). No brick lies outside the world: keep it on the edge's cell.
+            # No brick lies outside the world: a belief that the world's known extent
+            # contradicts is kept on the nearest cell that agrees with it, the edge's. A
+            # brick by the edge, seen from afar, can be mapped a cell beyond it; remembered
+            # there, it would come back onto the map inside the edge's wall, where it is no
+            # goal, and leave again as a remembered brick, which is one, and the agent
+            # would walk to and fro across a cell's edge (for 50,000 ticks in
+            # gen-nested_rings 11230026).
             x0, y0, x1, y1 = self.bounds
             cells = np.clip(cells, (x0, y0), (x1 - 1, y1 - 1))
         merged = np.unique(np.vstack([self.bricks, cells]), axis=0) if len(self.bricks) else np.unique(cells, axis=0)
@@ -437,10 +441,12 @@ class FarMemory:
         a target through the world, round what the agent remembers as blocked (fixed
         walls, food, water) and over everything else. None if there are no targets.
 
-        Why not the straight distance: a wall longer than the map between the agent and
-        its goal made the border cell straight behind it the cheapest; the agent walked
-        into the wall, along it while its end was on the map, and back when that end
-        scrolled off (generated worlds with long walls and food fields)."""
+        Why not the straight distance: the distance that remains is the way round what is
+        known to block, beyond the map as on it. With the straight distance, a wall longer
+        than the map between the agent and its goal makes the border cell straight behind
+        it the cheapest; the agent walks into the wall, along it while its end is on the
+        map, and back when that end scrolls off (as in generated worlds with long walls
+        and food fields)."""
         if len(targets) == 0:
             return None
         # Kept for the few (targets, border obstacles, memory, cell) asked lately: the

@@ -62,9 +62,12 @@ class SealGuard:
         """`unsafe` (this step's verdicts, within SEAL_RADIUS cells) and the sites found
         sealing in the last SEAL_MEMORY ticks that are out of that radius now.
 
-        Why: the check runs only near the agent. A site it found sealing became a goal
-        again one cell farther off, and the agent turned back at that cell's edge, to and
-        fro, for ever (a one-cell slot of water whose far end it had not seen)."""
+        Why: a verdict is about the site, not about where the agent stands. The check
+        runs only near the agent, so a site it found sealing would be a goal again one
+        cell farther off, and the agent would turn back at that cell's edge, to and fro,
+        for ever (as in a one-cell slot of water whose far end it had not seen,
+        gen-pocket 11230010). A verdict lasts SEAL_MEMORY ticks at most, since what it was
+        made on goes stale."""
         any_unsafe = bool(np.count_nonzero(unsafe))
         if not self._found and not any_unsafe:
             return unsafe   # nothing remembered, nothing new: the rest would change nothing
@@ -99,10 +102,12 @@ class SealGuard:
         walls as it goes.
 
         With the world's extent known, the check runs on the whole world as the agent
-        remembers it: a corridor longer than the map, judged on the map alone, was either
-        cut off from everything at the map's border (nothing checked: a site filled with
-        open sites deeper in, gen-pocket 153) or, with the border counted open, open at a
-        far end that was a wall (its mouth filled first, gen-pocket 117)."""
+        remembers it: whether a site joins another to the supply is a fact about the
+        world, and the map's border is neither a wall nor a way out. A corridor longer
+        than the map, judged on the map alone, is either cut off from everything at the
+        border (nothing checked: a site filled with open sites deeper in, as in gen-pocket
+        153) or, with the border counted open, open at a far end that is a wall (its mouth
+        filled first, as in gen-pocket 117)."""
         c, r = self.centre, SEAL_RADIUS
         if not np.count_nonzero(goals[max(c - r, 0):c + r + 1, max(c - r, 0):c + r + 1]):
             return self._nothing(goals.shape)   # no goal near: nothing to judge
@@ -145,8 +150,11 @@ class SealGuard:
         """`judge`, worked out: `near` the goal sites judged, `fresh` the open sites seen
         empty lately and `near`, `structure` the map's structure bricks, `memory` the far
         memory's `_memory_key`."""
-        # No food or water lies on an open site: such a mark is a disc mapped a cell off
-        # (a slot between water walls looked filled in its middle, gen-pocket 120).
+        # No layout puts a wall, food or water on a drop site (nor does the world add a
+        # disc there unless forced), so such a mark on an open site is a disc mapped a cell
+        # off. Counted, it would hide every site behind it from the check (no way reaches
+        # them to be cut), and the sites there would be filled one in front of another (as
+        # a slot between water walls looked filled in its middle, gen-pocket 120).
         blocked = blocked & ~open_sites
         # The outside: the supply, and open ground seen a few cells beyond the sites that
         # are checked (the supply itself is often beyond the map, where nothing is seen).
@@ -158,13 +166,16 @@ class SealGuard:
         reference = (g.supply | (g.outside & g.ground & ~g.open)) & passable
         if not reference.any():
             # Nothing known outside the sites yet (a brain just made, after a restart, on a
-            # site with a brick in its gripper): nothing near can be judged, so nothing is
-            # filled until the agent has seen more. It dropped at once and walled itself in
-            # (nested_squares, its world restored from a checkpoint).
+            # site with a brick in its gripper): judged only on what was seen, no site near
+            # can be shown safe, so none is filled until the agent has seen more (one that
+            # dropped at once walled itself in, nested_squares restored from a checkpoint).
             return near
-        # Structure bricks are doubted only round sites that no way reaches even through
-        # stale sites: cut off by a stale mouth, the bricks beside a two-cell pocket were
-        # doubted and its inner column seemed to get out through them (gen-pocket 017).
+        # Structure bricks are doubted only where nothing else explains why an open site
+        # is walled in: round sites no way reaches even through stale sites. Behind a
+        # stale site the staleness explains it (that site may have been filled), and
+        # doubting real bricks there invents a way out: the inner column of a pocket two
+        # cells wide seemed to get out through them, and the site joining it to the mouth
+        # was filled (as in gen-pocket 017).
         local = self._square(SEAL_RADIUS + 1, near.shape)
         doubtful = g.from_map(walling_in(fresh & ~g.to_map(connected(reference, believed)), structure, local))
         unsafe = cut_off(g.from_map(near), passable | doubtful, reference, g.open,

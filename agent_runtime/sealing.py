@@ -47,13 +47,15 @@ def cut_off(candidates: np.ndarray, passable: np.ndarray, reference: np.ndarray,
 
     A candidate that `passable` does not connect to `reference` at all is judged again on
     each of `fallbacks` in turn, each counting more cells passable (open sites not seen
-    lately; every cell not known to be blocked). Why: ground beside a wall or the world's
-    edge is seldom seen free (the wall's readings hide it), and the mouth of a corridor by
-    the edge never was; judged on nothing, a site was filled from inside with the rest of
-    the corridor open behind it, and two agents were shut in (gen-pocket 117). Likewise a
-    corridor's far end, out of sight behind the agent for a while, cut its inside off from
-    everything (gen-pocket 031). Counting more cells open there can only find more sites
-    unsafe, never fewer."""
+    lately; every cell not known to be blocked). Why: a site that cannot be shown joined
+    to the outside gets no verdict at all, and no verdict is no proof of safety. The
+    strict view misses ways that are real but not proven: ground beside a wall or the
+    world's edge is seldom seen free (the wall's readings hide it), and an exit out of
+    sight behind the agent for a while is stale. Judged on nothing, a site is filled from
+    inside with the rest of its corridor open behind it (as in gen-pocket 117, where two
+    agents were shut in by the world's edge, and gen-pocket 031). A candidate the strict
+    view connects is judged there, so the fallbacks can only find more sites unsafe,
+    never fewer."""
     unsafe = np.zeros_like(candidates)
     rest = candidates
     for tier in (passable, *fallbacks):
@@ -123,14 +125,17 @@ def enclosed_sites(open_sites: np.ndarray, walls: np.ndarray, centre: tuple[int,
     """Open sites that no way reaches, from `centre` (the agent's cell) or from the grid's
     border (the world goes on beyond a map), round `walls`.
 
-    Why: a brick deep in a one-cell slot is hidden behind the brick in front of it, so its
-    site, last seen empty, stayed open on the map, walled in. The agent held its brick for
-    that site, found no way there, and wandered; three loaded agents did so in a corridor
-    for 6,000 ticks (gen-pocket 153). Nobody can fill a walled-in site, so believing it
-    filled loses nothing; the sensors open it again if they see it empty."""
+    Why: a site nobody can reach cannot be filled, so believing it filled loses nothing,
+    while believing it open keeps a loaded agent holding its brick for a site it can
+    never reach. The sensors cannot show such a site filled when its brick hides behind
+    another (deep in a one-cell slot, the brick in front hides it), so the map keeps it
+    open, walled in (three loaded agents wandered for it for 6,000 ticks in gen-pocket
+    153). The sensors open it again if they see it empty."""
     if not open_sites.any():
         return np.zeros_like(open_sites)
-    # No wall, food or water lies on a site: such a mark is a disc mapped a cell off.
+    # No layout puts a wall, food or water on a drop site (nor does the world add a disc
+    # there unless forced), so such a mark on an open site is a disc mapped a cell off:
+    # counted, it would wall in the sites behind it.
     walls = walls & ~open_sites
     walls[centre] = False           # the agent's own cell: it may stand on a brick it dropped
     ways_in = border(walls)
@@ -143,13 +148,15 @@ def pocket_beside(blocked: np.ndarray, cell: tuple[int, int]) -> np.ndarray:
     is blocked too, with every cell joined to them: the pocket a brick on `cell` closes.
     The rest of the world is what reaches the grid's border; on a map that holds the whole
     world (its border all outside the world's edge, so blocked) it is the largest region
-    beside `cell`.
+    beside `cell`: a guess that the outside is bigger than what one brick closes off (a
+    ring's inside), which a ring holding most of its world would fool.
 
-    Why: a dropped brick lets the agent that dropped it pass until the agent is off it, and
-    then holds like any other. An agent that moved off its brick into the cell a ring of
-    bricks encloses (the centre of nested_squares' inner ring) was shut in for good, 31 of
-    32 sites built, while its world was being killed and restored. Cells never seen count
-    as unblocked: only a pocket walled in on the map is one."""
+    Why: never shut oneself in. A dropped brick lets the agent that dropped it pass until
+    the agent is off it, and then holds like any other, so the side the agent steps off
+    to is the side it stays on, and cells that brick closes off are a prison (as the
+    centre of nested_squares' inner ring was, 31 of 32 sites built, for an agent whose
+    world was being killed and restored). Cells never seen count as unblocked: only a
+    pocket walled in on the map is one."""
     walls = blocked.copy()
     walls[cell] = True
     free = ~walls
