@@ -3,6 +3,7 @@
     python3 -m experiments.ablation --quick             # three small layouts: ablation_quick.md
     python3 -m experiments.ablation --sample 60 --jobs 2  # the 60-layout table: ablation.md
     python3 -m experiments.ablation --cluster tcp://HOST:8786   # on a Dask cluster (experiments/runner.py)
+    python3 -m experiments.ablation --sample 60 --resume  # go on with an interrupted run (same options)
 
 Each layout of a sample of the generated suite (every `--every`-th file, so every family
 and size comes in) is built in process (`conag.sim`, goal sequencing on) by several
@@ -17,6 +18,11 @@ Per agent the table gives the layouts completed, the median ticks of the complet
 and the median distance over the lower bound (`experiments.replay.lower_bound`, as in the
 generalisation table). A run stops as stalled after `--stall` ticks with no site filled
 (or the cells per agent on a large world), as in `experiments.generalisation`.
+
+Each finished run is appended to a journal next to the results (`ablation.partial.jsonl`,
+`experiments/journal.py`), removed when the table is written. `--resume` keeps the runs an
+interrupted invocation with the same `--out` finished for the same layout, agent, stall
+limit and code, and runs only the others: the 60-layout table takes hours.
 """
 
 from __future__ import annotations
@@ -25,12 +31,15 @@ import argparse
 import json
 import statistics
 import sys
+import time
+from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from agent_runtime.config import ADDITIONS, OFF_BY_DEFAULT, AgentConfig
 from experiments import runner
 from experiments.generalisation import DEFAULT_STALL, LAYOUTS, distance_bound, family_of, materialise, stall_limit
+from experiments.journal import Journal, code_version
 from world_server.scenario import parse_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -54,6 +63,7 @@ class Run:
     ticks: int
     distance: float
     bound: float
+    seconds: float = 0.0   # the run's wall time on its worker (absent from runs made before it was kept)
 
 
 def variants() -> dict[str, AgentConfig]:
@@ -73,13 +83,59 @@ def job_of(layout: str, agent: str, stall: int) -> Job:
 def run_one(job: Job) -> Run:
     from conag import sim
 
+    began = time.perf_counter()
     sc = parse_scenario(job.text, job.layout)
     run = sim.start(sc, cfg=variants()[job.agent])
     starts = [tuple(int(v) for v in cell[::-1]) for cell in sc.to_cell(run.world.agent_poses()[:, :2])]
     result = run.run(sc.max_ticks, stall_ticks=stall_limit(sc, job.stall))
     status = run.world.status()
     return Run(layout=job.layout, family=family_of(sc), agent=job.agent, completed=result.completed,
-               ticks=result.ticks, distance=float(sum(status.agent_distance)), bound=distance_bound(sc, starts))
+               ticks=result.ticks, distance=float(sum(status.agent_distance)), bound=distance_bound(sc, starts),
+               seconds=time.perf_counter() - began)
+
+
+def job_key(job: Job, code: str) -> list:
+    """A run's journal key: which run, under which settings and code."""
+    return [job.layout, job.agent, job.stall, code]
+
+
+def resumed(journal: Journal, jobs: list[Job], code: str) -> tuple[dict[Job, Run], list[Job]]:
+    """(the runs the journal already holds for `jobs`, the jobs still to run)."""
+    found = journal.results()
+    earlier = {j: Run(**found[k]) for j in jobs if (k := tuple(job_key(j, code))) in found}
+    return earlier, [j for j in jobs if j not in earlier]
+
+
+def remaining(elapsed: float, finished: int, left: int) -> float:
+    """Seconds the `left` runs should take at this invocation's pace so far (`finished` in
+    `elapsed`); the pace counts every worker, so it needs no worker count."""
+    return elapsed / finished * left if finished else float("nan")
+
+
+def hms(seconds: float) -> str:
+    """1:02:03 for a duration; "?" before there is a pace to go by."""
+    if seconds != seconds:   # nan
+        return "?"
+    s = round(seconds)
+    return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}"
+
+
+def sweep(jobs: list[Job], execute: Callable[[list[Job]], Iterable[runner.Done]], journal: Journal,
+          code: str, clock: Callable[[], float] = time.monotonic) -> list[Run]:
+    """Every run of `jobs` (in their order), those the journal holds taken from it, the
+    others by `execute` (each to the journal as it finishes), with progress on stderr."""
+    done, todo = resumed(journal, jobs, code)
+    if done:
+        print(f"resuming: {len(done)} of {len(jobs)} runs already done ({journal.path})", file=sys.stderr, flush=True)
+    began = clock()
+    for k, d in enumerate(execute(todo), 1):
+        r = done[d.job] = d.result
+        journal.append(job_key(d.job, code), asdict(r))
+        elapsed = clock() - began
+        print(f"[{len(done)}/{len(jobs)} {hms(elapsed)} elapsed, ~{hms(remaining(elapsed, k, len(todo) - k))} left] "
+              f"{r.layout} {r.agent}: {'complete' if r.completed else 'not complete'} in {r.ticks} ticks "
+              f"({r.seconds:.0f} s, {d.worker})", file=sys.stderr, flush=True)
+    return [done[j] for j in jobs]
 
 
 def table(runs: list[Run]) -> str:
@@ -108,6 +164,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--agents", help="only these agents, comma separated (default: every one)")
     ap.add_argument("--out", type=Path, default=ROOT / "experiments",
                     help="folder for the json and md (ablation_quick.* with --quick, else ablation.*)")
+    ap.add_argument("--resume", action="store_true",
+                    help="keep the runs an interrupted invocation with the same --out finished "
+                         "(its journal there, ablation.partial.jsonl)")
     args = ap.parse_args(argv)
     names = sorted(p.name for p in materialise())
     layouts = list(QUICK) if args.quick else names[::max(len(names) // args.sample, 1)][:args.sample]
@@ -116,21 +175,19 @@ def main(argv: list[str] | None = None) -> int:
     if unknown:
         ap.error(f"unknown agent(s) {', '.join(unknown)}; known: {', '.join(variants())}")
     jobs = [job_of(layout, agent, args.stall) for layout in layouts for agent in agents]
-    done: dict[Job, Run] = {}
+    stem = "ablation_quick" if args.quick else "ablation"
+    args.out.mkdir(parents=True, exist_ok=True)
+    journal = Journal(args.out / f"{stem}.partial.jsonl", resume=args.resume)
+    where = runner.where_of(args, args.jobs)
     try:
-        for k, d in enumerate(runner.run(run_one, jobs, runner.where_of(args, args.jobs)), 1):
-            r = done[d.job] = d.result
-            print(f"[{k}/{len(jobs)}] {r.layout} {r.agent}: {'complete' if r.completed else 'not complete'} "
-                  f"in {r.ticks} ticks ({d.worker})", file=sys.stderr, flush=True)
+        runs = sweep(jobs, lambda todo: runner.run(run_one, todo, where), journal, code_version())
     except runner.ClusterError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    runs = [done[j] for j in jobs]
-    args.out.mkdir(parents=True, exist_ok=True)
-    stem = "ablation_quick" if args.quick else "ablation"
     (args.out / f"{stem}.json").write_text(json.dumps([asdict(r) for r in runs], indent=1) + "\n", encoding="utf-8")
     text = table(runs)
     (args.out / f"{stem}.md").write_text(text + "\n", encoding="utf-8")
+    journal.remove()
     print(text)
     return 0
 

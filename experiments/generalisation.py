@@ -36,7 +36,6 @@ import argparse
 import json
 import os
 import re
-import subprocess
 import sys
 import tempfile
 import time
@@ -49,7 +48,7 @@ import numpy as np
 from agent_runtime.config import AgentConfig
 from conag import sim
 from experiments import runner
-from experiments.journal import Journal
+from experiments.journal import Journal, code_version
 from experiments.report import RESULTS_DOC, write_section
 from world_server import suite
 from world_server.scenario import Scenario, load_scenario, parse_scenario
@@ -82,7 +81,7 @@ class Job:
     layout: str        # file name under LAYOUTS (or a path for --only)
     mode: str
     stall: int
-    code: str = ""     # the code version the run is for (see _code_version)
+    code: str = ""     # the code version the run is for (see journal.code_version)
     text: str = field(default="", repr=False)   # the layout file's text: a task needs no file of the suite
 
 
@@ -226,25 +225,6 @@ def how_it_ended(o) -> str:
 
 def _job_key(job: Job) -> list:
     return [job.layout, job.mode, job.stall, job.code]
-
-
-_CODE_DIRS = ("agent_runtime", "world_server", "conag/sim")   # what a run's outcome depends on
-
-
-def _code_version() -> str:
-    """The git trees of the code a run depends on, and whether it has uncommitted changes
-    ("" outside a git checkout): a journalled run counts on resuming only for the same code
-    (a commit elsewhere, the docs, changes nothing)."""
-    try:
-        trees = subprocess.run(["git", "rev-parse", *(f"HEAD:{d}" for d in _CODE_DIRS)], cwd=ROOT,
-                               capture_output=True, text=True, timeout=10, check=False)
-        dirty = subprocess.run(["git", "status", "--porcelain", "--", *_CODE_DIRS], cwd=ROOT,
-                               capture_output=True, text=True, timeout=10, check=False)
-    except (OSError, subprocess.SubprocessError):
-        return ""
-    if trees.returncode != 0:
-        return ""
-    return " ".join(h[:12] for h in trees.stdout.split()) + (" +changes" if dirty.stdout.strip() else "")
 
 
 def resumed(journal: Journal, jobs: list[Job]) -> tuple[list[Outcome], list[Job]]:
@@ -557,7 +537,7 @@ def sweep(ap: argparse.ArgumentParser, args: argparse.Namespace, files: list[str
     for old in pictures.glob("*.png") if pictures.exists() and fresh else ():
         old.unlink()
     journal = Journal(out / JOURNAL, resume=args.resume)
-    code = _code_version()
+    code = code_version()
     earlier, jobs = resumed(journal, [job_of(name, mode, args.stall, code) for name in names for mode, _ in MODES
                                       if args.mode in (None, mode)])
     earlier = [in_folder(o, pictures) for o in earlier]

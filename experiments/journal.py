@@ -1,19 +1,25 @@
 """A run journal: a long benchmark's finished runs, one JSON line each, so an interrupted
 run (a closed laptop, a killed session, the end of a CI slot) can be resumed without
-running again what it already finished (`experiments/generalisation.py --resume`).
+running again what it already finished (`experiments.generalisation --resume`,
+`experiments.ablation --resume`).
 
 Each line is {"run": <when that invocation began>, "at": <its seconds so far>, "key": ...,
 "result": ...}; `key` says which job it was and under which settings (a line whose settings
-differ from the resumed run's is not used). Lines are appended and flushed one at a time:
-a kill loses at most the line being written, and a torn last line is dropped on resuming.
+differ from the resumed run's is not used; `code_version` is the code part of a key). Lines
+are appended and flushed one at a time: a kill loses at most the line being written, and a
+torn last line is dropped on resuming.
 """
 
 from __future__ import annotations
 
 import json
+import subprocess
 import time
 from pathlib import Path
 from typing import Any
+
+ROOT = Path(__file__).resolve().parent.parent
+CODE_DIRS = ("agent_runtime", "world_server", "conag/sim")   # what a run's outcome depends on
 
 
 class Journal:
@@ -65,3 +71,19 @@ def _read(path: Path) -> list[dict[str, Any]]:
         if isinstance(e, dict) and {"run", "at", "key", "result"} <= e.keys():
             entries.append(e)
     return entries
+
+
+def code_version(root: Path = ROOT) -> str:
+    """The git trees of the code a run depends on, and whether it has uncommitted changes
+    ("" outside a git checkout): a journalled run counts on resuming only for the same code
+    (a commit elsewhere, the docs, changes nothing)."""
+    try:
+        trees = subprocess.run(["git", "rev-parse", *(f"HEAD:{d}" for d in CODE_DIRS)], cwd=root,
+                               capture_output=True, text=True, timeout=10, check=False)
+        dirty = subprocess.run(["git", "status", "--porcelain", "--", *CODE_DIRS], cwd=root,
+                               capture_output=True, text=True, timeout=10, check=False)
+    except (OSError, subprocess.SubprocessError):
+        return ""
+    if trees.returncode != 0:
+        return ""
+    return " ".join(h[:12] for h in trees.stdout.split()) + (" +changes" if dirty.stdout.strip() else "")

@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from experiments import generalisation as gen
+from experiments.journal import code_version
 from world_server import suite
 from world_server.buildability import check_buildable
 from world_server.generator import GENERATOR_VERSION
@@ -147,7 +148,7 @@ def test_an_interrupted_run_resumes_without_running_again_what_it_finished(tmp_p
     # As if the run had been killed after its goal-sequencing run: only that one is in the journal.
     first = next(r for r in rows if r["mode"] == "goal sequencing")
     (tmp_path / "cut").mkdir()
-    key = [layout, "goal sequencing", gen.DEFAULT_STALL, gen._code_version()]
+    key = [layout, "goal sequencing", gen.DEFAULT_STALL, code_version()]
     (tmp_path / "cut" / gen.JOURNAL).write_text(json.dumps({"run": 1.0, "at": 5.0, "key": key, "result": first}) + "\n")
     resumed = run(tmp_path / "cut", "--resume")
     assert resumed.returncode == 0, resumed.stderr[-2000:]
