@@ -159,6 +159,11 @@ class Brain:
         self._enclosed: tuple[bytes, np.ndarray | None] | None = None  # (inputs, result) of the last check
         self._matching: tuple[bytes, Matching] | None = None  # (inputs, result) of the last matching
         self._inputs: tuple[np.ndarray, NavInputs] | None = None  # (the step's marks, `nav_inputs` of them)
+        # The last inputs made: handed back by `nav_inputs` while unchanged, so what is made
+        # from them alone is kept by identity (`_sequenced_goals`, the NMs' obstacles).
+        self._last_inputs: NavInputs | None = None
+        self._sequenced_kept: tuple[NavInputs, np.ndarray, np.ndarray] | None = None
+        self._obstacles_kept: tuple[np.ndarray, NavInputs, np.ndarray, tuple[np.ndarray, np.ndarray]] | None = None
         self._empty: np.ndarray | None = None   # an empty map mask, read-only
         self._supply_kept: tuple[tuple[int, int] | None, np.ndarray, np.ndarray] | None = None  # `_supply`
         self._taken_from: np.ndarray | None = None  # (dx, dy) cells to where the held brick was taken
@@ -367,14 +372,7 @@ class Brain:
         # and turned back each time the sites came onto the map, for ever, a cell's step
         # either side of the map's edge (gen-polyomino 134). Any free brick blocks nothing then.
         if sequenced and self.cfg.goal_sequencing and i.any_open:
-            matching = self.matching(supply_bricks, config_goals, obstacles, i.closed)
-            config_goals, brick_goals = select_goals(matching, brick_goals, config_goals)
-            held = open_sites & ~config_goals
-            if self.cfg.mouth_side and np.count_nonzero(held):
-                # Closed sites are passable for this: the depth of a site behind one must
-                # stay finite, or every site would count as "no deeper" than its neighbour.
-                depth = self.fields.distance(supply_bricks, obstacles, "depth")
-                config_goals &= ~_mouth_side(held, config_goals, depth)
+            config_goals, brick_goals = self._sequenced_goals(i)
         if self.cfg.goal_sequencing and self.cfg.seal_guard:
             # Also when sequencing gives way (plan's fallback): no site that seals another.
             unsafe = self.seals.unsafe(config_goals, open_sites, obstacles, supply_bricks, self._tick)
@@ -386,8 +384,34 @@ class Brain:
                 config_goals = self._yield(config_goals)
         # Bricks that are not goals (the structure's, and with sequencing the unmatched free
         # ones) are in the way: a path must not lead through one to a matched brick beyond.
-        config_obstacles, brick_obstacles = nm_obstacles(i.in_the_way, m[BRICK], brick_goals, self.centre)
+        kept = self._obstacles_kept
+        if kept is None or kept[0] is not m or kept[1] is not i or kept[2] is not brick_goals:
+            both = nm_obstacles(i.in_the_way, m[BRICK], brick_goals, self.centre)
+            for mask in both:
+                mask.setflags(write=False)
+            self._obstacles_kept = kept = (m, i, brick_goals, both)
+        config_obstacles, brick_obstacles = kept[3]
         return (config_goals, config_obstacles), (brick_goals, brick_obstacles)
+
+    def _sequenced_goals(self, i: NavInputs) -> tuple[np.ndarray, np.ndarray]:
+        """(site goals, brick goals) with goal sequencing (§6.2): the Matching grid's, less
+        the sites on the mouth side of a held-open path (`mouth_side`). A function of the
+        step's `NavInputs` alone, so kept (read-only) while they are the same object."""
+        kept = self._sequenced_kept
+        if kept is not None and kept[0] is i:
+            return kept[1], kept[2]
+        matching = self.matching(i.supply_bricks, i.config_goals, i.obstacles, i.closed)
+        config_goals, brick_goals = select_goals(matching, i.brick_goals, i.config_goals)
+        held = i.config_goals & ~config_goals
+        if self.cfg.mouth_side and np.count_nonzero(held):
+            # Closed sites are passable for this: the depth of a site behind one must
+            # stay finite, or every site would count as "no deeper" than its neighbour.
+            depth = self.fields.distance(i.supply_bricks, i.obstacles, "depth")
+            config_goals &= ~_mouth_side(held, config_goals, depth)
+        config_goals.setflags(write=False)
+        brick_goals.setflags(write=False)
+        self._sequenced_kept = (i, config_goals, brick_goals)
+        return config_goals, brick_goals
 
     def _yield(self, goals: np.ndarray) -> np.ndarray:
         """`goals` less those another agent in sight takes first (`claims`), unless that
@@ -404,8 +428,10 @@ class Brain:
         """`nav_inputs` of the marks `m`, made once per step (`m` is the step's own array)."""
         if self._inputs is None or self._inputs[0] is not m:
             extra = self._supply() if self.cfg.goal_sequencing and self.cfg.supply_beyond else self._no_supply()
-            self._inputs = (m, nav_inputs(m, self._recalled, extra, self.maps.clear_age, self.cfg.site_memory,
-                                          self.cfg.agents_as_obstacles, self.cfg.closed_sites, self.centre))
+            self._last_inputs = nav_inputs(m, self._recalled, extra, self.maps.clear_age, self.cfg.site_memory,
+                                           self.cfg.agents_as_obstacles, self.cfg.closed_sites, self.centre,
+                                           self._last_inputs)
+            self._inputs = (m, self._last_inputs)
         return self._inputs[1]
 
     def _no_supply(self) -> np.ndarray:

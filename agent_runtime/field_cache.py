@@ -10,7 +10,8 @@ is the field the kernel would compute again, bit for bit: the cache changes no d
 may also name the `slot` it asks from (the configuration NM, the brick NM, ...): the
 slot's last key is compared first, which spares hashing the key (several microseconds at
 81 x 81 and more for a seeded field) on the most common hit, the same inputs as a tick
-before.
+before; and when the inputs are the very arrays the slot was last asked with, and
+read-only (nothing can have changed them), not even the key is made.
 
 Fields handed out are read-only: one array may be returned to several callers. A field
 with no goal is all inf and needs no kernel (the kernel's answer too).
@@ -39,13 +40,20 @@ class FieldCache:
         self.capacity = capacity
         self._fields: OrderedDict[bytes, np.ndarray] = OrderedDict()
         self._nowhere: dict[tuple[int, ...], np.ndarray] = {}  # the all-inf field per shape
-        self._slots: dict[str, tuple[bytes, np.ndarray]] = {}  # slot -> (its last key, field)
+        # slot -> (its last key, field, and the goals and obstacles it was asked with)
+        self._slots: dict[str, tuple[bytes, np.ndarray, np.ndarray, np.ndarray]] = {}
         self._work: FieldWork | None = None   # the kernels' buffers, for the last shape asked
         self.hits = 0
         self.misses = 0
 
     def distance(self, goals: np.ndarray, obstacles: np.ndarray, slot: str | None = None) -> np.ndarray:
         """`spreading.distance_field(goals, obstacles)`, read-only; `slot`: see the module."""
+        if slot is not None:
+            last = self._slots.get(slot)
+            if last is not None and last[2] is goals and last[3] is obstacles and _frozen(goals) and _frozen(obstacles):
+                self.hits += 1
+                return last[1]
+        asked = (goals, obstacles)
         goals = np.ascontiguousarray(goals, dtype=np.bool_)
         obstacles = np.ascontiguousarray(obstacles, dtype=np.bool_)
         if goals.shape != obstacles.shape:  # let the kernel's own check say what is wrong
@@ -53,7 +61,7 @@ class FieldCache:
         if not np.count_nonzero(goals):
             return self._all_inf(goals.shape)
         key = b"d" + _shape_bytes(goals.shape) + goals.tobytes() + obstacles.tobytes()
-        return self._lookup(key, lambda: distance_field(goals, obstacles, self._work_for(goals.shape)), slot)
+        return self._lookup(key, lambda: distance_field(goals, obstacles, self._work_for(goals.shape)), slot, asked)
 
     def seeded(self, seed: np.ndarray, obstacles: np.ndarray, slot: str | None = None) -> np.ndarray:
         """`spreading.seeded_distance_field(seed, obstacles)`, read-only; `slot`: see the module."""
@@ -62,9 +70,10 @@ class FieldCache:
         if seed.shape != obstacles.shape:
             return seeded_distance_field(seed, obstacles)
         key = b"s" + _shape_bytes(seed.shape) + seed.tobytes() + obstacles.tobytes()
-        return self._lookup(key, lambda: seeded_distance_field(seed, obstacles, self._work_for(seed.shape)), slot)
+        return self._lookup(key, lambda: seeded_distance_field(seed, obstacles, self._work_for(seed.shape)), slot,
+                            (_NOT_ASKED, _NOT_ASKED))
 
-    def _lookup(self, key: bytes, compute, slot: str | None) -> np.ndarray:
+    def _lookup(self, key: bytes, compute, slot: str | None, asked: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
         if slot is not None:
             last = self._slots.get(slot)
             if last is not None and last[0] == key:   # compared, not hashed
@@ -82,7 +91,7 @@ class FieldCache:
             if len(self._fields) > self.capacity:
                 self._fields.popitem(last=False)
         if slot is not None:
-            self._slots[slot] = (key, field)
+            self._slots[slot] = (key, field, *asked)
         return field
 
     def _work_for(self, shape: tuple[int, ...]) -> FieldWork | None:
@@ -98,6 +107,16 @@ class FieldCache:
             field = self._nowhere[shape] = np.full(shape, np.inf)
             field.setflags(write=False)
         return field
+
+
+# Stands for the inputs of a seeded field in a slot: never the goals of a `distance` call.
+_NOT_ASKED = np.zeros(0, bool)
+
+
+def _frozen(grid: np.ndarray) -> bool:
+    """Whether nothing can change `grid` any more: read-only, and so is what it views."""
+    base = grid.base
+    return not grid.flags.writeable and (not isinstance(base, np.ndarray) or not base.flags.writeable)
 
 
 def _shape_bytes(shape: tuple[int, ...]) -> bytes:
