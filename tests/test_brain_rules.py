@@ -19,7 +19,7 @@ from tests.conftest import make
 from world_server.discs import BRICK_DISC
 
 SECTORS = 16
-EAST, WEST = 0, 8   # sectors whose centre angles (11.25 and 191.25 degrees) lie nearest due east and west
+EAST, WEST = 0, 8   # sectors whose centre angles (11.25 and 191.25 degrees) lie half a sector off due east and west
 
 
 def _welcome(site_xs=(), site_ys=(), x: float = 50.5, y: float = 50.5) -> Welcome:
