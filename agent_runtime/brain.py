@@ -81,9 +81,11 @@ class Plans:
     brick_obstacles: np.ndarray | None = None
 
 
-# Behaviours during which standing still is the point. Not approaching food or water: a
-# source seen a cell off now and then flips the way to it, and an agent turned back and
-# forth beside a gap in a wall for 9,000 ticks (gen-letter 109).
+# Behaviours during which standing still is the point: eating and drinking only. Every
+# other behaviour means to move, so no headway during it is a deadlock whatever caused it,
+# and `_unstick` breaks it: approaching food or water too (as a source seen a cell off now
+# and then flips the way to it: an agent turned back and forth beside a gap in a wall for
+# 9,000 ticks, gen-letter 109).
 _STILL_IS_FINE = frozenset({"eat", "drink"})
 # The field cache's slots (`field_cache`) of the configuration and brick NMs, of their
 # plain fallbacks and of the needs' fields (by ESM layer).
@@ -142,10 +144,11 @@ class Brain:
         self.centre = self.cfg.map_size // 2
         self.seals = SealGuard(self.maps, self.far, self.centre)
         # Food and water remembered beyond the map that came back onto it and are not seen
-        # again yet (a sector sees only the nearest disc of a wall): in the way of paths,
-        # never a need's goal. Without them a water wall longer than the map was open ground
-        # again each time it came back, and the agents walked to it, along it and back
-        # (gen-multi 025).
+        # again yet (a sector sees only the nearest disc of a wall). What was seen stays
+        # until seen otherwise, so they are in the way of paths; but a need acts only on
+        # what is seen (a disc remembered may be gone), so they are never a need's goal.
+        # Forgotten, a water wall longer than the map is open ground again each time it
+        # comes back, and agents walk to it, along it and back (as in gen-multi 025).
         self._recalled = np.zeros((self.cfg.map_size,) * 2, bool)
         self._attach_tick = welcome.tick
         self.plans: Plans | None = None
@@ -322,11 +325,13 @@ class Brain:
         """The cell the held brick was taken from (`cell`, None when not holding), as a
         mask; when it lies beyond the map, the border cell towards it.
 
-        While an agent carries a brick it may know no free brick at all (the last one in
-        view is in its hand, or another agent took it). The Matching grid then has no
-        source, protects no path, and the nearest site would be filled even if it walls
-        off another (Fig. 18 with several agents). So where the brick came from stands for
-        the supply: more bricks are likely there, and future bricks will come that way.
+        The matching must protect the ways from the supply even when no free brick is in
+        view, and where the held brick came from is the best-known supply: more bricks are
+        likely there, and future bricks will come that way. While an agent carries a brick
+        it may know no free brick at all (the last one in view is in its hand, or another
+        agent took it); without a source the Matching grid protects no path, and the
+        nearest site is filled even where it walls off another (as in Fig. 18 with several
+        agents).
         """
         mask = np.zeros((self.cfg.map_size,) * 2, bool)
         if cell is not None:
@@ -360,17 +365,20 @@ class Brain:
         agents in sight are obstacles on both maps.
         """
         m = self.layers()
-        # Fixed obstacles (walls, the world's edge) are in the way exactly as food and water
-        # are; other agents in sight too (`agents_as_obstacles`): two agents heading opposite
-        # ways down a one-cell corridor would otherwise meet, back off and meet again for ever.
+        # Plan round whatever is in the way now: fixed obstacles (walls, the world's edge)
+        # exactly as food and water, and other agents in sight (`agents_as_obstacles`), since
+        # a plan through a body leads into it (as two agents heading opposite ways down a
+        # one-cell corridor meet, back off and meet again, for ever).
         i = self._nav_inputs(m)
         config_goals, brick_goals, obstacles = i.config_goals, i.brick_goals, i.obstacles
         open_sites = config_goals
         supply_bricks = i.supply_bricks
-        # With no open site on the map the Matching grid pairs nothing and would leave no
-        # brick goal at all: the brick NM then followed a remembered brick beyond the border
-        # and turned back each time the sites came onto the map, for ever, a cell's step
-        # either side of the map's edge (gen-polyomino 134). Any free brick blocks nothing then.
+        # Sequencing narrows the goals only where it has pairs to protect: with no open site
+        # on the map the Matching grid pairs nothing, and taking any free brick blocks no
+        # one's path, so every free brick stays a goal. Left to the matching, none would be:
+        # the brick NM would follow a remembered brick beyond the border and turn back each
+        # time the sites came onto the map, a cell's step either side of the map's edge,
+        # for ever (as in gen-polyomino 134).
         if sequenced and self.cfg.goal_sequencing and i.any_open:
             config_goals, brick_goals = self._sequenced_goals(i)
         if self.cfg.goal_sequencing and self.cfg.seal_guard:
@@ -486,11 +494,14 @@ class Brain:
         """Whether sequencing leaves the brick NM no brick to go to: none reachable, or
         none on the map while free bricks lie on it.
 
-        The second case is a matching that only holds the map: with the way from these
-        bricks to the sites leading round beyond the border, it pairs none of them, and the
-        brick NM followed remembered bricks far away, until a step brought a site back onto
-        the map, the bricks here were matched again and it turned back, a cell's step either
-        side of the map's edge (gen-nested_rings 11260025). Any free brick blocks nothing."""
+        The second case: the matching holds only the map, so a free brick on it that it
+        pairs with no site tells where the map ends, not that the brick is not needed; and
+        taking a free brick blocks no one's path. So the bricks in view are goals before
+        remembered ones far off. Left to the matching, a way from these bricks to the sites
+        that leads round beyond the border pairs none of them; the brick NM follows bricks
+        far away until a step brings a site back onto the map, the bricks here are paired
+        again and it turns back, a cell's step either side of the map's edge (as in
+        gen-nested_rings 11260025)."""
         if not np.isfinite(field[self.centre, self.centre]):
             return True
         return not np.count_nonzero(goals) and bool(np.count_nonzero(self._nav_inputs(self.layers()).brick_goals))
@@ -619,12 +630,14 @@ class Brain:
         """Odometry (cells) of a brick the body overlaps, if one of the brick readings (cells,
         one per sector) shows one.
 
-        Only the brick an agent dropped itself lets its body pass, so this is one it dropped
-        before this brain knew: a process started again, or a world resumed from a
-        checkpoint, while the body was still on it. A lone agent restarted in that moment
-        stepped off into nested_squares' inner ring and was shut in (`python3 -m faults.chaos`, 30/32).
-        The margin keeps a brick merely touching (the physics lets bodies sink in a
-        little) from counting."""
+        Never shut oneself in, whenever the brain started: what the body did before, a new
+        brain infers from what it senses. Only the brick an agent dropped itself lets its
+        body pass, so this is one it dropped before this brain knew (a process started
+        again, or a world resumed from a checkpoint, while the body was still on it), and
+        leaving it is guarded as after any drop. As in nested_squares under `python3 -m
+        faults.chaos`: a lone agent restarted in that moment stepped off into the inner
+        ring and was shut in, at 30/32. The margin keeps a brick merely touching (the
+        physics lets bodies sink in a little) from counting."""
         if _nearest_reading(bricks) >= self._release - _OVERLAP_MARGIN:
             return None
         return self._odo + self._reading_offset(bricks)
@@ -748,10 +761,11 @@ class Brain:
         if motor == "avoid_red":
             if (self.cfg.agents_in_the_way and _nearest_reading(ranges[_CH["agent"]]) < self.sensor_range
                     and self._agents_in_the_way(plans)):
-                # Only other agents stand between the held brick and a site (a corridor one
-                # body wide): back away from the nearest, so it can come out. Four agents
-                # queued in a 31-cell corridor otherwise held it shut for good, the one
-                # inside unable to leave and the rest unable to enter (gen-pocket 117).
+                # A queue in a dead end clears only from its mouth: when only other agents
+                # keep a site out of reach (a corridor one body wide), back away from the
+                # nearest, so it can come out. Else the one inside cannot leave and the rest
+                # cannot enter, for good (as four agents queued in a 31-cell corridor of
+                # gen-pocket 117).
                 return steering.away_from(*self._reading_offset(ranges[_CH["agent"]]), frame.heading, cruise)
             if _nearest_reading(ranges[_CH["brick"]]) < self.sensor_range:
                 return steering.away_from(*self._reading_offset(ranges[_CH["brick"]]), frame.heading, cruise)
