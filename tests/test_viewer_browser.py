@@ -149,7 +149,7 @@ def test_the_recording_page_scrubs_the_timeline(tmp_path, browser):
     views = [view(0, 0.5, filled=False), view(50, 3.5, filled=False), view(100, 5.25, filled=True)]
     with McapRecorder(out) as rec:
         for v in views:
-            rec.add("conag/v5/world/w0/view", encode(v), v.tick)
+            rec.add("conag/v6/world/w0/view", encode(v), v.tick)
     from conag.commands.view import load_timeline
 
     with ViewerServer(load_timeline(str(out))).serve_in_thread() as server:
