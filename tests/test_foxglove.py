@@ -79,9 +79,25 @@ def entities(update) -> dict[str, object]:
     return {e.id: e for e in update.entities}
 
 
+def cue_marks(entity, kind: str) -> list[tuple[float, float]]:
+    """Where a cue entity's marks are: the centre of each cross (two bars) or diamond (four)."""
+    per = 2 if kind == "site" else 4
+    cubes = list(entity.cubes)
+    assert len(cubes) % per == 0
+    groups = [cubes[i:i + per] for i in range(0, len(cubes), per)]
+    return sorted((round(sum(c.pose.position.x for c in g) / per, 6), round(sum(c.pose.position.y for c in g) / per, 6))
+                  for g in groups)
+
+
 def assert_scene_matches(update, v: WorldView) -> None:
-    """The SceneUpdate shows what the WorldView says: each disc, site and body where it is."""
+    """The SceneUpdate shows what the WorldView says: each disc, site, cue and body where it is."""
     es = entities(update)
+    for kind in ("site", "supply"):
+        want = sorted((round(x, 6), round(y, 6)) for x, y, k in zip(v.cue_xs, v.cue_ys, v.cue_kinds) if k == kind)
+        if want:
+            assert cue_marks(es[f"cues/{kind}"], kind) == want, kind
+        else:
+            assert f"cues/{kind}" not in es, kind
     for kind in ("food", "water", "brick"):
         got = sorted((round(c.pose.position.x, 6), round(c.pose.position.y, 6)) for c in es[f"discs/{kind}"].cylinders)
         want = sorted((round(x, 6), round(y, 6)) for x, y, k in zip(v.disc_xs, v.disc_ys, v.disc_kinds) if k == kind)
@@ -193,6 +209,32 @@ def test_a_scene_made_from_kept_primitives_is_the_scene_made_afresh():
     from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
 
     assert_scene_matches(SceneUpdate.FromString(kept.scene(views[-1], 5).encode()), views[-1])
+
+def test_cues_show_as_their_own_entities_and_go_when_the_world_takes_them_off(tmp_path):
+    # A foreman's marks (docs/society.md) in a recording, read by Foxglove's own decoder: a cross
+    # per site cue and a diamond per supply cue, on the floor above the sites and under the discs,
+    # in colours of their own; a kind whose last cue goes is deleted; a world without cues has none.
+    from dataclasses import replace
+
+    out = tmp_path / "r.mcap"
+    both = replace(_view(10), cue_xs=(4.5, 8.5, 9.5), cue_ys=(5.5, 2.5, 7.5), cue_kinds=("site", "site", "supply"))
+    views = [_view(0), both, replace(_view(20), cue_xs=(8.5,), cue_ys=(2.5,), cue_kinds=("site",))]
+    with McapRecorder(out, derive=Translator().feed) as rec:
+        for i, v in enumerate(views):
+            rec.add(keys.view(W), encode(v), 1_000 + i)
+    scenes = [m for _, m in read_foxglove(out)["/world/scene"]]
+    for update, v in zip(scenes, views):
+        assert_scene_matches(update, v)
+    assert not [e for e in scenes[0].entities if e.id.startswith("cues/")]
+    es = entities(scenes[1])
+    site, supply, disc = es["cues/site"].cubes[0], es["cues/supply"].cubes[0], es["discs/brick"].cylinders[0]
+    assert (site.color.r, site.color.g, site.color.b) != (supply.color.r, supply.color.g, supply.color.b)
+    sites_top = es["sites"].cubes[0].pose.position.z + es["sites"].cubes[0].size.z / 2
+    for bar in (site, supply):
+        bottom, top = bar.pose.position.z - bar.size.z / 2, bar.pose.position.z + bar.size.z / 2
+        assert sites_top <= bottom and top < disc.size.z  # over the site squares, inside a lying disc's height
+    assert [d.id for d in scenes[2].deletions] == ["cues/supply"]
+
 
 def test_a_recording_without_foxglove_channels_has_the_bus_channels_only(tmp_path):
     out = tmp_path / "r.mcap"
