@@ -78,7 +78,7 @@ function paintScenery(p) {
 // The legend: a swatch per thing the world draws, painted once with the world's own strokes.
 const LEGEND = [["food", "food"], ["water", "water"], ["brick", "brick"], ["site", "drop site"],
                 ["filled", "filled site"], ["wall", "wall"], ["agent", "agent"],
-                ["cue_site", "site cue: drop a brick here"], ["cue_supply", "supply cue: take bricks here"]];
+                ["cue_site", "site cue: drop here"], ["cue_supply", "supply cue: take bricks"]];
 function drawLegend() {
   const box = document.getElementById("legend"), S = 16;
   for (const [item, label] of LEGEND) {
