@@ -134,6 +134,13 @@ def _view(tick: int, holding: bool = False) -> WorldView:
                      (0.7, -2.5), (holding, False), (0.5, 11.5), (0.5, 9.5))
 
 
+def _cued_view(tick: int) -> WorldView:
+    """`_view(tick)` in a world with cues: a site cue on the empty site, a supply cue beside it."""
+    from dataclasses import replace
+
+    return replace(_view(tick), cue_xs=(5.5, 9.5), cue_ys=(5.5, 7.5), cue_kinds=("site", "supply"))
+
+
 def _map(tick: int, layer: str = "brick", size: int = 5) -> AgentMap:
     return AgentMap("a1", tick, layer, size, tuple((7 * i + tick) % 128 for i in range(size * size)))
 
@@ -331,7 +338,7 @@ class FoxgloveClient:
         self.ws.close()
 
 
-def test_a_live_world_is_served_to_a_foxglove_websocket_client(bus):
+def test_a_live_world_is_served_to_a_foxglove_websocket_client(bus):  # with cues, as a society's
     from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
 
     from conag.foxglove.live import FoxgloveBridge
@@ -344,7 +351,7 @@ def test_a_live_world_is_served_to_a_foxglove_websocket_client(bus):
         tick = 0
         while not stop.wait(0.05):
             tick += 10
-            world.put(keys.view(W), encode(_view(tick)))
+            world.put(keys.view(W), encode(_cued_view(tick)))
             bridge.step()
 
     thread = threading.Thread(target=serve, daemon=True)
@@ -354,7 +361,7 @@ def test_a_live_world_is_served_to_a_foxglove_websocket_client(bus):
         client = FoxgloveClient(f"ws://127.0.0.1:{bridge.port}")
         update = SceneUpdate.FromString(client.next_message("/world/scene"))
         tick = int({m.key: m.value for m in entities(update)["sites"].metadata}["tick"])
-        assert_scene_matches(update, _view(tick))
+        assert_scene_matches(update, _cued_view(tick))  # the cues too, as their own entities
         assert client.channels["/world/scene"]["schemaName"] == "foxglove.SceneUpdate"
         assert client.channels["/world/scene"]["encoding"] == "protobuf"
         # the walls were sent before this client came: they are sent again for it
