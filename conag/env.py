@@ -11,7 +11,12 @@ and returns the frames of the next one as observations.
   index into protocol.BODY_ACTIONS}` (world units per second, radians per tick; see
   docs/protocol.md).
 * Observation, per agent: `{"ranges": 5 x sectors readings (-1: nothing), "heading":
-  radians, "odometry": the last tick's (dx, dy) on world axes, "holding": 0 or 1}`.
+  radians, "odometry": the last tick's (dx, dy) on world axes, "holding": 0 or 1}`. In a
+  world with cues (`[world] cue_reach` > 0: docs/society.md) it holds the cue readings too:
+  `"cues"`, len(CUE_KINDS) x sectors distances to the nearest uncovered cue of each kind
+  (site, then supply; -1: nothing), and `"cue_under"`, the cue under the body (0: none,
+  1 + its index in CUE_KINDS); without cues the observation is as above. The action space
+  stays the body's (protocol.BODY_ACTIONS): marking cues is a foreman's, not the env's.
 * Reward: `reward(env, agent, filled_now)`, by default the number of drop sites filled
   during the step (shared by every agent; negative when a brick leaves a site), plus,
   with `teacher=True`, the teacher's reinforcement of the agent's arm action (below).
@@ -52,7 +57,7 @@ from agent_runtime.brain import Brain
 from agent_runtime.config import AgentConfig
 from agent_runtime.world_link import WorldLink
 from protocol.bus import BusOptions, open_session
-from protocol.messages import BODY_ACTIONS, CHANNELS, Decision, SensorFrame, Welcome
+from protocol.messages import BODY_ACTIONS, CHANNELS, CUE_KINDS, Decision, SensorFrame, Welcome
 from teacher.core import Teacher
 from world_server.scenario import Scenario, load_scenario
 from world_server.server import WorldServer
@@ -128,12 +133,17 @@ class ConAgParallelEnv(ParallelEnv):
         self._sent: set[str] = set()  # agents commanded for the current tick (`command`)
         cfg = self.scenario.world
         ranges = len(CHANNELS) * cfg.sensor_sectors
-        self._obs_space = spaces.Dict({
+        self.cues = cfg.cue_reach > 0  # the world has cues: observations hold their readings
+        obs = {
             "ranges": spaces.Box(-1.0, cfg.sensor_range, (ranges,), np.float32),
             "heading": spaces.Box(-math.pi, math.pi, (1,), np.float32),
             "odometry": spaces.Box(-np.inf, np.inf, (2,), np.float32),
             "holding": spaces.Discrete(2),
-        })
+        }
+        if self.cues:
+            obs["cues"] = spaces.Box(-1.0, cfg.sensor_range, (len(CUE_KINDS) * cfg.sensor_sectors,), np.float32)
+            obs["cue_under"] = spaces.Discrete(1 + len(CUE_KINDS))
+        self._obs_space = spaces.Dict(obs)
         self._act_space = {a: spaces.Dict({
             "speed": spaces.Box(0.0, cfg.max_speed, (1,), np.float32),
             "turn": spaces.Box(-cfg.max_turn, cfg.max_turn, (1,), np.float32),
@@ -202,8 +212,12 @@ class ConAgParallelEnv(ParallelEnv):
 
     def _observe(self, agent: str) -> dict:
         f = self.frames[agent]
-        return {"ranges": np.asarray(f.ranges, np.float32), "heading": np.array([f.heading], np.float32),
-                "odometry": np.array([f.odom_dx, f.odom_dy], np.float32), "holding": int(f.holding)}
+        obs = {"ranges": np.asarray(f.ranges, np.float32), "heading": np.array([f.heading], np.float32),
+               "odometry": np.array([f.odom_dx, f.odom_dy], np.float32), "holding": int(f.holding)}
+        if self.cues:
+            obs["cues"] = np.asarray(f.cues, np.float32)
+            obs["cue_under"] = 1 + CUE_KINDS.index(f.cue_under) if f.cue_under else 0
+        return obs
 
     def _info(self, agent: str) -> dict:
         f = self.frames[agent]

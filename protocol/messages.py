@@ -19,8 +19,9 @@ from protocol.keys import check_id
 # 4: the world's epoch in Welcome and every SensorFrame (an agent refuses frames of another).
 # 5: cues (marks on the floor): SensorFrame.cues and cue_under, the mark / unmark actions and
 #    AgentCommand.mark_*, Welcome.cue_reach.
+# 6: the cues lying in the world in WorldView (cue_xs, cue_ys, cue_kinds), for viewers and recorders.
 # An incompatible change raises this and keys.ROOT together (see docs/protocol.md, Versioning).
-SCHEMA_VERSION = 5
+SCHEMA_VERSION = 6
 
 # Sensor channels, in the order of SensorFrame.ranges (channel-major).
 # Disc-like channels first (food, water, brick, obstacle: fixed `#` cells and the world's
@@ -519,7 +520,7 @@ class RunControlResult:
         _require(len(self.message) <= MAX_STRING, "RunControlResult.message too long")
 
 
-MAX_VIEW_ITEMS = 4096  # discs, and wall cells, a WorldView holds at most (a message stays under 256 KiB)
+MAX_VIEW_ITEMS = 4096  # discs, wall cells, and cues, a WorldView holds at most (a message stays under 256 KiB)
 
 
 @dataclass(frozen=True)
@@ -529,7 +530,9 @@ class WorldView:
     Published every few ticks while someone subscribes to it, and the answer to a query on
     the same key. Discs lying in the world (a carried brick is not among them: its agent's
     `agent_holding` says so), every drop site and whether it holds a brick, every body with
-    its heading, and the fixed `#` wall cells. One entry per item in each group of arrays.
+    its heading, the fixed `#` wall cells, and in a world with cues every cue lying on the
+    floor (its cell's centre and kind, covered by a disc or not; none without cues). One
+    entry per item in each group of arrays.
     """
 
     world_id: str
@@ -550,6 +553,9 @@ class WorldView:
     agent_holding: tuple[bool, ...]
     wall_xs: tuple[float, ...]
     wall_ys: tuple[float, ...]
+    cue_xs: tuple[float, ...] = ()
+    cue_ys: tuple[float, ...] = ()
+    cue_kinds: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         check_id(self.world_id, "world id")
@@ -557,16 +563,17 @@ class WorldView:
         _require(self.tick >= 0 and self.width > 0 and self.height > 0, "WorldView tick/extent out of range")
         groups = (("disc_xs", "disc_ys", "disc_kinds"), ("site_xs", "site_ys", "site_filled"),
                   ("agent_ids", "agent_alive", "agent_x", "agent_y", "agent_heading", "agent_holding"),
-                  ("wall_xs", "wall_ys"))
+                  ("wall_xs", "wall_ys"), ("cue_xs", "cue_ys", "cue_kinds"))
         for group in groups:
             n = len(getattr(self, group[0]))
             for name in group[1:]:
                 _require(len(getattr(self, name)) == n, f"WorldView.{name} must match {group[0]}")
-        _require(len(self.disc_xs) <= MAX_VIEW_ITEMS and len(self.wall_xs) <= MAX_VIEW_ITEMS,
-                 "WorldView holds too many discs or walls")
+        _require(max(len(self.disc_xs), len(self.wall_xs), len(self.cue_xs)) <= MAX_VIEW_ITEMS,
+                 "WorldView holds too many discs, walls or cues")
         _require(len(self.site_xs) <= MAX_SITES, "WorldView has too many sites")
         _require(len(self.agent_ids) <= MAX_AGENTS_IN_STATUS, "WorldView lists too many agents")
         _require(all(k in DISC_KINDS for k in self.disc_kinds), f"WorldView.disc_kinds must be among {DISC_KINDS}")
+        _require(all(k in CUE_KINDS for k in self.cue_kinds), f"WorldView.cue_kinds must be among {CUE_KINDS}")
         for a in self.agent_ids:
             check_id(a, "agent id")
 

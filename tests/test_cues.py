@@ -1,6 +1,7 @@
 """Cues in the world (issue 37 item 4; world_server/cues.py): marked and unmarked by command,
-sensed on their own channel where they lie, covered by a disc, kept by checkpoints, and
-sent over the wire."""
+sensed on their own channel where they lie, covered by a disc, kept by checkpoints, sent
+over the wire, and shown to observers: the world's WorldView carries them (every cue, covered
+or not) to the viewer's picture and the recorder."""
 
 from __future__ import annotations
 
@@ -10,8 +11,8 @@ import numpy as np
 import pytest
 
 from protocol.codec import decode, encode
-from protocol.messages import CUE_KINDS, NO_READING, AgentCommand, Perturbation, SensorFrame
-from tests.conftest import make
+from protocol.messages import CUE_KINDS, NO_READING, AgentCommand, Perturbation, SensorFrame, WorldView
+from tests.conftest import make, scenario, wait_until
 from world_server.checkpoint import restore_world, world_state
 from world_server.cues import sense_cues
 
@@ -132,3 +133,63 @@ def test_the_cue_fields_cross_the_wire():
         SensorFrame("a1", 3, 0.0, 0.0, 0.0, 2, (-1.0,) * 10, False, cues=(1.0,))
     with pytest.raises(ValueError, match="mark_kind"):
         AgentCommand("a1", 3, 1.0, 0.0, "mark", mark_kind="paint")
+
+
+# --- what observers see (WorldView, issue 37 items 5-6) ------------------------------------------
+
+def test_the_view_carries_every_cue_where_and_of_the_kind_it_lies_covered_ones_too():
+    w = make(LAYOUT, sensor_noise=0.0, cue_reach=7.0)
+    w.attach("a")
+    mark(w, 3.0, 1.0)                       # the cell (4, 1): centre (4.5, 3.5)
+    mark(w, 0.0, -2.0, "supply")            # the cell (1, 4): centre (1.5, 0.5)
+    mark(w, 6.0, 0.0)                       # the brick's cell (7, 2): covered, not sensed, still drawn
+    v = w.view()
+    assert sorted(zip(v.cue_xs, v.cue_ys, v.cue_kinds)) == [(1.5, 0.5, "supply"), (4.5, 3.5, "site"),
+                                                            (7.5, 2.5, "site")]
+    assert decode(encode(v)) == v
+    mark(w, 3.0, 1.0, action="unmark")
+    assert (4.5, 3.5) not in set(zip(w.view().cue_xs, w.view().cue_ys))
+
+
+def test_a_world_without_cues_shows_none_and_builds_none(monkeypatch):
+    w = make(LAYOUT, sensor_noise=0.0)
+    w.attach("a")
+    mark(w, 2.0, 0.0)
+    monkeypatch.setattr(type(w.cues), "arrays", lambda _self: pytest.fail("a world without cues built a cue list"))
+    v = w.view()
+    assert v.cue_xs == v.cue_ys == v.cue_kinds == ()
+
+
+def test_the_view_message_round_trips_its_cues_and_refuses_bad_ones():
+    v = WorldView("w0", 10, 9.0, 5.0, (), (), (), (), (), (), (), (), (), (), (), (), (), (),
+                  cue_xs=(4.5, 1.5), cue_ys=(3.5, 0.5), cue_kinds=("site", "supply"))
+    assert decode(encode(v)) == v
+    with pytest.raises(ValueError, match="cue_kinds"):
+        WorldView("w0", 10, 9.0, 5.0, (), (), (), (), (), (), (), (), (), (), (), (), (), (),
+                  cue_xs=(4.5,), cue_ys=(3.5,), cue_kinds=("paint",))
+    with pytest.raises(ValueError, match="cue_ys"):
+        WorldView("w0", 10, 9.0, 5.0, (), (), (), (), (), (), (), (), (), (), (), (), (), (),
+                  cue_xs=(4.5,), cue_ys=(), cue_kinds=("site",))
+
+
+def test_a_world_with_cues_publishes_them_to_a_viewer_on_the_bus(bus, start_world):
+    from agent_runtime.world_link import WorldLink
+    from conag.viewer.server import LiveFeed
+
+    start_world(scenario(LAYOUT, sensor_noise=0.0, cue_reach=6.0), view_every=5)
+    feed = LiveFeed(bus.client_session(), "w0").start()
+    link = WorldLink(bus.client_session(), "w0", "a")
+    try:
+        frame = link.next_frame(link.attach(timeout=10.0).tick - 1, timeout=10.0)
+        marks = [(3.0, 1.0, "site"), (0.0, -2.0, "supply")] + [None] * 10
+        for m in marks:
+            link.send(frame.tick, 0.0, 0.0, "mark" if m else "none", m)
+            frame = link.next_frame(frame.tick, timeout=10.0)
+            assert frame is not None
+        view = wait_until(lambda: feed.scene.view if feed.scene.view and feed.scene.view.tick >= 10 else None,
+                          what="a view after the marks")
+        assert sorted(zip(view.cue_xs, view.cue_ys, view.cue_kinds)) == [(1.5, 0.5, "supply"), (4.5, 3.5, "site")]
+        assert sorted(feed.scene.picture()["cues"]) == [[1.5, 0.5, "supply"], [4.5, 3.5, "site"]]
+    finally:
+        link.close()
+        feed.close()

@@ -48,6 +48,40 @@ def test_a_step_moves_the_body_and_filling_a_site_is_rewarded():
         env.close()
 
 
+def test_in_a_world_with_cues_each_observation_holds_the_cue_readings():
+    import dataclasses
+
+    from protocol.messages import CHANNELS, CUE_KINDS, NO_READING
+    from world_server.scenario import load_scenario
+
+    plain = ConAgParallelEnv(SCENARIOS / "quick_wall.toml")
+    sc = load_scenario(SCENARIOS / "quick_wall.toml")
+    cued = ConAgParallelEnv(dataclasses.replace(sc, world=dataclasses.replace(sc.world, cue_reach=5.0)))
+    try:
+        obs, _ = plain.reset(seed=5)
+        assert set(obs["a1"]) == set(plain.observation_space("a1").spaces) == {"ranges", "heading", "odometry",
+                                                                              "holding"}
+        obs, _ = cued.reset(seed=5)
+        sectors = sc.world.sensor_sectors
+        space = cued.observation_space("a1")
+        assert space["cues"].shape == (len(CUE_KINDS) * sectors,) and space["cue_under"].n == 1 + len(CUE_KINDS)
+        assert space.contains(obs["a1"]) and (obs["a1"]["cues"] == NO_READING).all() and obs["a1"]["cue_under"] == 0
+        # Cues put on the floor between two steps (the world waits for the commands): a supply
+        # cue under the body, a site cue two cells east of it.
+        col, row = (int(v) for v in cued.world.scenario.to_cell(cued.world.agent_poses()[:1, :2])[0])
+        cued.world.cues.place((col, row), "supply")
+        cued.world.cues.place((col + 2, row), "site")
+        obs, *_ = cued.step({"a1": {"speed": [0.0], "turn": [0.0], "action": 0}})
+        o = obs["a1"]
+        assert space.contains(o) and o["cue_under"] == 1 + CUE_KINDS.index("supply")
+        site = o["cues"][:sectors]
+        assert (site >= 0).sum() == 1 and 1.0 < site.max() < 3.0  # one site cue, about two cells away
+        assert len(o["ranges"]) == len(CHANNELS) * sectors
+    finally:
+        plain.close()
+        cued.close()
+
+
 def test_the_gymnasium_env_drives_one_agent_among_conag_agents():
     env = ConAgGymEnv(SCENARIOS / "fig6.toml", max_cycles=50)
     try:

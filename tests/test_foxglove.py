@@ -79,9 +79,25 @@ def entities(update) -> dict[str, object]:
     return {e.id: e for e in update.entities}
 
 
+def cue_marks(entity, kind: str) -> list[tuple[float, float]]:
+    """Where a cue entity's marks are: the centre of each cross (two bars) or diamond (four)."""
+    per = 2 if kind == "site" else 4
+    cubes = list(entity.cubes)
+    assert len(cubes) % per == 0
+    groups = [cubes[i:i + per] for i in range(0, len(cubes), per)]
+    return sorted((round(sum(c.pose.position.x for c in g) / per, 6), round(sum(c.pose.position.y for c in g) / per, 6))
+                  for g in groups)
+
+
 def assert_scene_matches(update, v: WorldView) -> None:
-    """The SceneUpdate shows what the WorldView says: each disc, site and body where it is."""
+    """The SceneUpdate shows what the WorldView says: each disc, site, cue and body where it is."""
     es = entities(update)
+    for kind in ("site", "supply"):
+        want = sorted((round(x, 6), round(y, 6)) for x, y, k in zip(v.cue_xs, v.cue_ys, v.cue_kinds) if k == kind)
+        if want:
+            assert cue_marks(es[f"cues/{kind}"], kind) == want, kind
+        else:
+            assert f"cues/{kind}" not in es, kind
     for kind in ("food", "water", "brick"):
         got = sorted((round(c.pose.position.x, 6), round(c.pose.position.y, 6)) for c in es[f"discs/{kind}"].cylinders)
         want = sorted((round(x, 6), round(y, 6)) for x, y, k in zip(v.disc_xs, v.disc_ys, v.disc_kinds) if k == kind)
@@ -116,6 +132,13 @@ def _view(tick: int, holding: bool = False) -> WorldView:
     return WorldView(W, tick, 12.0, 10.0, (1.5, 2.5, 7.25), (1.5, 8.5, 3.75), ("food", "brick", "water"),
                      (4.5, 5.5), (5.5, 5.5), (True, False), ("a1", "a2"), (True, False), (3.2, 9.1), (4.4, 2.0),
                      (0.7, -2.5), (holding, False), (0.5, 11.5), (0.5, 9.5))
+
+
+def _cued_view(tick: int) -> WorldView:
+    """`_view(tick)` in a world with cues: a site cue on the empty site, a supply cue beside it."""
+    from dataclasses import replace
+
+    return replace(_view(tick), cue_xs=(5.5, 9.5), cue_ys=(5.5, 7.5), cue_kinds=("site", "supply"))
 
 
 def _map(tick: int, layer: str = "brick", size: int = 5) -> AgentMap:
@@ -194,6 +217,32 @@ def test_a_scene_made_from_kept_primitives_is_the_scene_made_afresh():
 
     assert_scene_matches(SceneUpdate.FromString(kept.scene(views[-1], 5).encode()), views[-1])
 
+def test_cues_show_as_their_own_entities_and_go_when_the_world_takes_them_off(tmp_path):
+    # A foreman's marks (docs/society.md) in a recording, read by Foxglove's own decoder: a cross
+    # per site cue and a diamond per supply cue, on the floor above the sites and under the discs,
+    # in colours of their own; a kind whose last cue goes is deleted; a world without cues has none.
+    from dataclasses import replace
+
+    out = tmp_path / "r.mcap"
+    both = replace(_view(10), cue_xs=(4.5, 8.5, 9.5), cue_ys=(5.5, 2.5, 7.5), cue_kinds=("site", "site", "supply"))
+    views = [_view(0), both, replace(_view(20), cue_xs=(8.5,), cue_ys=(2.5,), cue_kinds=("site",))]
+    with McapRecorder(out, derive=Translator().feed) as rec:
+        for i, v in enumerate(views):
+            rec.add(keys.view(W), encode(v), 1_000 + i)
+    scenes = [m for _, m in read_foxglove(out)["/world/scene"]]
+    for update, v in zip(scenes, views):
+        assert_scene_matches(update, v)
+    assert not [e for e in scenes[0].entities if e.id.startswith("cues/")]
+    es = entities(scenes[1])
+    site, supply, disc = es["cues/site"].cubes[0], es["cues/supply"].cubes[0], es["discs/brick"].cylinders[0]
+    assert (site.color.r, site.color.g, site.color.b) != (supply.color.r, supply.color.g, supply.color.b)
+    sites_top = es["sites"].cubes[0].pose.position.z + es["sites"].cubes[0].size.z / 2
+    for bar in (site, supply):
+        bottom, top = bar.pose.position.z - bar.size.z / 2, bar.pose.position.z + bar.size.z / 2
+        assert sites_top <= bottom and top < disc.size.z  # over the site squares, inside a lying disc's height
+    assert [d.id for d in scenes[2].deletions] == ["cues/supply"]
+
+
 def test_a_recording_without_foxglove_channels_has_the_bus_channels_only(tmp_path):
     out = tmp_path / "r.mcap"
     with McapRecorder(out) as rec:
@@ -210,7 +259,7 @@ def test_a_map_is_decoded_fast_as_the_codec_decodes_it():
 def _raw_map(fields: list) -> bytes:
     import msgpack
 
-    return msgpack.packb({"v": 5, "t": "AgentMap", "f": fields}, use_bin_type=True)
+    return msgpack.packb({"v": 6, "t": "AgentMap", "f": fields}, use_bin_type=True)
 
 
 @pytest.mark.parametrize("data", [
@@ -289,7 +338,7 @@ class FoxgloveClient:
         self.ws.close()
 
 
-def test_a_live_world_is_served_to_a_foxglove_websocket_client(bus):
+def test_a_live_world_is_served_to_a_foxglove_websocket_client(bus):  # with cues, as a society's
     from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
 
     from conag.foxglove.live import FoxgloveBridge
@@ -302,7 +351,7 @@ def test_a_live_world_is_served_to_a_foxglove_websocket_client(bus):
         tick = 0
         while not stop.wait(0.05):
             tick += 10
-            world.put(keys.view(W), encode(_view(tick)))
+            world.put(keys.view(W), encode(_cued_view(tick)))
             bridge.step()
 
     thread = threading.Thread(target=serve, daemon=True)
@@ -312,7 +361,7 @@ def test_a_live_world_is_served_to_a_foxglove_websocket_client(bus):
         client = FoxgloveClient(f"ws://127.0.0.1:{bridge.port}")
         update = SceneUpdate.FromString(client.next_message("/world/scene"))
         tick = int({m.key: m.value for m in entities(update)["sites"].metadata}["tick"])
-        assert_scene_matches(update, _view(tick))
+        assert_scene_matches(update, _cued_view(tick))  # the cues too, as their own entities
         assert client.channels["/world/scene"]["schemaName"] == "foxglove.SceneUpdate"
         assert client.channels["/world/scene"]["encoding"] == "protobuf"
         # the walls were sent before this client came: they are sent again for it

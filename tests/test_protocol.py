@@ -91,7 +91,8 @@ EXAMPLES: dict[type, object] = {
     WorldView: WorldView(world_id="w", tick=40, width=12.0, height=8.0, disc_xs=(1.5, 2.5), disc_ys=(0.5, 0.5),
                          disc_kinds=("brick", "food"), site_xs=(4.5,), site_ys=(3.5,), site_filled=(True,),
                          agent_ids=("a1",), agent_alive=(True,), agent_x=(6.0,), agent_y=(2.0,),
-                         agent_heading=(0.5,), agent_holding=(False,), wall_xs=(0.5,), wall_ys=(7.5,)),
+                         agent_heading=(0.5,), agent_holding=(False,), wall_xs=(0.5,), wall_ys=(7.5,),
+                         cue_xs=(4.5, 9.5), cue_ys=(3.5, 1.5), cue_kinds=("site", "supply")),
     Perturbed: Perturbed(tick=501, op="move", x=1.0, y=2.0, kind="brick", to_x=3.5, to_y=-1.0, ok=True,
                          message="moved brick"),
     Decision: Decision(
@@ -305,7 +306,7 @@ def test_protocol_error_is_a_value_error():
     assert issubclass(ProtocolError, ValueError)
 
 
-@pytest.mark.parametrize("version", [0, 1, 2, 3, 4, 6, -1, 2**40, "5", b"\x05", None, True, [5], {"v": 5}])
+@pytest.mark.parametrize("version", [0, 1, 2, 3, 4, 5, 7, -1, 2**40, "6", b"\x06", None, True, [6], {"v": 6}])
 def test_wrong_schema_version(version):
     _bad(_pack("Hello", ["a1", 1], version=version))
 
@@ -492,6 +493,8 @@ def test_reinforcement_arm_out_of_range(arm):
         pytest.param(_with(EXAMPLES[Decision], arm="x" * 33), id="decision-name-too-long"),
         pytest.param(_with(EXAMPLES[PerturbResult], tick=-1), id="perturb-result-negative-tick"),
         pytest.param(_with(EXAMPLES[Reinforcement], seq=-1), id="negative-seq"),
+        pytest.param(_with(EXAMPLES[WorldView], cue_kinds=["site", "paint"]), id="bad-cue-kind"),
+        pytest.param(_with(EXAMPLES[WorldView], cue_ys=b""), id="cue-length-mismatch"),
     ],
 )
 def test_out_of_domain_values(data):

@@ -1,5 +1,6 @@
 """A society of foremen and workers (issue 37 item 4; docs/society.md): in process, and as
-processes under `conag run --foremen F --workers W`, its members killed and restarted."""
+processes under `conag run --foremen F --workers W`, its members killed and restarted, and
+recorded: its cues in the recording's views and Foxglove scene, its run replayed tick for tick."""
 
 from __future__ import annotations
 
@@ -66,3 +67,25 @@ def test_conag_run_fig19_with_a_foreman_and_six_workers_completes_through_kills_
     restarts = {a["id"]: a["restarts"] for a in s["agents"]}
     assert sorted(restarts) == sorted(society_ids(1, 6))
     assert restarts["f1"] == 1 and restarts["w2"] >= 1 and restarts["w1"] == 0
+
+
+@pytest.mark.slow
+def test_a_recorded_society_shows_its_cues_and_replays_tick_for_tick(tmp_path):
+    from conag.recording.mcap_log import read_recording
+    from protocol.codec import decode
+    from tests.test_foxglove import assert_scene_matches, read_foxglove
+
+    out = tmp_path / "society.mcap"
+    run = conag("run", "scenarios/quick_wall.toml", "--foremen", "1", "--workers", "3", "--headless", "--quiet",
+                "--record", out, "--listen", f"tcp/127.0.0.1:{free_port()}", timeout=300)
+    assert run.returncode == 0, run.stdout + run.stderr
+    views = {e.tick: decode(e.data) for e in read_recording(out).entries if e.key.endswith("/view")}
+    assert any(v.cue_kinds for v in views.values())             # the foreman's marks reached the recorder
+    scenes = read_foxglove(out)["/world/scene"]
+    assert {t for t, _ in scenes} == set(views)
+    for tick, update in scenes:
+        assert_scene_matches(update, views[tick])               # cues/site and cues/supply where the world had them
+    # The world's cue reach is `conag run`'s, not the scenario's: the replay takes it from the Welcomes.
+    verify = conag("replay", out, "--verify", "--quiet", timeout=300)
+    assert verify.returncode == 0, verify.stdout + verify.stderr
+    assert "identical" in verify.stdout

@@ -1,7 +1,7 @@
 """The viewer's page in a real browser: headless Chromium (Debian's `chromium` and
 `chromium-driver`, driven by selenium: `pip install -e '.[browser]'`) loads `conag view`,
 live and over a recording, and the tests read the canvas's pixels where the world says a
-filled site, an empty one and an agent are, click a disc away, and scrub the timeline.
+filled site, an empty one, a cue and an agent are, click a disc away, and scrub the timeline.
 
 Skipped, saying why, where Chromium, its driver or selenium is missing (`.ci/run` installs
 them). `CONAG_SCREENSHOT=PATH` keeps the screenshot of the recorded Fig. 19 build
@@ -29,7 +29,8 @@ from tests.test_viewer import LAYOUT, view
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 CHROMEDRIVER = shutil.which("chromedriver") or "/usr/bin/chromedriver"
 COLOURS = {"filled": (0xE0, 0xA1, 0x00), "site": (0xF2, 0xD2, 0x7A), "agent": (0x6A, 0x3D, 0x9A),
-           "brick": (0xB5, 0x46, 0x2F), "food": (0x3A, 0x9D, 0x23), "blank": (0, 0, 0)}  # blank: transparent canvas
+           "brick": (0xB5, 0x46, 0x2F), "food": (0x3A, 0x9D, 0x23), "blank": (0, 0, 0),  # blank: transparent canvas
+           "cue_site": (0x00, 0x83, 0x8F), "cue_supply": (0xEF, 0x6C, 0x00)}
 
 
 def _missing() -> str | None:
@@ -141,6 +142,35 @@ def test_the_live_page_draws_the_world_and_a_click_removes_a_disc(bus, browser):
         rw.close()
 
 
+def test_the_page_draws_each_cue_kind_with_a_mark_of_its_own_under_the_discs(bus, browser):
+    # A site cue is a cross (through its cell's centre), a supply cue a diamond outline (its
+    # centre left clear); a cue under a brick is hidden, as the agents' sensors miss it; the
+    # legend names both kinds.
+    from selenium.webdriver.common.by import By
+
+    world = make(LAYOUT, cue_reach=5.0)
+    world.attach("a1")
+    for cell, kind in (((3, 1), "site"), ((5, 1), "supply"), ((4, 0), "site"), ((2, 2), "site")):
+        world.cues.place(cell, kind)  # (3.5, 1.5); (5.5, 1.5); on the empty site (4.5, 2.5); under the brick (2.5, 0.5)
+    rw = RunningWorld(world, bus.server_session())
+    feed = LiveFeed(bus.client_session(), "w0").start()
+    wait_until(lambda: feed.scene.view is not None or feed.refresh(0.5), what="the world's first view")
+    try:
+        with ViewerServer(feed).serve_in_thread() as server:
+            browser.get(server.url)
+            wait_until(lambda: browser.execute_script("return window.viewer && window.viewer.frames > 0"),
+                       what="the page's first picture")
+            assert len(picture(browser)["cues"]) == 4
+            assert near(pixel(browser, 3.5, 1.5), "cue_site") and near(pixel(browser, 4.5, 2.5), "cue_site")
+            assert near(pixel(browser, 5.5, 1.5), "blank") and near(pixel(browser, 5.69, 1.69), "cue_supply")
+            assert near(pixel(browser, 2.7, 0.7), "brick")  # the covered cue's cross arm: under the brick
+            legend = browser.find_element(By.ID, "legend").text
+            assert "site cue" in legend and "supply cue" in legend
+    finally:
+        feed.close()
+        rw.close()
+
+
 def test_the_recording_page_scrubs_the_timeline(tmp_path, browser):
     from selenium.webdriver.common.action_chains import ActionChains
     from selenium.webdriver.common.by import By
@@ -149,7 +179,7 @@ def test_the_recording_page_scrubs_the_timeline(tmp_path, browser):
     views = [view(0, 0.5, filled=False), view(50, 3.5, filled=False), view(100, 5.25, filled=True)]
     with McapRecorder(out) as rec:
         for v in views:
-            rec.add("conag/v5/world/w0/view", encode(v), v.tick)
+            rec.add("conag/v6/world/w0/view", encode(v), v.tick)
     from conag.commands.view import load_timeline
 
     with ViewerServer(load_timeline(str(out))).serve_in_thread() as server:

@@ -578,9 +578,11 @@ class World:
 
     def view(self) -> WorldView:
         """What there is to draw now: discs lying in the world, sites and whether each is
-        filled, bodies with headings and held bricks, wall cells (the WorldView message).
-        Raises ValueError when the world holds more than MAX_VIEW_ITEMS discs or walls."""
+        filled, bodies with headings and held bricks, wall cells, and the cues lying on the
+        floor, covered or not (the WorldView message; a world without cues builds no cue list).
+        Raises ValueError when the world holds more than MAX_VIEW_ITEMS discs, walls or cues."""
         _, xy, kind = self.discs.present_arrays()
+        cues = self._cue_view() if self.cfg.cue_reach > 0 else {}
         filled = self.sites_filled()
         pos, order = self._positions, self._order
         return WorldView(
@@ -593,7 +595,14 @@ class World:
             agent_x=tuple(float(pos[r.index, 0]) for r in order), agent_y=tuple(float(pos[r.index, 1]) for r in order),
             agent_heading=tuple(float(self.heading[r.index]) for r in order),
             agent_holding=tuple(r.holding >= 0 for r in order),
-            wall_xs=tuple(self._walls_xy[:, 0].tolist()), wall_ys=tuple(self._walls_xy[:, 1].tolist()))
+            wall_xs=tuple(self._walls_xy[:, 0].tolist()), wall_ys=tuple(self._walls_xy[:, 1].tolist()), **cues)
+
+    def _cue_view(self) -> dict[str, tuple]:
+        """The WorldView's cue fields: every cue's cell centre and kind, in the board's order."""
+        cells, kinds = self.cues.arrays()
+        xy = self.scenario.to_world(cells)
+        return {"cue_xs": tuple(xy[:, 0].tolist()), "cue_ys": tuple(xy[:, 1].tolist()),
+                "cue_kinds": tuple(CUE_KINDS[k] for k in kinds.tolist())}
 
     def agent_poses(self) -> np.ndarray:
         """(n, 3) x, y, heading of every body, in attach order (for pictures and tests)."""

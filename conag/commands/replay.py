@@ -88,11 +88,25 @@ def _scripts(args: argparse.Namespace, rec, entries) -> list[LockstepScript]:
     return scripts
 
 
-def _fresh_world(rec, world_id: str) -> tuple[World, CheckpointPlan | None]:
-    """The recorded scenario's world from its seed, and the checkpoint interval it stepped with."""
+def _welcomed_cue_reach(scripts: list[LockstepScript]) -> float | None:
+    """The cue reach the recorded world stated in its first Welcome (None if it welcomed no
+    one): `conag run --foremen/--workers` and `conag world --cue-reach` set it beside the
+    scenario, and a world with cues senses them in every frame."""
+    for script in scripts:
+        for tick in sorted(script.attaches):
+            for w in script.attaches[tick]:
+                return w.cue_reach
+    return None
+
+
+def _fresh_world(rec, world_id: str, cue_reach: float | None = None) -> tuple[World, CheckpointPlan | None]:
+    """The recorded scenario's world from its seed (with `cue_reach`, the recorded world's),
+    and the checkpoint interval it stepped with."""
     scenario = parse_scenario(rec.info["scenario"], rec.info.get("scenario_path", "<recording>"))
     if "noise" in rec.info:  # the noise flags of the recorded `conag run`
         scenario = from_note(rec.info["noise"]).apply(scenario)
+    if cue_reach is not None:
+        scenario = replace(scenario, world=replace(scenario.world, cue_reach=cue_reach))
     # The script stands in for every command the recorded world stepped without: this one
     # never times out itself (a busy machine makes the replay slower, not different).
     scenario = replace(scenario, world=replace(scenario.world, lockstep_timeout=VERIFY_TIMEOUT))
@@ -107,7 +121,8 @@ def _verify(args: argparse.Namespace, rec, entries, world_id: str) -> int:
     each run of the world in turn, a resumed one from the state the replay reached at its
     checkpoint's tick."""
     scripts = _scripts(args, rec, entries)
-    world, plan = _fresh_world(rec, world_id)
+    cue_reach = _welcomed_cue_reach(scripts)
+    world, plan = _fresh_world(rec, world_id, cue_reach)
     results: list[Comparison] = []
     with stop_on_signals() as stop:
         for k, script in enumerate(scripts):
@@ -115,7 +130,7 @@ def _verify(args: argparse.Namespace, rec, entries, world_id: str) -> int:
                 print(f"note: {script.cut_short}: the replay ends at tick {script.end_tick}", file=sys.stderr)
             try:
                 if k:
-                    world = _world_for(script, world, plan, rec, world_id)
+                    world = _world_for(script, world, plan, rec, world_id, cue_reach)
                 results.append(_replay_run(args, script, world, plan, world_id, stop))
             except DriveError as exc:  # the replayed world did not answer: nothing compared from there on
                 print(f"error: {args.file}: the replay stopped: {exc}", file=sys.stderr)
@@ -125,11 +140,12 @@ def _verify(args: argparse.Namespace, rec, entries, world_id: str) -> int:
     return _verdict(results, scripts[:len(results)])
 
 
-def _world_for(script: LockstepScript, before: World, plan: CheckpointPlan | None, rec, world_id: str) -> World:
+def _world_for(script: LockstepScript, before: World, plan: CheckpointPlan | None, rec, world_id: str,
+               cue_reach: float | None) -> World:
     """The world a later run of the recorded one started as: afresh from the seed, or resumed
     from the state the world replayed before it has reached (its checkpoint's tick)."""
     if not script.resumed:
-        return _fresh_world(rec, world_id)[0]
+        return _fresh_world(rec, world_id, cue_reach)[0]
     if plan is None or before.tick != script.first_tick:
         raise DriveError(f"the world was resumed at tick {script.first_tick}, which the replay did not reach")
     world = restore_world(decode_checkpoint(checkpoint_world(before, plan.every)))

@@ -10,7 +10,10 @@ y north, z up, one unit one world unit; headings counter-clockwise from east.
 * `/world/scene` (`foxglove.SceneUpdate`, from each WorldView): entities `discs/<kind>`
   (a flat cylinder per disc, coloured as the viewer colours them), `sites` (a flat square
   per drop site, dark yellow when filled), `agents/<id>` (body, heading arrow, the brick it
-  holds, its id). Each entity's metadata holds the `tick`;
+  holds, its id), and in a world with cues `cues/site` (a cross per site cue) and
+  `cues/supply` (a diamond outline per supply cue), flat marks on the floor above the sites
+  and under the discs, in the viewer's colours; a kind's entity is deleted when its last cue
+  goes, and a world without cues has none. Each entity's metadata holds the `tick`;
 * `/world/walls` (`SceneUpdate`, entity `walls`): the fixed wall cells, once, and again if
   they change;
 * `/tf` (`foxglove.FrameTransforms`, from each WorldView): frame `<agent id>` in `world`,
@@ -47,6 +50,7 @@ from protocol.codec import MAX_MESSAGE_BYTES, ProtocolError, decode
 from protocol.keys import check_id
 from protocol.messages import (
     CHANNELS,
+    CUE_KINDS,
     MAP_LAYERS,
     MAP_LEVEL,
     NO_READING,
@@ -70,7 +74,8 @@ PROGRESS = "/progress"
 SCANS_EVERY = 10  # the world's default view_every: scans at the ticks views are published
 PRIMITIVES_KEPT = 4096  # disc and site primitives kept for the next views (emptied when full)
 COLOURS = {"food": "#3a9d23", "water": "#2a6fdb", "brick": "#b5462f", "wall": "#555555", "site": "#f2d27a",
-           "filled": "#e0a100", "agent": "#6a3d9a", "dead": "#aaaaaa", "heading": "#111111"}  # the viewer's
+           "filled": "#e0a100", "agent": "#6a3d9a", "dead": "#aaaaaa", "heading": "#111111",
+           "cue_site": "#00838f", "cue_supply": "#ef6c00"}  # the viewer's
 PROGRESS_SCHEMA = {
     "title": "conag.Progress", "type": "object",
     "properties": {"tick": {"type": "integer"}, "sites_filled": {"type": "integer"},
@@ -221,6 +226,7 @@ class Translator:
         self.view: WorldView | None = None
         self._walls: tuple | None = None
         self._agents: set[str] = set()
+        self._cue_kinds: set[str] = set()  # the cue entities the last scene showed
         self._frames: dict[str, SensorFrame] = {}  # per agent: its frame of a view tick, not yet translated
         # A disc or a site looks the same from one view to the next unless it moved or filled:
         # its primitive is made once and reused (most of a SceneUpdate's making, otherwise).
@@ -272,11 +278,14 @@ class Translator:
         entities.append(self._entity("sites", t, meta, cubes=[
             self._kept(("site", g, x, y, f), _site_cube, g, x, y, f)
             for x, y, f in zip(v.site_xs, v.site_ys, v.site_filled)]))
+        kinds = set(v.cue_kinds)
+        entities += [self._cues(v, kind, t, meta) for kind in CUE_KINDS if kind in kinds]
         entities += [self._agent(v, i, t, meta) for i in range(len(v.agent_ids))]
-        gone = self._agents - set(v.agent_ids)
-        self._agents = set(v.agent_ids)
-        deletions = [fm.SceneEntityDeletion(timestamp=_stamp(t), type=fm.SceneEntityDeletionType.MatchingId,
-                                            id=f"agents/{a}") for a in sorted(gone)]
+        gone = [f"agents/{a}" for a in sorted(self._agents - set(v.agent_ids))]
+        gone += [f"cues/{k}" for k in CUE_KINDS if k in self._cue_kinds - kinds]
+        self._agents, self._cue_kinds = set(v.agent_ids), kinds
+        deletions = [fm.SceneEntityDeletion(timestamp=_stamp(t), type=fm.SceneEntityDeletionType.MatchingId, id=eid)
+                     for eid in gone]
         return fm.SceneUpdate(deletions=deletions, entities=entities)
 
     def _entity(self, eid: str, t: int, meta: list, **primitives) -> fm.SceneEntity:
@@ -296,6 +305,12 @@ class Translator:
         return self._entity(f"discs/{kind}", t, meta, cylinders=[
             self._kept(("disc", g, kind, x, y), _disc_cylinder, g, kind, x, y)
             for x, y, k in zip(v.disc_xs, v.disc_ys, v.disc_kinds) if k == kind])
+
+    def _cues(self, v: WorldView, kind: str, t: int, meta: list) -> fm.SceneEntity:
+        g = self.geometry
+        bars = [self._kept(("cue", g, kind, x, y), _cue_bars, g, kind, x, y)
+                for x, y, k in zip(v.cue_xs, v.cue_ys, v.cue_kinds) if k == kind]
+        return self._entity(f"cues/{kind}", t, meta, cubes=[b for mark in bars for b in mark])
 
     def _agent(self, v: WorldView, i: int, t: int, meta: list) -> fm.SceneEntity:
         aid, x, y, h = v.agent_ids[i], v.agent_x[i], v.agent_y[i], v.agent_heading[i]
@@ -396,6 +411,23 @@ class Translator:
 def _site_cube(g: Geometry, x: float, y: float, filled: bool) -> fm.CubePrimitive:
     return fm.CubePrimitive(pose=_pose(x, y, 0.005), size=fm.Vector3(x=g.cell * 0.9, y=g.cell * 0.9, z=0.01),
                             color=_colour("filled" if filled else "site"))
+
+
+def _cue_bars(g: Geometry, kind: str, x: float, y: float) -> list[fm.CubePrimitive]:
+    """A cue's mark as thin flat bars (cubes): a cross for a site cue, a diamond outline for a
+    supply cue, as the viewer draws them. Both lie within a disc's radius, so a brick on a
+    marked cell hides its mark (the world's sensors do not see it either), and sit on the
+    floor just above the site squares (z 0 to 0.01) and under the discs."""
+    c, width, z = g.cell, 0.1 * g.cell, 0.02
+    colour = _colour(f"cue_{kind}")
+    if kind == "site":
+        arm = 0.3 * c  # the cross's half-width along x and y
+        return [fm.CubePrimitive(pose=_pose(x, y, z, h), size=fm.Vector3(x=2 * arm * math.sqrt(2), y=width, z=0.01),
+                                 color=colour) for h in (math.pi / 4, -math.pi / 4)]
+    a = 0.38 * c  # the diamond's corners, along x and y from its centre
+    return [fm.CubePrimitive(pose=_pose(x + sx * a / 2, y + sy * a / 2, z, math.atan2(sy, -sx)),
+                             size=fm.Vector3(x=a * math.sqrt(2), y=width, z=0.01), color=colour)
+            for sx, sy in ((1, 1), (-1, 1), (-1, -1), (1, -1))]
 
 
 def _disc_cylinder(g: Geometry, kind: str, x: float, y: float) -> fm.CylinderPrimitive:

@@ -5,7 +5,8 @@ wire) and gives the picture as a dict of plain lists and numbers (`picture`), th
 page draws:
 
 * `tick`, `width`, `height`; `discs` as [x, y, kind]; `sites` as [x, y, filled]; `walls`
-  as [x, y]: from the newest WorldView;
+  as [x, y]; `cues` as [x, y, kind] (the marks foremen put on the floor: docs/society.md;
+  empty in a world without cues): from the newest WorldView;
 * `agents`: per body its id, x, y, heading, holding, alive (WorldView), and from its
   newest AgentState its behaviour, sites it believes open and blocker; from its newest
   Decision (learning students publish one per step) its six state nodes;
@@ -184,7 +185,7 @@ class Scene:
         chart's points (a timeline sends them once)."""
         v, st = self.view, self.status
         out: dict[str, Any] = {"tick": 0, "width": 0.0, "height": 0.0, "discs": [], "sites": [], "walls": [],
-                               "agents": []}
+                               "cues": [], "agents": []}
         if st is not None:
             out.update(tick=st.tick, scenario=st.scenario, mode=st.mode, sites_filled=st.sites_filled,
                        sites_total=st.sites_total, agents_alive=st.agents_alive, completed=st.completed)
@@ -193,6 +194,7 @@ class Scene:
                        discs=[[_r(x), _r(y), k] for x, y, k in zip(v.disc_xs, v.disc_ys, v.disc_kinds)],
                        sites=[[_r(x), _r(y), f] for x, y, f in zip(v.site_xs, v.site_ys, v.site_filled)],
                        walls=[[_r(x), _r(y)] for x, y in zip(v.wall_xs, v.wall_ys)],
+                       cues=[[_r(x), _r(y), k] for x, y, k in zip(v.cue_xs, v.cue_ys, v.cue_kinds)],
                        agents=[self._agent(v, i) for i in range(len(v.agent_ids))])
             if st is None or v.tick >= st.tick:
                 filled = sum(v.site_filled)

@@ -2,7 +2,8 @@
 // fields). Live: a Server-Sent Events stream of pictures. Recording: a timeline to scrub and play.
 "use strict";
 const COLOURS = { food: "#3a9d23", water: "#2a6fdb", brick: "#b5462f", wall: "#555555",
-                  site: "#f2d27a", filled: "#e0a100", agent: "#6a3d9a", dead: "#aaaaaa", heading: "#111111" };
+                  site: "#f2d27a", filled: "#e0a100", agent: "#6a3d9a", dead: "#aaaaaa", heading: "#111111",
+                  cue_site: "#00838f", cue_supply: "#ef6c00" };
 const DISC_R = 0.5, AGENT_R = 0.3, MARGIN = 10;
 const canvas = document.getElementById("world"), ctx = canvas.getContext("2d");
 const viewer = window.viewer = { picture: null, mode: null, selectedAgent: null, selectedDisc: null,
@@ -29,8 +30,20 @@ function cell(g, x, y, fill, inset) {
   g.fillStyle = fill; g.fillRect(px + inset, py + inset, s - 2 * inset, s - 2 * inset);
 }
 
-// The world is drawn in two layers. The scenery (border, walls, sites, discs) changes only when
-// a brick is grabbed or dropped, so it is painted on an offscreen canvas when it changes and
+// A cue (a mark a foreman put on the floor, docs/society.md), centred on pixel (px, py) of a
+// cell s pixels wide: a cross for a site cue ("drop a brick here"), a diamond outline for a
+// supply cue ("take bricks from around here"). Both fit inside a disc, so a brick lying on a
+// marked cell hides its mark, as it hides it from the agents' sensors.
+function cueMark(g, px, py, s, kind) {
+  const a = (kind === "site" ? 0.3 : 0.38) * s;
+  g.beginPath();
+  if (kind === "site") { g.moveTo(px - a, py - a); g.lineTo(px + a, py + a); g.moveTo(px - a, py + a); g.lineTo(px + a, py - a); }
+  else { g.moveTo(px + a, py); g.lineTo(px, py + a); g.lineTo(px - a, py); g.lineTo(px, py - a); g.closePath(); }
+  g.strokeStyle = COLOURS["cue_" + kind]; g.lineWidth = Math.max(2, 0.1 * s); g.stroke();
+}
+
+// The world is drawn in two layers. The scenery (border, walls, sites, cues, discs) changes only
+// when a brick is grabbed or dropped or a cue put or taken, so it is painted on an offscreen canvas when it changes and
 // copied; each picture repaints only the bodies over it. Software-rendered in a browser on the
 // run's own cores, every arc counts (docs/results/benchmarks.md, viewer overhead).
 const scenery = { canvas: document.createElement("canvas"), key: null };
@@ -48,17 +61,37 @@ function sameRows(a, b) {  // two lists of [x, y, ...] rows, equal element for e
 function paintScenery(p) {
   const k = scenery.key;
   if (k && k.w === canvas.width && k.h === canvas.height && k.scale === viewer.scale && sameRows(k.walls, p.walls)
-      && sameRows(k.sites, p.sites) && sameRows(k.discs, p.discs)) return;
+      && sameRows(k.sites, p.sites) && sameRows(k.cues, p.cues) && sameRows(k.discs, p.discs)) return;
   const c = scenery.canvas;
   c.width = canvas.width; c.height = canvas.height;  // setting the size clears it, even the same size
   const g = c.getContext("2d"), [x0, y0] = viewer.toCanvas(0, p.height);
   g.strokeStyle = "#888"; g.lineWidth = 1; g.strokeRect(x0, y0, p.width * viewer.scale, p.height * viewer.scale);
   for (const [x, y] of p.walls) cell(g, x, y, COLOURS.wall, 0);
   for (const [x, y, filled] of p.sites) cell(g, x, y, filled ? COLOURS.filled : COLOURS.site, 1);
+  for (const [x, y, kind] of p.cues || []) cueMark(g, ...viewer.toCanvas(x, y), viewer.scale, kind);  // under discs and bodies
   for (const [x, y, kind] of p.discs) circle(g, x, y, DISC_R * 0.92, COLOURS[kind]);
-  scenery.key = { w: canvas.width, h: canvas.height, scale: viewer.scale, walls: p.walls, sites: p.sites, discs: p.discs };
+  scenery.key = { w: canvas.width, h: canvas.height, scale: viewer.scale, walls: p.walls, sites: p.sites,
+                  cues: p.cues || [], discs: p.discs };
   viewer.sceneryPaints = (viewer.sceneryPaints || 0) + 1;
 }
+
+// The legend: a swatch per thing the world draws, painted once with the world's own strokes.
+const LEGEND = [["food", "food"], ["water", "water"], ["brick", "brick"], ["site", "drop site"],
+                ["filled", "filled site"], ["wall", "wall"], ["agent", "agent"],
+                ["cue_site", "site cue: drop here"], ["cue_supply", "supply cue: take bricks"]];
+function drawLegend() {
+  const box = document.getElementById("legend"), S = 16;
+  for (const [item, label] of LEGEND) {
+    const span = document.createElement("span"), c = document.createElement("canvas"), g = c.getContext("2d");
+    c.width = c.height = S; c.dataset.item = item;
+    if (item.startsWith("cue_")) { g.fillStyle = COLOURS.site; g.fillRect(0, 0, S, S); cueMark(g, S / 2, S / 2, S, item.slice(4)); }
+    else if (["site", "filled", "wall"].includes(item)) { g.fillStyle = COLOURS[item]; g.fillRect(1, 1, S - 2, S - 2); }
+    else { g.beginPath(); g.arc(S / 2, S / 2, (item === "agent" ? AGENT_R / DISC_R : 0.92) * S / 2, 0, 2 * Math.PI);
+           g.fillStyle = COLOURS[item]; g.fill(); }
+    span.appendChild(c); span.appendChild(document.createTextNode(label)); box.appendChild(span);
+  }
+}
+drawLegend();
 
 function setText(id, text) {  // DOM writes only when the text changes: each one costs a layout
   const e = document.getElementById(id);
