@@ -58,6 +58,19 @@ def test_checkpoint_benchmark_quick_run_prints_its_table():
     assert len(rows) == 1 and float(rows[0].split("|")[2].split()[0]) > 0
 
 
+def test_step_stages_quick_run_times_every_stage_the_step_calls():
+    r = subprocess.run([sys.executable, "-m", "bench.bench_step_stages", "--quick", "--layout", "fig6"], cwd=ROOT,
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    rows = {line.split("|")[1].strip(): line.split("|")[2:5] for line in r.stdout.splitlines()
+            if line.startswith("| ") and not line.startswith("| stage")}
+    from bench.bench_step_stages import STAGES
+    assert set(rows) == {path for _, path in STAGES}
+    # every step perceives and plans once: the wrappers really sit on the path the step takes
+    assert float(rows["Brain.perceive"][1]) == 1.0 and float(rows["Brain.plan"][1]) == 1.0
+    assert float(rows["Brain.plan"][0]) > float(rows["Brain.nav_masks"][0]) > 0
+
+
 def test_recorder_benchmark_replays_a_build_into_the_recorder_and_prints_its_cpu():
     r = subprocess.run([sys.executable, "-m", "bench.bench_recorder", "--scenario", "scenarios/quick_wall.toml",
                         "--agents", "1", "--reps", "1"], cwd=ROOT, capture_output=True, text=True, timeout=300)
