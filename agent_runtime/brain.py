@@ -238,14 +238,13 @@ class Brain:
         walls = layers[OBSTACLE] > 0.5
         discs = (layers[FOOD] > 0.5) | (layers[WATER] > 0.5)
         ground = self.maps.known & ~walls & ~discs      # before the maps shift
-        kx, ky = self.maps.move(dx, dy, self.cell)
-        if kx or ky:
-            self.far.save_walls(walls, discs | self._recalled, ground)
-            back = self.far.move(kx, ky, free)
-            layers[BRICK][back] = 1.0
-            layers[OBSTACLE][self.far.load_walls()] = 1.0
-            self.far.config_layer(layers[CONFIG])
-            self._recalled = self.far.load_discs()
+        kx, ky = self.maps.move(dx, dy, self.cell)   # the cells `crossing` said
+        self.far.save_walls(walls, discs | self._recalled, ground)
+        back = self.far.move(kx, ky, free)
+        layers[BRICK][back] = 1.0
+        layers[OBSTACLE][self.far.load_walls()] = 1.0
+        self.far.config_layer(layers[CONFIG])
+        self._recalled = self.far.load_discs()
 
     def _anchor_maps(self, ranges: np.ndarray) -> None:
         """`anchor_maps`: move the belief of where the agent is by what the landmarks it

@@ -5,9 +5,9 @@
     python3 -m experiments.ablation --cluster tcp://HOST:8786   # on a Dask cluster (experiments/runner.py)
     python3 -m experiments.ablation --sample 60 --resume  # go on with an interrupted run (same options)
 
-Each layout of a sample of the generated suite (every `--every`-th file, so every family
-and size comes in) is built in process (`conag.sim`, goal sequencing on) by several
-agents, named by `AgentConfig`:
+Each layout of a sample of the generated suite (`--sample` files evenly spaced in name
+order, so every family and size comes in) is built in process (`conag.sim`, goal
+sequencing on) by several agents, named by `AgentConfig`:
 
 * `default`: the best agent, every addition on;
 * `-NAME`: the default with one addition switched off, for each of ADDITIONS;
