@@ -277,6 +277,8 @@ def as_processes(tree: Path, scenario: str, agents: int, ticks: int, per_process
         if not profile.exists():
             raise RuntimeError(f"{' '.join(cmd)} in {tree} wrote no profile (exit {proc.returncode}): {last[0]}")
         prof = json.loads(profile.read_text())
+    if prof.get("first_tick") is None:   # e.g. agents that never all attached on a starved machine
+        raise RuntimeError(f"{' '.join(cmd)} in {tree}: the world never ticked (exit {proc.returncode}): {last[0]}")
     busy = sum(prof[k] for k in ("step", "publish", "wait", "other"))
     per_tick = prof["per_tick_ms"]
     return {"rate": prof["ticks"] / busy if busy else 0.0, "first_tick_s": prof["first_tick"] - launched,
@@ -458,7 +460,11 @@ def main(argv: list[str] | None = None) -> int:
     with reference_checkout(rev, args.reference_dir) if with_reference else nullcontext() as ref:
         trees = {"this": ROOT} | ({"reference": ref} if ref is not None else {})
         label = None if ref is None else tree_label(ref, str(ref)) if args.reference_dir else rev
-        rows = lockstep(trees, scenario, args) if args.agents else []
+        try:
+            rows = lockstep(trees, scenario, args) if args.agents else []
+        except RuntimeError as exc:   # a run that failed: say which and why, without a traceback
+            print(f"bench_scale: {exc}", file=sys.stderr)
+            return 1
     live = []
     for n in args.realtime:
         for k in args.per_process:
