@@ -16,6 +16,7 @@ import os
 import shutil
 import subprocess
 import sys
+from contextlib import contextmanager
 
 import pytest
 
@@ -108,11 +109,10 @@ def check_drawn_where_the_world_says(driver, v) -> None:
         assert near(behind, "agent"), (aid, x, y, behind)
 
 
-def test_the_live_page_draws_the_world_and_a_click_removes_a_disc(bus, browser):
-    from selenium.webdriver.common.by import By
-
-    world = make(LAYOUT)
-    world.attach("a1")
+@contextmanager
+def live_page(bus, browser, world):
+    """`world` served over `bus` to a live viewer, its page open in `browser` with a first
+    picture drawn; yields the RunningWorld, and closes the feed and the world after."""
     rw = RunningWorld(world, bus.server_session())
     feed = LiveFeed(bus.client_session(), "w0").start()
     wait_until(lambda: feed.scene.view is not None or feed.refresh(0.5), what="the world's first view")
@@ -121,25 +121,34 @@ def test_the_live_page_draws_the_world_and_a_click_removes_a_disc(bus, browser):
             browser.get(server.url)
             wait_until(lambda: browser.execute_script("return window.viewer && window.viewer.frames > 0"),
                        what="the page's first picture")
-            truth = rw.world.view()
-            check_drawn_where_the_world_says(browser, truth)
-            assert near(pixel(browser, 4.5, 2.5), "site")  # the empty site's centre: no disc
-            assert "a1" in browser.find_element(By.ID, "agents").text
-
-            click_world(browser, 0.5, 0.5)  # the agent: its details
-            wait_until(lambda: "a1 at (0.50, 0.50)" in browser.find_element(By.ID, "details").text,
-                       what="the clicked agent's details")
-            click_world(browser, 2.5, 0.5)  # the free brick, then "remove"
-            wait_until(lambda: "brick at (2.5, 0.5)" in browser.find_element(By.ID, "disc").text,
-                       what="the clicked disc")
-            browser.find_element(By.ID, "remove").click()
-            wait_until(lambda: near(pixel(browser, 2.5, 0.5), "blank"), what="the brick to vanish from the canvas")
-            after = rw.world.view()
-            assert (2.5, 0.5) not in set(zip(after.disc_xs, after.disc_ys))  # gone from the world itself
-            wait_until(lambda: "done" in browser.find_element(By.ID, "perturbed").text, what="the page's 'done'")
+            yield rw
     finally:
         feed.close()
         rw.close()
+
+
+def test_the_live_page_draws_the_world_and_a_click_removes_a_disc(bus, browser):
+    from selenium.webdriver.common.by import By
+
+    world = make(LAYOUT)
+    world.attach("a1")
+    with live_page(bus, browser, world) as rw:
+        truth = rw.world.view()
+        check_drawn_where_the_world_says(browser, truth)
+        assert near(pixel(browser, 4.5, 2.5), "site")  # the empty site's centre: no disc
+        assert "a1" in browser.find_element(By.ID, "agents").text
+
+        click_world(browser, 0.5, 0.5)  # the agent: its details
+        wait_until(lambda: "a1 at (0.50, 0.50)" in browser.find_element(By.ID, "details").text,
+                   what="the clicked agent's details")
+        click_world(browser, 2.5, 0.5)  # the free brick, then "remove"
+        wait_until(lambda: "brick at (2.5, 0.5)" in browser.find_element(By.ID, "disc").text,
+                   what="the clicked disc")
+        browser.find_element(By.ID, "remove").click()
+        wait_until(lambda: near(pixel(browser, 2.5, 0.5), "blank"), what="the brick to vanish from the canvas")
+        after = rw.world.view()
+        assert (2.5, 0.5) not in set(zip(after.disc_xs, after.disc_ys))  # gone from the world itself
+        wait_until(lambda: "done" in browser.find_element(By.ID, "perturbed").text, what="the page's 'done'")
 
 
 def test_the_page_draws_each_cue_kind_with_a_mark_of_its_own_under_the_discs(bus, browser):
@@ -152,23 +161,13 @@ def test_the_page_draws_each_cue_kind_with_a_mark_of_its_own_under_the_discs(bus
     world.attach("a1")
     for cell, kind in (((3, 1), "site"), ((5, 1), "supply"), ((4, 0), "site"), ((2, 2), "site")):
         world.cues.place(cell, kind)  # (3.5, 1.5); (5.5, 1.5); on the empty site (4.5, 2.5); under the brick (2.5, 0.5)
-    rw = RunningWorld(world, bus.server_session())
-    feed = LiveFeed(bus.client_session(), "w0").start()
-    wait_until(lambda: feed.scene.view is not None or feed.refresh(0.5), what="the world's first view")
-    try:
-        with ViewerServer(feed).serve_in_thread() as server:
-            browser.get(server.url)
-            wait_until(lambda: browser.execute_script("return window.viewer && window.viewer.frames > 0"),
-                       what="the page's first picture")
-            assert len(picture(browser)["cues"]) == 4
-            assert near(pixel(browser, 3.5, 1.5), "cue_site") and near(pixel(browser, 4.5, 2.5), "cue_site")
-            assert near(pixel(browser, 5.5, 1.5), "blank") and near(pixel(browser, 5.69, 1.69), "cue_supply")
-            assert near(pixel(browser, 2.7, 0.7), "brick")  # the covered cue's cross arm: under the brick
-            legend = browser.find_element(By.ID, "legend").text
-            assert "site cue" in legend and "supply cue" in legend
-    finally:
-        feed.close()
-        rw.close()
+    with live_page(bus, browser, world):
+        assert len(picture(browser)["cues"]) == 4
+        assert near(pixel(browser, 3.5, 1.5), "cue_site") and near(pixel(browser, 4.5, 2.5), "cue_site")
+        assert near(pixel(browser, 5.5, 1.5), "blank") and near(pixel(browser, 5.69, 1.69), "cue_supply")
+        assert near(pixel(browser, 2.7, 0.7), "brick")  # the covered cue's cross arm: under the brick
+        legend = browser.find_element(By.ID, "legend").text
+        assert "site cue" in legend and "supply cue" in legend
 
 
 def test_the_recording_page_scrubs_the_timeline(tmp_path, browser):
