@@ -137,13 +137,16 @@ def start_world(bus):
 T = TypeVar("T")
 
 
-def wait_until(predicate: Callable[[], T], timeout: float = 10.0, interval: float = 0.02,
+def wait_until(predicate: Callable[[], T], timeout: float = 60.0, interval: float = 0.02,
                what: str = "the condition") -> T:
     """Call `predicate` every `interval` seconds until it returns something truthy, and return
     that; raise AssertionError naming `what` once `timeout` seconds have passed without.
 
     Tests wait on what they need to see (a count reached, a process gone, a tick passed),
-    never on a fixed sleep: a busy machine makes them slower, not wrong.
+    never on a fixed sleep: a busy machine makes them slower, not wrong. The default is long
+    because a passing wait returns at once and only a failing one pays it: in a fresh clone an
+    agent's first steps compile the numba kernels, four xdist workers at once on two cores, and
+    a 10 s default failed there (an agent not yet stepping after 10 s).
     """
     deadline = time.monotonic() + timeout
     while True:
