@@ -24,6 +24,7 @@ class DiscStore:
         self.state = np.full(len(self.kind), IN_WORLD, dtype=np.int64)
         self._present: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._present_kind: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._filled: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # (present indices, site codes, filled)
 
     def __len__(self) -> int:
         return len(self.kind)
@@ -99,9 +100,17 @@ class DiscStore:
         return int(np.count_nonzero((self.kind == BRICK_DISC) & (self.state != GONE)))
 
     def filled_sites(self, site_codes: np.ndarray, cell_code) -> np.ndarray:
-        """Boolean per site: a present brick lies in the site's cell.
+        """Boolean per site: a present brick lies in the site's cell (read-only).
 
         `cell_code` maps (n, 2) world positions to the same integer codes as `site_codes`.
+        Asked every tick (progress, completion, the view) but changed only by a grab, a
+        drop or a perturbation: kept while the discs in the world (`present_arrays`, made
+        anew on every change) and the sites' codes are the same objects.
         """
-        bricks = np.flatnonzero((self.kind == BRICK_DISC) & (self.state == IN_WORLD))
-        return np.isin(site_codes, cell_code(self.xy[bricks]))
+        idx, xy, kinds = self.present_arrays()
+        kept = self._filled
+        if kept is None or kept[0] is not idx or kept[1] is not site_codes:
+            filled = np.isin(site_codes, cell_code(xy[kinds == BRICK_DISC]))
+            filled.setflags(write=False)
+            self._filled = kept = (idx, site_codes, filled)
+        return kept[2]
