@@ -145,8 +145,8 @@ def wait_until(predicate: Callable[[], T], timeout: float = 60.0, interval: floa
     Tests wait on what they need to see (a count reached, a process gone, a tick passed),
     never on a fixed sleep: a busy machine makes them slower, not wrong. The default is long
     because a passing wait returns at once and only a failing one pays it: in a fresh clone an
-    agent's first steps compile the numba kernels, four xdist workers at once on two cores, and
-    a 10 s default failed there (an agent not yet stepping after 10 s).
+    agent's first steps compile the numba kernels, every xdist worker at once, and a 10 s
+    default failed there (an agent not yet stepping after 10 s, with four workers on two cores).
     """
     deadline = time.monotonic() + timeout
     while True:
