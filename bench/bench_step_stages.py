@@ -102,7 +102,8 @@ def table(steps: list[float], per_stage: dict[str, list[float]], calls: dict) ->
 
 def cold_kernel(layout: Path, map_size: int, warmup: int) -> str:
     """The distance-field kernel on the last 200 fields a run computed: warm, and with the
-    caches flushed by reading 32 MB before each call."""
+    caches flushed by reading 32 MB before each call. A run of its own, not `measure`'s:
+    copying every field's inputs inside the timed steps would add to the stages' times."""
     import numpy as np
 
     from agent_runtime import field_cache
