@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from agent_runtime.spreading import _DC, _DR, _STEP, _TIE, _field_kernel, _move_masks, _shift
+from agent_runtime.spreading import _DC, _DR, _STEP, _TIE, _field_kernel, _move_masks, _shift, readonly
 
 
 @dataclass(frozen=True)
@@ -56,7 +56,7 @@ def _grids(bricks, sites, obstacles, closed=None) -> tuple[np.ndarray, np.ndarra
     # A disc that is an obstacle is neither a free brick nor an open site; a site that
     # already holds a brick is filled (the caller passes unfilled sites, this makes sure).
     sites = sites & ~obstacles & ~bricks
-    return bricks & ~obstacles, sites, obstacles | (closed & sites)
+    return readonly(bricks & ~obstacles), readonly(sites), readonly(obstacles | (closed & sites))
 
 
 def _result(match, rounds, site_r, site_c, brick_r, brick_c, sites) -> Matching:

@@ -77,8 +77,11 @@ class StepMarks(NamedTuple):
     walls: np.ndarray        # OBSTACLE, FOOD, WATER, and bricks on sites
 
 
+# Read-only, as the grids they stand for are (`spreading.readonly` says why).
 _NOWHERE = np.zeros((1, 1), np.bool_)
 _NO_MARKS = np.zeros((1, 1, 1), np.bool_)
+_NOWHERE.flags.writeable = False
+_NO_MARKS.flags.writeable = False
 
 
 def step_marks(maps: np.ndarray, outside: np.ndarray | None, recalled: np.ndarray, known: np.ndarray,

@@ -260,13 +260,25 @@ def _reach_kernel(sources, passable):
 # --- public API -----------------------------------------------------------------------
 
 
+def readonly(grid: np.ndarray) -> np.ndarray:
+    """`grid`, or a read-only view of it. numba compiles a kernel once per signature, and
+    a writable array is another type than a read-only one: inputs passed read-only always
+    keep a kernel at one signature (each one more is about a second of compiling in every
+    fresh checkout, test worker and process)."""
+    if not grid.flags.writeable:
+        return grid
+    view = grid.view()
+    view.flags.writeable = False
+    return view
+
+
 def _bool_grids(goals, obstacles) -> tuple[np.ndarray, np.ndarray]:
-    # C-contiguous bool arrays keep the kernel at one compiled signature.
+    # C-contiguous, read-only bool arrays keep the kernel at one compiled signature.
     goals = np.ascontiguousarray(goals, dtype=np.bool_)
     obstacles = np.ascontiguousarray(obstacles, dtype=np.bool_)
     if goals.ndim != 2 or goals.shape != obstacles.shape:
         raise ValueError(f"goals {goals.shape} and obstacles {obstacles.shape} must be equal 2-D shapes")
-    return goals, obstacles
+    return readonly(goals), readonly(obstacles)
 
 
 def distance_field(goals: np.ndarray, obstacles: np.ndarray, work: FieldWork | None = None) -> np.ndarray:

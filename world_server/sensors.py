@@ -48,7 +48,9 @@ def _bucket(xy, cell, nx, ny):
         counts[key[i] + 1] += 1
     for b in range(nx * ny):
         counts[b + 1] += counts[b]
-    fill = counts[:-1].copy()
+    fill = np.empty(nx * ny, np.int64)
+    for b in range(nx * ny):
+        fill[b] = counts[b]
     order = np.empty(n, np.int64)
     for i in range(n):
         order[fill[key[i]]] = i
@@ -105,9 +107,16 @@ def _index(agent_xy, disc_xy, disc_channel, radius, width, height, agent_channel
     ny = max(int(height / cell) + 1, 1)
     n_discs = disc_xy.shape[0]
     m = n_discs + agent_xy.shape[0]
+    # Loops, not slice assignments: numba compiles those to a great deal of code (this
+    # function took 3.4 s to compile with them, 0.4 s without), and every fresh checkout,
+    # test worker and world pays for it before its first tick.
     obj_xy = np.empty((m, 2))
-    obj_xy[:n_discs] = disc_xy
-    obj_xy[n_discs:] = agent_xy
+    for i in range(n_discs):
+        obj_xy[i, 0] = disc_xy[i, 0]
+        obj_xy[i, 1] = disc_xy[i, 1]
+    for i in range(agent_xy.shape[0]):
+        obj_xy[n_discs + i, 0] = agent_xy[i, 0]
+        obj_xy[n_discs + i, 1] = agent_xy[i, 1]
     starts, order = _bucket(obj_xy, cell, nx, ny)
     # Gathered in bucket order, so each bucket is a contiguous run in memory.
     sx = np.empty(m)
@@ -245,33 +254,48 @@ def _occlude_and_alias(a, agent_xy, grid, radius, sectors, out, occlusion, alias
                 out[a, ch, s] = alt
 
 
+# Four sweeps, chosen in Python: plain or with occlusion and aliasing, serial or shared
+# among the cores. One kernel holding both paths compiled both (8 s of a fresh checkout's
+# first tick); split, a run compiles only the one it uses.
 @njit(cache=True)
 def _sweep(agent_xy, disc_xy, disc_channel, sensing, sectors, radius, width, height, noise, seed, out,
-           agent_channel, occlusion, aliasing, alias_seed, disc_channels):
+           agent_channel):
     grid = _index(agent_xy, disc_xy, disc_channel, radius, width, height, agent_channel)
-    degraded = occlusion or aliasing > 0.0
     for a in range(agent_xy.shape[0]):
         if sensing[a]:
-            if degraded:
-                _scan_degraded(a, agent_xy, disc_xy.shape[0], grid, radius, sectors, noise, seed, out, occlusion,
-                               aliasing, alias_seed, disc_channels)
-            else:
-                _scan(a, agent_xy, disc_xy.shape[0], grid, radius, sectors, noise, seed, out)
+            _scan(a, agent_xy, disc_xy.shape[0], grid, radius, sectors, noise, seed, out)
 
 
 @njit(cache=True, parallel=True)
 def _sweep_parallel(agent_xy, disc_xy, disc_channel, sensing, sectors, radius, width, height, noise, seed, out,
-                    agent_channel, occlusion, aliasing, alias_seed, disc_channels):
+                    agent_channel):
     """`_sweep` with the agents shared among the cores (rows of different agents never overlap)."""
     grid = _index(agent_xy, disc_xy, disc_channel, radius, width, height, agent_channel)
-    degraded = occlusion or aliasing > 0.0
     for a in prange(agent_xy.shape[0]):
         if sensing[a]:
-            if degraded:
-                _scan_degraded(a, agent_xy, disc_xy.shape[0], grid, radius, sectors, noise, seed, out, occlusion,
-                               aliasing, alias_seed, disc_channels)
-            else:
-                _scan(a, agent_xy, disc_xy.shape[0], grid, radius, sectors, noise, seed, out)
+            _scan(a, agent_xy, disc_xy.shape[0], grid, radius, sectors, noise, seed, out)
+
+
+@njit(cache=True)
+def _sweep_degraded(agent_xy, disc_xy, disc_channel, sensing, sectors, radius, width, height, noise, seed, out,
+                    agent_channel, occlusion, aliasing, alias_seed, disc_channels):
+    """`_sweep` with occlusion and aliasing (`_scan_degraded`)."""
+    grid = _index(agent_xy, disc_xy, disc_channel, radius, width, height, agent_channel)
+    for a in range(agent_xy.shape[0]):
+        if sensing[a]:
+            _scan_degraded(a, agent_xy, disc_xy.shape[0], grid, radius, sectors, noise, seed, out, occlusion,
+                           aliasing, alias_seed, disc_channels)
+
+
+@njit(cache=True, parallel=True)
+def _sweep_degraded_parallel(agent_xy, disc_xy, disc_channel, sensing, sectors, radius, width, height, noise, seed,
+                             out, agent_channel, occlusion, aliasing, alias_seed, disc_channels):
+    """`_sweep_degraded` with the agents shared among the cores."""
+    grid = _index(agent_xy, disc_xy, disc_channel, radius, width, height, agent_channel)
+    for a in prange(agent_xy.shape[0]):
+        if sensing[a]:
+            _scan_degraded(a, agent_xy, disc_xy.shape[0], grid, radius, sectors, noise, seed, out, occlusion,
+                           aliasing, alias_seed, disc_channels)
 
 
 # Below this many agents, starting threads costs more than it saves.
@@ -293,11 +317,15 @@ def sense(agent_xy: np.ndarray, sensing: np.ndarray, disc_xy: np.ndarray, disc_c
     n = agent_xy.shape[0]
     out = np.full((n, len(CHANNELS), sectors), NO_READING)
     if n:
-        kernel = _sweep_parallel if n >= PARALLEL_FROM else _sweep
-        kernel(np.ascontiguousarray(agent_xy, np.float64), np.ascontiguousarray(disc_xy, np.float64).reshape(-1, 2),
-               np.asarray(disc_channel, np.int64), np.asarray(sensing, np.bool_), sectors,
-               float(radius), float(size[0]), float(size[1]), float(noise), int(seed), out, AGENT_CHANNEL,
-               bool(occlusion), float(aliasing), int(alias_seed), DISC_CHANNELS)
+        args = (np.ascontiguousarray(agent_xy, np.float64), np.ascontiguousarray(disc_xy, np.float64).reshape(-1, 2),
+                np.asarray(disc_channel, np.int64), np.asarray(sensing, np.bool_), sectors,
+                float(radius), float(size[0]), float(size[1]), float(noise), int(seed), out, AGENT_CHANNEL)
+        parallel = n >= PARALLEL_FROM
+        if occlusion or aliasing > 0.0:
+            kernel = _sweep_degraded_parallel if parallel else _sweep_degraded
+            kernel(*args, bool(occlusion), float(aliasing), int(alias_seed), DISC_CHANNELS)
+        else:
+            (_sweep_parallel if parallel else _sweep)(*args)
     return out
 
 
