@@ -49,7 +49,7 @@ from agent_runtime.nav_inputs import NavInputs, nav_inputs, nm_obstacles, step_m
 from agent_runtime.network import NONE, STATE_NODES, ActionNetwork, engineered
 from agent_runtime.seal_guard import SealGuard
 from agent_runtime.sealing import dilate, enclosed_sites, pocket_beside
-from agent_runtime.spreading import gradient_step
+from agent_runtime.spreading import gradient_step, readonly
 from protocol.messages import BEHAVIOURS, CHANNELS, NO_READING, AgentState, Decision, SensorFrame, Welcome
 
 _CH = {name: CHANNELS.index(name) for name in CHANNELS}
@@ -518,7 +518,7 @@ class Brain:
         """Offset and straight-line distance (cells) to the nearest marked cell, or None
         (the first in row order on a tie)."""
         frac = self.maps.frac
-        found, row, col = _nearest_cell(cells, self.centre, float(frac[0]), float(frac[1]))
+        found, row, col = _nearest_cell(readonly(cells), self.centre, float(frac[0]), float(frac[1]))
         if not found:
             return None
         dx, dy = self.maps.offset_of(row, col)
@@ -912,7 +912,7 @@ def _mouth_side(held: np.ndarray, sites: np.ndarray, depth: np.ndarray) -> np.nd
     seal the far end (docs/design.md, Measurements). Sites
     deeper than the held one (Fig. 18's D2 beside D1) stay goals: they are what the path
     is kept open for."""
-    return _mouth_side_kernel(np.ascontiguousarray(held), np.ascontiguousarray(sites), np.ascontiguousarray(depth))
+    return _mouth_side_kernel(*(readonly(np.ascontiguousarray(g)) for g in (held, sites, depth)))
 
 
 @njit(cache=True)

@@ -39,7 +39,7 @@ import math
 import numpy as np
 from numba import njit
 
-from agent_runtime.spreading import distance_field
+from agent_runtime.spreading import distance_field, readonly
 
 SQRT2_M1 = math.sqrt(2.0) - 1.0
 BLOCK = 5          # cells per side of the squares Explore keeps track of having seen
@@ -518,7 +518,7 @@ def border_seed(targets: np.ndarray, size: int, obstacles: np.ndarray) -> np.nda
     t = np.ascontiguousarray(np.asarray(targets, np.int64).reshape(-1, 2))
     # Compiled: a whole-array version (border x targets x 2) was half of a 100-agent
     # decision step on a large blueprint, whose every site beyond the map is a target.
-    seed[border[:, 0], border[:, 1]] = _nearest_octile(border, t)
+    seed[border[:, 0], border[:, 1]] = _nearest_octile(border, readonly(t))
     return seed
 
 

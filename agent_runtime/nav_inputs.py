@@ -23,6 +23,7 @@ import numpy as np
 from numba import njit
 
 from agent_runtime.esm import AGENT, BRICK, CONFIG, FOOD, OBSTACLE, WATER
+from agent_runtime.spreading import readonly
 
 
 class NavInputs(NamedTuple):
@@ -50,8 +51,8 @@ def nav_inputs(marks: np.ndarray, recalled: np.ndarray, extra_supply: np.ndarray
     itself comes back (the same object), so the stages made from it can tell by identity
     that their inputs did not change (most steps, on layouts where others seldom pass)."""
     stack = _stack_of(previous, marks.shape[1:])
-    masks, any_open = _inputs_kernel(marks, recalled, extra_supply, clear_age, float(site_memory), agents_block,
-                                     closed_sites, centre, stack if stack is not None else _NO_MARKS,
+    masks, any_open = _inputs_kernel(readonly(marks), recalled, readonly(extra_supply), clear_age, float(site_memory),
+                                     agents_block, closed_sites, centre, stack if stack is not None else _NO_MARKS,
                                      stack is not None)
     if masks is None:
         assert previous is not None
@@ -95,8 +96,9 @@ def step_marks(maps: np.ndarray, outside: np.ndarray | None, recalled: np.ndarra
     be known unchanged by identity (it is read-only; a caller that must add to it copies)."""
     has_outside = outside is not None
     same_shape = previous is not None and previous.shape == maps.shape
-    marks, open_sites, walls, same = _marks_kernel(maps, outside if has_outside else _NOWHERE, has_outside,
-                                                   recalled, known, previous if same_shape else _NO_MARKS, same_shape)
+    edge = readonly(outside) if outside is not None else _NOWHERE
+    last = readonly(previous) if previous is not None and same_shape else _NO_MARKS
+    marks, open_sites, walls, same = _marks_kernel(maps, edge, has_outside, recalled, known, last, same_shape)
     return StepMarks(previous if same and previous is not None else marks, open_sites, walls)
 
 
@@ -105,7 +107,7 @@ def nm_obstacles(in_the_way: np.ndarray, bricks: np.ndarray, brick_goals: np.nda
     """The obstacles of the configuration NM (what is in the way, and every brick) and of
     the brick NM (what is in the way, and the bricks that are not goals), each with the
     agent's own cell free: it may stand on a brick it just dropped and must plan a way out."""
-    return _obstacles_kernel(in_the_way, bricks, brick_goals, centre)
+    return _obstacles_kernel(readonly(in_the_way), readonly(bricks), readonly(brick_goals), centre)
 
 
 @njit(cache=True)

@@ -372,7 +372,7 @@ def gradient_step(dist: np.ndarray, centre: tuple[int, int] | None = None) -> tu
         return None
     if here == 0.0:
         return (0, 0)
-    return MOVES[_gradient_kernel(dist, r, c)]
+    return MOVES[_gradient_kernel(readonly(dist), r, c)]
 
 
 @njit(cache=True)

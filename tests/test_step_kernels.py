@@ -200,8 +200,8 @@ def test_the_compiled_extent_is_the_diagonal_of_the_bounding_box(seed, k):
 def test_the_compiled_site_beliefs_are_the_numpy_expressions(seed):
     rng = np.random.default_rng(seed)
     n, k = 9, 12
-    bricks = (rng.random((n, n)) < 0.4).astype(np.float64)
-    clear_age = rng.integers(0, 3, (n, n)).astype(np.float64)
+    bricks = (rng.random((n, n)) < 0.4).astype(np.float32)      # as the maps and their ages are
+    clear_age = rng.integers(0, 3, (n, n)).astype(np.float32)
     on = np.sort(rng.choice(k, size=rng.integers(0, k + 1), replace=False))
     rows, cols = rng.integers(0, n, on.size), rng.integers(0, n, on.size)
     site_open = rng.random(k) < 0.5
@@ -225,7 +225,7 @@ def test_the_step_marks_are_the_numpy_expressions(seed, size, bounded):
     from agent_runtime.esm import BRICK, CONFIG, FOOD, OBSTACLE, WATER
     from agent_runtime.nav_inputs import step_marks
     rng = np.random.default_rng(seed)
-    maps = np.where(rng.random((6, size, size)) < 0.3, 1.0, rng.random((6, size, size)) * 0.5)
+    maps = np.where(rng.random((6, size, size)) < 0.3, 1.0, rng.random((6, size, size)) * 0.5).astype(np.float32)
     outside = rng.random((size, size)) < 0.2 if bounded else None
     recalled, known = rng.random((2, size, size)) < 0.4
     want_maps, want_recalled = maps.copy(), recalled & ~known
