@@ -33,6 +33,10 @@ from tests.conftest import SCENARIOS, RunningWorld, free_port, wait_until
 from world_server.scenario import load_scenario
 from world_server.world import World
 
+# One worker runs the whole module (pyproject's `--dist loadgroup`): its tests share one
+# deployment, and `test_the_figures` tallies every kind of attempt the module makes.
+pytestmark = pytest.mark.xdist_group("secure_bus")
+
 W = "w0"
 A1, A2 = agent_user("a1"), agent_user("a2")
 QUIET = 0.5  # seconds an attack is given to have an effect (the rightful control shows one in far less)
