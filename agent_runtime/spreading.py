@@ -17,8 +17,8 @@ touch diagonally. A goal cell that is also an obstacle is an obstacle. Arrays ar
 indexed [row, col].
 
 API: `distance_field`, `seeded_distance_field`, `reachable`, `activation`, `gradient_step`,
-`spread_iterative`. Pure numpy and
-numba: no bus, no world.
+`spread_iterative`, and `readonly` (the kernels' inputs, kept at one compiled signature).
+Pure numpy and numba: no bus, no world.
 """
 
 from __future__ import annotations
