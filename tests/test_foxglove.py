@@ -409,8 +409,18 @@ def test_a_client_of_an_agents_scans_gets_those_of_the_newest_views_tick(bus):
             frames.put(encode(_frame(tick)))
             if tick == 30:
                 world.put(keys.view(W), encode(_view(30)))
-        wait_until(bridge.step, what="the bridge sent what came")
-        scan = LaserScan.FromString(client.next_message("/agents/a1/scan/food", subscribed=True))
+
+        # Step the bridge until the scan comes, not just once: a view of tick 10 put above can
+        # still be on its way, and a step that takes only it sends the scene (no frame of
+        # tick 10 came) with the view of tick 30 yet to come (failed once so in CI).
+        def scan_sent() -> bytes | None:
+            bridge.step()
+            try:
+                return client.next_message("/agents/a1/scan/food", timeout=0.2, subscribed=True)
+            except TimeoutError:
+                return None
+
+        scan = LaserScan.FromString(wait_until(scan_sent, what="a1's scan"))
         assert list(scan.ranges) == [30.0] * 4  # the frame of the view's tick, of the 16 that came
         assert (scan.pose.position.x, scan.pose.position.y) == (3.2, 4.4)  # a1's body in that view
     finally:
