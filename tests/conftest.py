@@ -23,6 +23,7 @@ import pytest
 from hypothesis import settings
 
 from protocol.bus import BusOptions, open_session
+from tests import kernel_compile_lock, kernel_warmup
 from world_server.scenario import load_scenario, parse_scenario
 from world_server.server import WorldServer
 from world_server.world import World
@@ -39,6 +40,27 @@ SCENARIOS = ROOT / "scenarios"
 settings.register_profile("derandomized", derandomize=True, database=None, print_blob=True)
 settings.register_profile("explore", print_blob=True)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "derandomized"))
+
+# Each numba kernel compiles once across the xdist workers, not once in each: a worker that
+# wants a kernel another is compiling waits for it and loads it from the cache.
+kernel_compile_lock.install(kernel_compile_lock.lock_dir_for(ROOT))
+
+
+def pytest_configure(config):
+    """With xdist workers, compile the kernels on both cores while the workers start
+    (tests/kernel_warmup.py); the controller itself runs no test."""
+    if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
+        return
+    config.kernel_warmups = [
+        subprocess.Popen([sys.executable, "-m", "tests.kernel_warmup", part], cwd=ROOT,
+                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        for part in kernel_warmup.PARTS]
+
+
+def pytest_unconfigure(config):
+    for warmup in getattr(config, "kernel_warmups", ()):
+        warmup.kill()
+        warmup.wait()
 
 # `conag run` registers by name (conag/runs.py) and the verbs find runs there: the tests,
 # and every process they start, keep a runs directory of their own, so they never see
