@@ -426,7 +426,8 @@ def _search(grid, width, prio, starts, max_attempts, max_bricks):
                     break
                 if k > best or best_fail[0] == 0:  # remember the first refusal at the deepest point
                     best = k
-                    best_fail[:] = fail
+                    for i in range(3):  # a loop: numba's slice assignment compiles for seconds
+                        best_fail[i] = fail[i]
                 if fail[0] != _NO_BRICK:
                     break  # the site itself is the problem, not the brick
             if done:
