@@ -185,8 +185,9 @@ def test_the_shown_agents_maps_are_pushed_on_the_event_stream_once_each_when_the
             events = _maps_events(server.url, lambda ev: any(e["tick"] == 10 for e in ev))
             assert events[-1]["agent"] == "a1" and events[-1]["size"] == 3
             assert {k: layer_cells(v) for k, v in events[-1]["layers"].items()} == {"config": [3] * 9, "brick": [3] * 9}
-            # nothing new for three seconds: sent once only (a new stream gets the newest at once)
-            quiet = _maps_events(server.url, lambda ev: time.monotonic() > start + 3 and len(ev) >= 1, timeout=10)
+            # nothing new for a second, ten display periods: sent once only (a new stream gets
+            # the newest at once)
+            quiet = _maps_events(server.url, lambda ev: time.monotonic() > start + 1 and len(ev) >= 1, timeout=10)
             assert [e["tick"] for e in quiet] == [10]
             snapshot(20, 5)
             events = _maps_events(server.url, lambda ev: any(e["tick"] == 20 for e in ev))
