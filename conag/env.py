@@ -44,6 +44,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import threading
+import weakref
 from collections.abc import Callable
 from pathlib import Path
 from typing import ClassVar
@@ -72,6 +73,10 @@ def sites_filled_reward(env: ConAgParallelEnv, agent: str, filled_now: int) -> f
     return float(filled_now) + float(env.teacher_arm.get(agent, 0))
 
 
+# The envs of this process not yet closed: only the last to close waits for zenoh's callback
+# threads (`close`), as another open env's threads live until it closes.
+_OPEN_ENVS: weakref.WeakSet = weakref.WeakSet()
+_OPEN_ENVS_LOCK = threading.Lock()
 _NO_OUTPUTS = (0.0,) * 7  # a Decision's output activations: the teacher's rule does not read them
 
 
@@ -126,6 +131,8 @@ class ConAgParallelEnv(ParallelEnv):
         self.world_id = self._env_id  # a new one per reset (`reset`)
         self._server_session = open_session(BusOptions(listen=(endpoint,)), serve=True)
         self._session = open_session(BusOptions(connect=(endpoint,)))
+        with _OPEN_ENVS_LOCK:
+            _OPEN_ENVS.add(self)
         self._links: dict[str, WorldLink] = {}
         self._stop: threading.Event | None = None
         self._thread: threading.Thread | None = None
@@ -284,7 +291,13 @@ class ConAgParallelEnv(ParallelEnv):
                 s.close()
             except Exception:  # noqa: BLE001 -- closing twice, or after zenoh shut down: nothing left to do
                 pass
-        join_callback_threads()  # the world's, declared in a daemon thread (bus.session says why)
+        with _OPEN_ENVS_LOCK:
+            _OPEN_ENVS.discard(self)
+            last = not _OPEN_ENVS
+        if last:
+            # The world's callback threads, declared in a daemon thread (bus.session says why).
+            # Not while another env is open: its threads would hold this one for the timeout.
+            join_callback_threads()
 
 
 class ConAgGymEnv(gymnasium.Env):

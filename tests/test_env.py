@@ -82,6 +82,28 @@ def test_in_a_world_with_cues_each_observation_holds_the_cue_readings():
         cued.close()
 
 
+def test_an_env_closed_while_another_is_open_does_not_wait_for_the_others_threads(monkeypatch):
+    # Closing waits (up to 2 s) for zenoh's callback threads, for the interpreter's exit; an
+    # open env's threads live on, so only the last env to close waits.
+    import weakref
+
+    import conag.env
+    import protocol.bus
+
+    joins = []
+    monkeypatch.setattr(protocol.bus, "join_callback_threads", lambda: joins.append(1) or True)
+    monkeypatch.setattr(conag.env, "_OPEN_ENVS", weakref.WeakSet())  # other tests' envs do not count
+    first, second = ConAgParallelEnv(SCENARIOS / "quick_wall.toml"), ConAgParallelEnv(SCENARIOS / "quick_wall.toml")
+    try:
+        first.reset(seed=1)
+        second.reset(seed=1)
+    finally:
+        first.close()
+        assert joins == []
+        second.close()
+        assert joins == [1]
+
+
 def test_the_gymnasium_env_drives_one_agent_among_conag_agents():
     env = ConAgGymEnv(SCENARIOS / "fig6.toml", max_cycles=50)
     try:
