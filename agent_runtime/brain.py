@@ -38,6 +38,8 @@ from numba import njit
 
 from agent_runtime import steering
 from agent_runtime.anchoring import Anchor, Landmarks, edge_ring
+from agent_runtime.brick_news import NEWS_EVERY, BrickNews
+from agent_runtime.brick_news import cells as news_cells
 from agent_runtime.claims import claimed_by_others
 from agent_runtime.config import AgentConfig
 from agent_runtime.esm import AGENT, BRICK, CONFIG, FOOD, OBSTACLE, WATER, EgocentricMaps, Sensing
@@ -172,6 +174,9 @@ class Brain:
         self._taken_from: np.ndarray | None = None  # (dx, dy) cells to where the held brick was taken
         self._dropped_at: np.ndarray | None = None  # odometry (cells) where it last dropped, until off it
         self._drop_unseen = False  # that drop was before this brain started (`_brick_underfoot`)
+        self._took: list[np.ndarray] = []  # `share_bricks`: world cells of bricks taken since the last news
+        # ... and the cells its sensors see now (the news is of bricks seen, not remembered)
+        self._in_sight = _disc_mask(self.cfg.map_size, self.sensor_range - 1.0) if self.cfg.share_bricks else None
         # Centre to centre, in cells, at which the world lets a dropped brick hold this body again.
         self._release = (welcome.agent_radius + welcome.disc_radius) / welcome.cell_size
         # `anchor_maps`: the belief of where the agent is, kept true by landmarks it sees.
@@ -305,8 +310,37 @@ class Brain:
         elif self._taken_from is None:
             near = self.plans.nearest_brick if self.plans is not None else None
             self._taken_from = np.array(near[:2] if near is not None else (0.0, 0.0))
+            if self.cfg.share_bricks:
+                self._took.append(self._world_cell(*self._taken_from))
         else:
             self._taken_from -= (frame.odom_dx / self.cell, frame.odom_dy / self.cell)
+
+    def _world_cell(self, ox: float, oy: float) -> np.ndarray:
+        """The world cell (x, y) of the point at offset (ox, oy) cells from the agent."""
+        row, col = self.maps.cell_of(ox, oy)
+        return self.far.from_map(np.array([row]), np.array([col]))[0] + self._origin
+
+    def brick_news(self) -> BrickNews | None:
+        """`share_bricks`: this agent's report to the others, every NEWS_EVERY ticks after a
+        step (else None): the free bricks in sight and those it took since its last report,
+        in world cells, with the brick it heads for while it holds none
+        (agent_runtime.brick_news). Only bricks in sight: a remembered one,
+        or one heard of, may be gone, and told on it would go round the team for ever."""
+        if not self.cfg.share_bricks or self._last_marks is None or self._tick % NEWS_EVERY:
+            return None
+        marks = self._last_marks
+        rows, cols = np.nonzero(marks[BRICK] & ~marks[CONFIG] & self._in_sight)
+        seen = self.far.from_map(rows, cols) + self._origin
+        taken = news_cells(self._took)
+        self._took = []
+        near = self.plans.nearest_brick if self.plans is not None and self._taken_from is None else None
+        claimed = news_cells([] if near is None else [self._world_cell(near[0], near[1])])
+        return BrickNews(self.agent_id, self._tick, seen, taken, claimed)
+
+    def hear_bricks(self, news: BrickNews) -> None:
+        """`share_bricks`: another agent's report, remembered (agent_runtime.brick_news)."""
+        if self.cfg.share_bricks and news.sender != self.agent_id:
+            self.far.hear(news.seen - self._origin, np.vstack([news.taken, news.claimed]) - self._origin)
 
     def _supply(self) -> np.ndarray:
         """The matching's extra supply, as a read-only mask: the held brick's source
@@ -913,6 +947,12 @@ def _mouth_side(held: np.ndarray, sites: np.ndarray, depth: np.ndarray) -> np.nd
     deeper than the held one (Fig. 18's D2 beside D1) stay goals: they are what the path
     is kept open for."""
     return _mouth_side_kernel(*(readonly(np.ascontiguousarray(g)) for g in (held, sites, depth)))
+
+
+def _disc_mask(size: int, radius: float) -> np.ndarray:
+    """The cells of a size x size map within `radius` cells of its centre cell."""
+    r = np.arange(size) - size // 2
+    return r[:, None] ** 2 + r[None, :] ** 2 <= radius * radius
 
 
 @njit(cache=True)

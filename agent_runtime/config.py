@@ -59,6 +59,8 @@ class AgentConfig:
     idle_wait: bool = False         # knowing bricks but nothing to fetch, wait near the supply, off the sites
     yield_goals: bool = False       # leave a brick or site to another agent in sight that is nearer to it
     spread_search: bool = False     # searching for bricks, leave unseen ground nearer another agent in sight to it
+    share_bricks: bool = False      # tell the other agents the free bricks on the map, and each brick taken;
+                                    # remember what they tell (agent_runtime.brick_news; over the bus)
     # Refinements of the ESMs' sensing rule (agent_runtime.esm; off: the plain rule).
     ghost_association: bool = True  # a reading explains a cell already marked; other brick marks in its band are ghosts
     clear_margins: bool = True      # a sector clears only cells well in front of its reading, well inside its range
@@ -135,10 +137,10 @@ class AgentConfig:
 # The additions beyond the paper, in the order AgentConfig declares them.
 ADDITIONS = ("far_memory", "obstacle_layer", "agents_as_obstacles", "explore_sweep", "unstick", "give_way",
              "agents_in_the_way", "closed_sites", "supply_beyond", "mouth_side", "seal_guard", "enclosed_sites",
-             "off_own_brick", "sequencing_fallback", "idle_wait", "yield_goals", "spread_search",
+             "off_own_brick", "sequencing_fallback", "idle_wait", "yield_goals", "spread_search", "share_bricks",
              "ghost_association", "clear_margins", "site_core", "obstacle_trust")
 # Additions that the default agent leaves off (docs/design.md says why for each).
-OFF_BY_DEFAULT = ("idle_wait", "yield_goals", "spread_search")
+OFF_BY_DEFAULT = ("idle_wait", "yield_goals", "spread_search", "share_bricks")
 # Corrections for a world the paper's agent assumed away (odometry noise, docs/noise.md), in
 # AgentConfig order. Unlike ADDITIONS they are off in the default agent: in a world without
 # noise they would only ever move a true belief by the sensors' noise.

@@ -325,6 +325,28 @@ class FarMemory:
         merged = np.unique(np.vstack([self.bricks, cells]), axis=0) if len(self.bricks) else np.unique(cells, axis=0)
         self.bricks = merged[-MAX_FAR_BRICKS:]
 
+    def hear(self, seen: np.ndarray, taken: np.ndarray) -> None:
+        """Bricks another agent reports (`AgentConfig.share_bricks`), as (k, 2) cells from
+        the attach cell: those `seen` beyond the map are remembered as if this agent had seen
+        them leave it (on the map its own sight holds); those `taken` (taken, or claimed by
+        the teller) are forgotten, and never remembered from the same news. Nothing changes,
+        and the caches keep, when the news is old news."""
+        if not self.remember:
+            return
+        if len(taken) and len(self.bricks):
+            gone = _rows_in(self.bricks, taken)
+            if gone.any():
+                self.bricks = self.bricks[~gone]
+        if len(seen) and len(taken):
+            seen = seen[~_rows_in(seen, taken)]
+        if len(seen):
+            rows, cols = self.to_map(seen)
+            new = seen[~self._on_map(rows, cols)]
+            if len(self.bricks):
+                new = new[~_rows_in(new, self.bricks)]
+            if len(new):
+                self._remember(new)
+
     # ------------------------------------------------------------------ exploring
 
     def mark_seen(self, radius: float) -> int:
@@ -555,6 +577,13 @@ def _nearest_octile(cells: np.ndarray, targets: np.ndarray) -> np.ndarray:
                 best = d
         out[i] = best
     return out
+
+
+def _rows_in(cells: np.ndarray, among: np.ndarray) -> np.ndarray:
+    """Which rows of `cells` ((k, 2) int) are rows of `among` ((j, 2) int), as a bool array."""
+    def key(a: np.ndarray) -> np.ndarray:
+        return np.asarray(a, np.int64)[:, 0] * (1 << 32) + np.asarray(a, np.int64)[:, 1]
+    return np.isin(key(cells), key(among))
 
 
 @njit(cache=True)

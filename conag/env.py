@@ -55,6 +55,7 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
 from agent_runtime.brain import Brain
+from agent_runtime.brick_news import require_in_process
 from agent_runtime.config import AgentConfig
 from agent_runtime.world_link import WorldLink
 from protocol.bus import BusOptions, open_session
@@ -84,6 +85,7 @@ def _agent_config(cfg: AgentConfig | str | None) -> tuple[AgentConfig, dict]:
     """The AgentConfig `cfg` names (a preset's name, a config, None: the default) and its record."""
     preset = cfg if isinstance(cfg, str) else None
     config = AgentConfig.preset(cfg) if isinstance(cfg, str) else cfg or AgentConfig()
+    require_in_process(config, "the env")
     return config, config.describe(preset)
 
 

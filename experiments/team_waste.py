@@ -98,7 +98,7 @@ def _idle_reason(brain: Brain, holding: bool) -> str:
     if brain.searching():
         return "knows no free brick"
     clear = p.brick_obstacles & ~(brain.maps.maps[AGENT] > 0.5)
-    if np.isfinite(brain._field(p.brick_goals, clear, brain.far.far_bricks())[c, c]):
+    if np.isfinite(brain._field(p.brick_goals, clear, brain.far.far_bricks(), "team_waste")[c, c]):
         return "bricks blocked by agents"
     return "bricks known, none reachable"
 

@@ -71,8 +71,19 @@ class SimRun:
             if self.on_step is not None:
                 self.on_step(frame.agent_id, s)
             self.world.set_command(frame.agent_id, s.speed, s.turn, s.action, s.mark)
+        self._pass_news()
         self.world.step()
         self._record_fills()
+
+    def _pass_news(self) -> None:
+        """Each brain's brick news (`AgentConfig.share_bricks`) to every other brain: the
+        loop stands in for a bus (agent_runtime.brick_news). A society's workers keep no maps:
+        they neither tell nor hear."""
+        brains = [b for b in self.brains.values() if isinstance(b, Brain)]
+        for news in [b.brick_news() for b in brains]:
+            if news is not None:
+                for brain in brains:
+                    brain.hear_bricks(news)
 
     def _record_fills(self) -> None:
         filled = self.world.sites_filled()
