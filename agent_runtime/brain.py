@@ -38,7 +38,7 @@ from numba import njit
 
 from agent_runtime import steering
 from agent_runtime.anchoring import Anchor, Landmarks, edge_ring
-from agent_runtime.brick_news import NEWS_EVERY, BrickNews
+from agent_runtime.brick_news import NEWS_EVERY, gone_cells, report, seen_cells
 from agent_runtime.brick_news import cells as news_cells
 from agent_runtime.claims import claimed_by_others
 from agent_runtime.config import AgentConfig
@@ -52,7 +52,17 @@ from agent_runtime.network import NONE, STATE_NODES, ActionNetwork, engineered
 from agent_runtime.seal_guard import SealGuard
 from agent_runtime.sealing import dilate, enclosed_sites, pocket_beside
 from agent_runtime.spreading import gradient_step, readonly
-from protocol.messages import BEHAVIOURS, CHANNELS, NO_READING, AgentState, Decision, SensorFrame, Welcome
+from protocol.messages import (
+    BEHAVIOURS,
+    CHANNELS,
+    MAX_NEWS_CELLS,
+    NO_READING,
+    AgentState,
+    BrickNews,
+    Decision,
+    SensorFrame,
+    Welcome,
+)
 
 _CH = {name: CHANNELS.index(name) for name in CHANNELS}
 
@@ -330,17 +340,17 @@ class Brain:
             return None
         marks = self._last_marks
         rows, cols = np.nonzero(marks[BRICK] & ~marks[CONFIG] & self._in_sight)
-        seen = self.far.from_map(rows, cols) + self._origin
-        taken = news_cells(self._took)
+        seen = self.far.from_map(rows[:MAX_NEWS_CELLS], cols[:MAX_NEWS_CELLS]) + self._origin
+        taken = news_cells(self._took[-MAX_NEWS_CELLS:])
         self._took = []
         near = self.plans.nearest_brick if self.plans is not None and self._taken_from is None else None
         claimed = news_cells([] if near is None else [self._world_cell(near[0], near[1])])
-        return BrickNews(self.agent_id, self._tick, seen, taken, claimed)
+        return report(self.agent_id, max(self._tick, 0), seen, taken, claimed)
 
     def hear_bricks(self, news: BrickNews) -> None:
         """`share_bricks`: another agent's report, remembered (agent_runtime.brick_news)."""
-        if self.cfg.share_bricks and news.sender != self.agent_id:
-            self.far.hear(news.seen - self._origin, np.vstack([news.taken, news.claimed]) - self._origin)
+        if self.cfg.share_bricks and news.agent_id != self.agent_id:
+            self.far.hear(seen_cells(news) - self._origin, gone_cells(news) - self._origin)
 
     def _supply(self) -> np.ndarray:
         """The matching's extra supply, as a read-only mask: the held brick's source

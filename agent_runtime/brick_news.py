@@ -11,43 +11,41 @@ whole distance), and forgets the claimed and the taken ones: a whole idle team t
 brick would all walk to it.
 
 The common frame is the world's grid: every agent knows its attach cell in it (the
-Welcome's position), as it knows the blueprint's sites. A report is what its sender's map
-holds now, not its memory of what it was told, so news of a brick stops once no agent's map
-holds it; a listener's own sensors clear a reported brick that is not there when it comes
+Welcome's position), as it knows the blueprint's sites. A report is what its sender sees
+now, not its memory of what it saw or was told, so news of a brick stops once no agent sees
+it; a listener's own sensors clear a reported brick that is not there when it comes
 into view, and a report of the brick taken clears it at once. Each agent still plans on its
 own maps alone: news only adds and removes remembered bricks.
 
-In `conag.sim` (and so in every experiment) the loop hands each report to the other
-brains. Agent processes cannot share bricks yet: the bus message is not built, and
-`conag run`, `conag agent(s)` and the env refuse the addition (`require_in_process`)
-rather than run it as a silent no-op.
+On the bus a report is a `BrickNews` message (protocol.messages) on the sender's key
+`agent/<id>/bricks`, best effort: the next report says it all again. In `conag.sim` (and so
+in every experiment) the loop hands each report to the other brains directly.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
+
+from protocol.messages import BrickNews
 
 NEWS_EVERY = 10   # ticks between an agent's reports: a brick is many ticks' walk away
 
 
-@dataclass(frozen=True)
-class BrickNews:
-    """One agent's report: world cells (x east, y north), each an (k, 2) int64 array."""
-
-    sender: str
-    tick: int
-    seen: np.ndarray    # the free bricks in the sender's sight
-    taken: np.ndarray   # the bricks it took since its last report
-    claimed: np.ndarray  # the brick it heads for (none, or one)
+def report(agent_id: str, tick: int, seen: np.ndarray, taken: np.ndarray, claimed: np.ndarray) -> BrickNews:
+    """The BrickNews of (k, 2) world-cell arrays (x, y)."""
+    def xs_ys(c: np.ndarray) -> tuple[tuple[int, ...], tuple[int, ...]]:
+        return tuple(c[:, 0].tolist()), tuple(c[:, 1].tolist())
+    return BrickNews(agent_id, tick, *xs_ys(seen), *xs_ys(taken), *xs_ys(claimed))
 
 
-def require_in_process(cfg, where: str) -> None:
-    """ValueError if `cfg` (an AgentConfig) asks for brick news where no loop carries it."""
-    if cfg.share_bricks:
-        raise ValueError(f"{where}: share_bricks runs in the in-process simulator only (conag.sim and the "
-                         "experiments); agent processes have no bus message for brick news yet")
+def seen_cells(news: BrickNews) -> np.ndarray:
+    """The free bricks the sender sees, (k, 2) world cells."""
+    return cells(list(zip(news.seen_xs, news.seen_ys)))
+
+
+def gone_cells(news: BrickNews) -> np.ndarray:
+    """The bricks the sender took or heads for, (k, 2) world cells: not to be fetched."""
+    return cells(list(zip(news.taken_xs + news.claimed_xs, news.taken_ys + news.claimed_ys)))
 
 
 def cells(pairs) -> np.ndarray:

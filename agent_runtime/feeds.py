@@ -1,4 +1,4 @@
-"""The agent process's side traffic: blueprint changes in, state reports out.
+"""The agent process's side traffic: blueprint changes in, state reports out, brick news.
 
 `AgentFeeds` subscribes to the world's Blueprint key through a FIFO inbox (reliable and
 never "latest wins": a blueprint change must not be lost), and must be created before
@@ -16,6 +16,11 @@ agent or for all is up (a recorder with `--maps-every N` asks all agents, a view
 its page shows), the agent also publishes its maps
 (`agent_runtime.snapshot`: the ESMs, both NMs, the Matching grid; one AgentMap per layer)
 at every tick that is a multiple of the smallest such N; with none up it publishes nothing.
+
+With `news` (`AgentConfig.share_bricks`) the agent publishes the brain's BrickNews on its
+bricks key after the steps that make one, and hands the brain, before each step, every
+report the other agents published since (agent_runtime.brick_news). Reports wait in a FIFO
+inbox; each says all its sender knows, so one dropped on a full inbox costs nothing lasting.
 """
 
 from __future__ import annotations
@@ -30,7 +35,7 @@ from agent_runtime.snapshot import map_snapshot
 from protocol import keys
 from protocol.bus import Declarations, Inbox, token_event
 from protocol.codec import ProtocolError, decode, encode
-from protocol.messages import Blueprint
+from protocol.messages import Blueprint, BrickNews
 
 log = logging.getLogger("conag.agent")
 
@@ -40,7 +45,8 @@ STATE_EVERY = 100  # ticks between AgentState reports
 class AgentFeeds:
     """Blueprint changes in (a FIFO inbox), the brain's AgentState reports out (see the module)."""
 
-    def __init__(self, session: zenoh.Session, world_id: str, agent_id: str, every: int = STATE_EVERY):
+    def __init__(self, session: zenoh.Session, world_id: str, agent_id: str, every: int = STATE_EVERY,
+                 news: bool = False):
         self.world_id, self.agent_id, self.every = world_id, agent_id, every
         self.bad = 0
         self._last_report: int | None = None
@@ -55,6 +61,11 @@ class AgentFeeds:
             keys.agent_maps(world_id, agent_id), congestion_control=zenoh.CongestionControl.DROP))
         for key in keys.maps_requests_for(world_id, agent_id):
             self._declared.add(session.liveliness().declare_subscriber(key, self._on_maps_token, history=True))
+        self._news_in = self._news_out = None
+        if news:
+            self._news_in = self._declared.add(Inbox(1024).subscribe(session, keys.all_agents(world_id, "bricks")))
+            self._news_out = self._declared.add(session.declare_publisher(
+                keys.bricks(world_id, agent_id), congestion_control=zenoh.CongestionControl.DROP))
 
     def _on_maps_token(self, sample: zenoh.Sample) -> None:
         key, (_, up) = str(sample.key_expr), token_event(sample)
@@ -94,16 +105,38 @@ class AgentFeeds:
         return best
 
     def before_step(self, brain) -> None:
-        """Hand the brain the newest blueprint, if one came (it keeps only newer versions)."""
+        """Hand the brain the newest blueprint, if one came (it keeps only newer versions),
+        and the other agents' brick news that came."""
         bp = self.newest_blueprint()
         if bp is not None and brain.set_blueprint(bp.version, bp.site_xs, bp.site_ys):
             log.info("agent %s: blueprint version %d, %d sites", self.agent_id, bp.version, len(bp.site_xs))
+        if self._news_in is not None:
+            for news in self.brick_news():
+                brain.hear_bricks(news)
+
+    def brick_news(self) -> list[BrickNews]:
+        """The other agents' BrickNews that arrived since the last call (bad ones counted)."""
+        out = []
+        while (sample := self._news_in.get(0)) is not None:
+            try:
+                news = decode(sample.payload.to_bytes(), BrickNews)
+            except ProtocolError as exc:
+                self.bad += 1
+                log.debug("agent %s ignored bad brick news: %s", self.agent_id, exc)
+                continue
+            if news.agent_id != self.agent_id:
+                out.append(news)
+        return out
 
     def after_step(self, brain, tick: int) -> None:
         """Publish the brain's state report if `every` ticks have passed since the last one."""
         # A lower tick: a world resumed from a checkpoint, counting from there again.
         if self._last_report is None or not 0 <= tick - self._last_report < self.every:
             self.report(brain, tick)
+        if self._news_out is not None:
+            news = brain.brick_news()
+            if news is not None:
+                self._news_out.put(encode(news))
         every = self.maps_every
         if every and tick % every == 0 and hasattr(brain, "maps"):  # (a worker keeps no maps)
             for layer in map_snapshot(brain, tick):

@@ -137,7 +137,8 @@ class AgentProcess:
         self.student = self.learning.student(opts.seed) if self.learning else opts.network
         w, a = opts.world_id, opts.agent_id
         self.link = WorldLink(session, w, a)
-        self.feeds = AgentFeeds(session, w, a)  # before attaching: no blueprint change is missed
+        # before attaching: no blueprint change is missed; brick news only from agents that tell it
+        self.feeds = AgentFeeds(session, w, a, news=opts.role != "worker" and (opts.cfg or AgentConfig()).share_bricks)
         self.brain: Brain | Worker | None = None
         self.tick = 0
         self.reattaches = 0  # worlds lost and found again

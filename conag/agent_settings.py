@@ -13,7 +13,6 @@ from __future__ import annotations
 import argparse
 from dataclasses import dataclass
 
-from agent_runtime.brick_news import require_in_process
 from agent_runtime.config import ADDITIONS, CORRECTIONS, OFF_BY_DEFAULT, AgentConfig
 from agent_runtime.node import Learning
 
@@ -53,10 +52,8 @@ class AgentSettings:
         wrong = [n for n in self.with_ if n not in SWITCH_ON]
         if wrong:
             raise ValueError(f"--with: unknown name(s) {', '.join(wrong)}; known: {', '.join(SWITCH_ON)}")
-        cfg = AgentConfig.preset(self.preset, map_size=self.map_size, goal_sequencing=not self.nearest_first,
-                                 **dict.fromkeys(self.without, False), **dict.fromkeys(self.with_, True))
-        require_in_process(cfg, "--with")
-        return cfg
+        return AgentConfig.preset(self.preset, map_size=self.map_size, goal_sequencing=not self.nearest_first,
+                                  **dict.fromkeys(self.without, False), **dict.fromkeys(self.with_, True))
 
     def describe(self) -> dict:
         """Which agent these settings run, as the run summary records it: the preset, the

@@ -55,7 +55,6 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
 from agent_runtime.brain import Brain
-from agent_runtime.brick_news import require_in_process
 from agent_runtime.config import AgentConfig
 from agent_runtime.world_link import WorldLink
 from protocol.bus import BusOptions, open_session
@@ -85,7 +84,9 @@ def _agent_config(cfg: AgentConfig | str | None) -> tuple[AgentConfig, dict]:
     """The AgentConfig `cfg` names (a preset's name, a config, None: the default) and its record."""
     preset = cfg if isinstance(cfg, str) else None
     config = AgentConfig.preset(cfg) if isinstance(cfg, str) else cfg or AgentConfig()
-    require_in_process(config, "the env")
+    if config.share_bricks:
+        # The env's agents meet only in its world: nothing carries news between them.
+        raise ValueError("the env: share_bricks is not carried between the env's agents")
     return config, config.describe(preset)
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import re
 
-ROOT = "conag/v6"  # v + messages.SCHEMA_VERSION: incompatible versions never meet
+ROOT = "conag/v7"  # v + messages.SCHEMA_VERSION: incompatible versions never meet
 
 # \Z, not $: `$` also matches before a trailing newline, which would let "a1\n" through.
 _ID = re.compile(r"^[A-Za-z0-9_.\-]{1,64}\Z")
@@ -93,6 +93,11 @@ def maps_requests_for(world: str, agent: str) -> tuple[str, str]:
     """The maps request tokens that concern `agent`, to watch: its own and those for every agent."""
     return (f"{world_root(world)}/alive/maps/*/{check_id(agent, 'agent id')}/*",
             f"{world_root(world)}/alive/maps/*/{MAPS_ALL}/*")
+
+
+def bricks(world: str, agent: str) -> str:
+    """BrickNews publications from one agent (the bricks it sees, takes and heads for)."""
+    return f"{world_root(world)}/agent/{check_id(agent, 'agent id')}/bricks"
 
 
 def agent_state(world: str, agent: str) -> str:

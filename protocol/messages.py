@@ -20,8 +20,9 @@ from protocol.keys import check_id
 # 5: cues (marks on the floor): SensorFrame.cues and cue_under, the mark / unmark actions and
 #    AgentCommand.mark_*, Welcome.cue_reach.
 # 6: the cues lying in the world in WorldView (cue_xs, cue_ys, cue_kinds), for viewers and recorders.
+# 7: BrickNews between agents, on the key agent/<id>/bricks (AgentConfig.share_bricks).
 # An incompatible change raises this and keys.ROOT together (see docs/protocol.md, Versioning).
-SCHEMA_VERSION = 6
+SCHEMA_VERSION = 7
 
 # Sensor channels, in the order of SensorFrame.ranges (channel-major).
 # Disc-like channels first (food, water, brick, obstacle: fixed `#` cells and the world's
@@ -494,6 +495,37 @@ class AgentState:
         _require(min(self.behaviour_ticks) >= 0, "AgentState.behaviour_ticks must be >= 0")
 
 
+MAX_NEWS_CELLS = 1024  # cells one BrickNews list holds at most (a sender's sight holds far fewer)
+
+
+@dataclass(frozen=True)
+class BrickNews:
+    """Agent -> agents, every few ticks, with `AgentConfig.share_bricks` on (best effort):
+    what the sender knows of the bricks (agent_runtime.brick_news).
+
+    Cells are the world's grid cells, (x east, y north) as world coordinates over the cell
+    size, floored: the free bricks in the sender's sight (`seen_*`), the bricks it took
+    since its last news (`taken_*`) and the brick it heads for (`claimed_*`: none or one).
+    """
+
+    agent_id: str
+    tick: int
+    seen_xs: tuple[int, ...]
+    seen_ys: tuple[int, ...]
+    taken_xs: tuple[int, ...]
+    taken_ys: tuple[int, ...]
+    claimed_xs: tuple[int, ...]
+    claimed_ys: tuple[int, ...]
+
+    def __post_init__(self) -> None:
+        check_id(self.agent_id, "agent id")
+        _require(self.tick >= 0, "BrickNews.tick must be >= 0")
+        for name in ("seen", "taken", "claimed"):
+            xs, ys = getattr(self, f"{name}_xs"), getattr(self, f"{name}_ys")
+            _require(len(xs) == len(ys), f"BrickNews {name}_xs/{name}_ys differ in length")
+            _require(len(xs) <= MAX_NEWS_CELLS, f"BrickNews has too many {name} cells")
+
+
 RUN_OPS = ("kill", "restart")
 
 
@@ -615,5 +647,5 @@ class AgentMap:
 MESSAGE_TYPES: tuple[type, ...] = (
     Hello, Welcome, SensorFrame, AgentCommand, CommandRejected, WorldStatus,
     Perturbation, PerturbResult, Decision, Reinforcement, RunControl, RunControlResult,
-    Blueprint, AgentState, Perturbed, LockstepTimeout, WorldView, AgentMap,
+    Blueprint, AgentState, Perturbed, LockstepTimeout, WorldView, AgentMap, BrickNews,
 )

@@ -129,7 +129,7 @@ def test_a_recording_cut_before_every_agents_first_command_takes_no_step(tmp_pat
                                             ("٣", None), ("", None), ("+5", None), (" 5", None), ("5 ", None),
                                             ("1000000001", None), ("9" * 5000, None), ("five", None)])
 def test_a_maps_request_period_is_ascii_digits_in_range(segment, every):
-    assert keys.maps_request_every(f"conag/v6/world/{W}/alive/maps/viewer/a1/{segment}") == every
+    assert keys.maps_request_every(f"{keys.ROOT}/world/{W}/alive/maps/viewer/a1/{segment}") == every
 
 
 def test_an_agent_ignores_a_maps_request_token_whose_period_is_no_number_with_a_warning(bus, caplog):

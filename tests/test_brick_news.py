@@ -4,15 +4,16 @@ own map and forgets those taken or claimed."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
-from agent_runtime.brick_news import NEWS_EVERY, cells
+from agent_runtime.brick_news import NEWS_EVERY, cells, report
 from agent_runtime.config import AgentConfig
 from agent_runtime.far_memory import FarMemory
 from conag import sim
-from conag.agent_settings import AgentSettings
-from tests.conftest import scenario
+from tests.conftest import SCENARIOS, conag, scenario, wait_until
 from world_server.discs import BRICK_DISC
 
 NO_SITES = np.zeros((0, 2), np.int64)
@@ -79,18 +80,63 @@ def test_news_is_of_bricks_in_sight_only_and_in_world_cells():
         run.step()
     a1, a2 = run.brains["a1"], run.brains["a2"]
     news = a1.brick_news()
-    assert news is not None and news.sender == "a1"
-    assert len(news.seen) > 0 and near_bricks(set(map(tuple, news.seen.tolist())), run, a1.cell)
-    assert a2.brick_news() is not None and len(a2.brick_news().seen) == 0   # none in a2's sight
+    assert news is not None and news.agent_id == "a1"
+    seen = set(zip(news.seen_xs, news.seen_ys))
+    assert seen and near_bricks(seen, run, a1.cell)
+    assert a2.brick_news() is not None and a2.brick_news().seen_xs == ()   # none in a2's sight
     run.step()
     assert a1.brick_news() is None   # one report every NEWS_EVERY ticks
 
 
-def test_agent_processes_and_the_env_refuse_brick_news_rather_than_drop_it():
-    # No bus message carries the news between processes yet: switched on there, the
-    # addition would silently do nothing.
-    with pytest.raises(ValueError, match="in-process simulator only"):
-        AgentSettings(with_=("share_bricks",)).config()
+def test_agent_processes_hear_each_others_news_over_the_bus(bus):
+    from agent_runtime.feeds import AgentFeeds
+    from protocol.messages import BEHAVIOURS, AgentState
+
+    class Teller:
+        def brick_news(self):
+            return report("a1", 10, cells([(3, 4), (9, 1)]), cells([(5, 5)]), cells([]))
+
+        def state_report(self, tick):
+            return AgentState("a1", tick, "explore", False, 0, "", (0,) * len(BEHAVIOURS))
+
+    class Listener:
+        set_blueprint = staticmethod(lambda *_: False)
+
+        def __init__(self):
+            self.heard = []
+
+        def hear_bricks(self, news):
+            self.heard.append(news)
+
+    teller = AgentFeeds(bus.server_session(), "w0", "a1", news=True)
+    listener = AgentFeeds(bus.client_session(), "w0", "a2", news=True)
+    ear = Listener()
+    try:
+        def heard() -> bool:
+            teller.after_step(Teller(), 10)   # best effort: sent again until the link is up
+            listener.before_step(ear)
+            return bool(ear.heard)
+        wait_until(heard, what="a1's brick news at a2")
+        news = ear.heard[0]
+        assert (news.agent_id, news.seen_xs, news.seen_ys, news.taken_xs) == ("a1", (3, 9), (4, 1), (5,))
+    finally:
+        for feeds in (teller, listener):
+            feeds.close()
+
+
+def test_the_env_refuses_brick_news_rather_than_drop_it():
+    # The env's agents meet only in its world: switched on there, the addition would
+    # silently do nothing.
     from conag.env import ConAgParallelEnv
-    with pytest.raises(ValueError, match="in-process simulator only"):
+    with pytest.raises(ValueError, match="share_bricks"):
         ConAgParallelEnv("scenarios/fig6.toml", cfg=AgentConfig(share_bricks=True))
+
+
+@pytest.mark.slow
+def test_conag_run_builds_fig6_with_agent_processes_sharing_bricks(tmp_path):
+    summary = tmp_path / "summary.json"
+    done = conag("run", str(SCENARIOS / "fig6.toml"), "--with", "share_bricks", "--headless", "--summary",
+                 str(summary), timeout=300)
+    assert done.returncode == 0, done.stdout + done.stderr
+    record = json.loads(summary.read_text())
+    assert record["completed"] and record["agent"]["changed"] == {"share_bricks": True}

@@ -27,6 +27,7 @@ from protocol import (
     AgentMap,
     AgentState,
     Blueprint,
+    BrickNews,
     CommandRejected,
     Decision,
     Hello,
@@ -105,6 +106,8 @@ EXAMPLES: dict[type, object] = {
     Blueprint: Blueprint(world_id="w", tick=40, version=2, site_xs=(0.5, 1.5), site_ys=(3.5, 3.5)),
     AgentState: AgentState(agent_id="a1", tick=300, behaviour="config_nav", holding=True, sites_open=3,
                            blocker="", behaviour_ticks=tuple(range(len(BEHAVIOURS)))),
+    BrickNews: BrickNews(agent_id="a1", tick=40, seen_xs=(3, 7), seen_ys=(12, 12), taken_xs=(5,), taken_ys=(1,),
+                         claimed_xs=(), claimed_ys=()),
 }
 
 
@@ -313,7 +316,7 @@ def test_protocol_error_is_a_value_error():
     assert issubclass(ProtocolError, ValueError)
 
 
-@pytest.mark.parametrize("version", [0, 1, 2, 3, 4, 5, 7, -1, 2**40, "6", b"\x06", None, True, [6], {"v": 6}])
+@pytest.mark.parametrize("version", [0, 1, 2, 3, 4, 5, 6, 8, -1, 2**40, "7", b"\x07", None, True, [7], {"v": 7}])
 def test_wrong_schema_version(version):
     _bad(_pack("Hello", ["a1", 1], version=version))
 

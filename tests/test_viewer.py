@@ -15,7 +15,7 @@ from agent_runtime.world_link import WorldLink
 from conag.recording.mcap_log import McapRecorder, read_recording
 from conag.viewer.scene import MAPS_STEPS, Scene, Timeline, layer_cells, maps_interval
 from conag.viewer.server import LiveFeed, ViewerServer
-from protocol import encode
+from protocol import encode, keys
 from protocol.messages import BEHAVIOURS, AgentState, WorldStatus, WorldView
 from tests.conftest import RunningWorld, make, wait_until
 from tests.scripted import ScriptedBody
@@ -70,8 +70,8 @@ def test_the_timeline_of_a_recording_shows_the_newest_view_at_or_before_a_tick(t
     out = tmp_path / "r.mcap"
     with McapRecorder(out) as rec:
         for tick, x in ((0, 0.5), (10, 1.5), (20, 2.5)):
-            rec.add("conag/v6/world/w0/view", encode(view(tick, x, filled=tick >= 20)), tick)
-            rec.add("conag/v6/world/w0/agent/a1/command", b"not drawn", tick)
+            rec.add(f"{keys.ROOT}/world/w0/view", encode(view(tick, x, filled=tick >= 20)), tick)
+            rec.add(f"{keys.ROOT}/world/w0/agent/a1/command", b"not drawn", tick)
     timeline = Timeline.from_entries(read_recording(out).entries)
     assert timeline.ticks == [0, 10, 20]
     assert json.loads(timeline.at(15))["agents"][0]["x"] == 1.5
@@ -138,7 +138,7 @@ def test_the_page_asks_for_the_maps_of_the_agent_it_shows_only(bus):
             assert requests("a1") == []  # nobody shown: nobody asked
             assert get(server.url + "api/maps?agent=a1") == {"tick": None, "size": 0, "layers": {}}
             assert feed.selected == "a1"
-            wait_until(lambda: requests("a1") == ["conag/v6/world/w0/alive/maps/v1/a1/10"], what="a1's request")
+            wait_until(lambda: requests("a1") == [f"{keys.ROOT}/world/w0/alive/maps/v1/a1/10"], what="a1's request")
             get(server.url + "api/maps?agent=a2")
             wait_until(lambda: requests("a1") == [] and requests("a2"), what="the request to follow the page")
     finally:
@@ -295,22 +295,22 @@ def test_the_maps_request_follows_the_runs_speed_between_the_pages_asks(bus):
     try:
         world_at(0)
         feed.maps("a1")
-        wait_until(lambda: requests() == ["conag/v6/world/w0/alive/maps/v1/a1/10"], what="the first request")
+        wait_until(lambda: requests() == [f"{keys.ROOT}/world/w0/alive/maps/v1/a1/10"], what="the first request")
         now[0] += 2.0
         world_at(120)                                # 60 ticks a second: one snapshot every 50
         feed.maps("a1")
-        wait_until(lambda: requests() == ["conag/v6/world/w0/alive/maps/v1/a1/50"], what="the request at 50")
+        wait_until(lambda: requests() == [f"{keys.ROOT}/world/w0/alive/maps/v1/a1/50"], what="the request at 50")
         now[0] += 1.0
         world_at(125)                                # it slowed down to 5 a second
         feed.maps("a1")
-        wait_until(lambda: requests() == ["conag/v6/world/w0/alive/maps/v1/a1/10"], what="the request back at 10")
+        wait_until(lambda: requests() == [f"{keys.ROOT}/world/w0/alive/maps/v1/a1/10"], what="the request back at 10")
     finally:
         feed.close()
     wait_until(lambda: requests() == [], what="the request to go with the viewer")
 
 
 def test_a_recording_cannot_be_perturbed_and_its_frames_are_served_by_tick():
-    timeline = Timeline.from_entries([type("E", (), dict(key="conag/v6/world/w0/view", tick=t,
+    timeline = Timeline.from_entries([type("E", (), dict(key=f"{keys.ROOT}/world/w0/view", tick=t,
                                                          data=encode(view(t, 0.5 + t / 10))))() for t in (0, 10)])
     with ViewerServer(timeline).serve_in_thread() as server:
         assert get(server.url + "api/info")["ticks"] == [0, 10]
@@ -401,7 +401,7 @@ def test_the_timeline_gives_an_agents_maps_at_a_tick():
     from agent_runtime.snapshot import map_snapshot
 
     brain = _brain_after_one_step()
-    entries = [type("E", (), dict(key="conag/v6/world/w0/agent/a1/maps", tick=t, data=encode(m)))()
+    entries = [type("E", (), dict(key=f"{keys.ROOT}/world/w0/agent/a1/maps", tick=t, data=encode(m)))()
                for t in (10, 20) for m in map_snapshot(brain, t)]
     timeline = Timeline.from_entries(entries)
     assert timeline.maps_at("a1", 15)["tick"] == 10 and timeline.maps_at("a1", 99)["tick"] == 20

@@ -29,9 +29,10 @@ The roles (a username each; `agent_user(id)` for agents):
 
 * `world`: publishes every frame, error, welcome, status, view, blueprint; hears every
   command and AgentState; answers attach, perturb, view, status and blueprint queries;
-* an agent `a1`: publishes only its own command, decision, state and maps, and declares only
-  its own liveliness token; receives only its own frames, reinforcements and errors (and the
-  blueprint); may attach only as itself; answers queries for its own newest decision;
+* an agent `a1`: publishes only its own command, decision, state, maps and brick news, and
+  declares only its own liveliness token; receives only its own frames, reinforcements and
+  errors (and the blueprint, and every agent's brick news); may attach only as itself;
+  answers queries for its own newest decision;
   watches the world's token, teachers and maps requests for itself;
 * `teacher`: hears every decision, publishes the reinforcements, its own teacher token;
 * `operator`: the only one that may perturb the world or ask a `conag run` to kill or restart
@@ -102,9 +103,10 @@ def agent_role(world: str, agent: str) -> Role:
     """Agent `agent`: its own keys only, in and out (see the module)."""
     return Role(agent_user(agent), (
         ("publish", (keys.command(world, agent), keys.decision(world, agent), keys.agent_state(world, agent),
-                     keys.agent_maps(world, agent))),
+                     keys.agent_maps(world, agent), keys.bricks(world, agent))),
+        # Every agent's brick news (`share_bricks`): the one traffic from agent to agent.
         ("subscribe", (keys.sensors(world, agent), keys.reinforcement(world, agent),
-                       keys.command_error(world, agent), keys.blueprint(world))),
+                       keys.command_error(world, agent), keys.blueprint(world), keys.all_agents(world, "bricks"))),
         ("ask", (keys.attach(world, agent), keys.blueprint(world), keys.status(world))),
         ("serve", (keys.decision(world, agent),)),  # its newest Decision, to a viewer
         ("token", (keys.agent_token(world, agent),)),
