@@ -59,8 +59,8 @@ class AgentConfig:
     idle_wait: bool = False         # knowing bricks but nothing to fetch, wait near the supply, off the sites
     yield_goals: bool = False       # leave a brick or site to another agent in sight that is nearer to it
     spread_search: bool = False     # searching for bricks, leave unseen ground nearer another agent in sight to it
-    share_bricks: bool = False      # tell the other agents the free bricks on the map, and each brick taken;
-                                    # remember what they tell (agent_runtime.brick_news; over the bus)
+    share_bricks: bool = False      # tell the other agents the free bricks in sight, the one headed for and
+                                    # those taken; remember what they tell (agent_runtime.brick_news; the bus)
     # Refinements of the ESMs' sensing rule (agent_runtime.esm; off: the plain rule).
     ghost_association: bool = True  # a reading explains a cell already marked; other brick marks in its band are ghosts
     clear_margins: bool = True      # a sector clears only cells well in front of its reading, well inside its range

@@ -120,6 +120,9 @@ class AgentFeeds:
         while (sample := self._news_in.get(0)) is not None:
             try:
                 news = decode(sample.payload.to_bytes(), BrickNews)
+                # Told in another's name: on a secure bus only a1 publishes on a1's key.
+                if keys.agent_of(str(sample.key_expr)) != news.agent_id:
+                    raise ProtocolError(f"news of {news.agent_id!r} on {sample.key_expr}")
             except ProtocolError as exc:
                 self.bad += 1
                 log.debug("agent %s ignored bad brick news: %s", self.agent_id, exc)

@@ -13,6 +13,8 @@ from agent_runtime.brick_news import NEWS_EVERY, cells, report
 from agent_runtime.config import AgentConfig
 from agent_runtime.far_memory import FarMemory
 from conag import sim
+from protocol import keys
+from protocol.codec import encode
 from tests.conftest import SCENARIOS, conag, scenario, wait_until
 from world_server.discs import BRICK_DISC
 
@@ -119,6 +121,14 @@ def test_agent_processes_hear_each_others_news_over_the_bus(bus):
         wait_until(heard, what="a1's brick news at a2")
         news = ear.heard[0]
         assert (news.agent_id, news.seen_xs, news.seen_ys, news.taken_xs) == ("a1", (3, 9), (4, 1), (5,))
+        # News in another agent's name, on a1's key, is refused and counted.
+        forger = bus.client_session().declare_publisher(keys.bricks("w0", "a1"))
+        forged = encode(report("a3", 20, cells([(1, 1)]), cells([]), cells([])))
+
+        def refused() -> bool:
+            forger.put(forged)
+            return not listener.brick_news() and listener.bad > 0
+        wait_until(refused, what="the forged news counted as bad")
     finally:
         for feeds in (teller, listener):
             feeds.close()
