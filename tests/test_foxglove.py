@@ -35,6 +35,7 @@ from protocol.codec import ProtocolError, decode, encode
 from protocol.messages import (
     CHANNELS,
     MAP_LAYERS,
+    SCHEMA_VERSION,
     AgentMap,
     AgentState,
     SensorFrame,
@@ -259,7 +260,7 @@ def test_a_map_is_decoded_fast_as_the_codec_decodes_it():
 def _raw_map(fields: list) -> bytes:
     import msgpack
 
-    return msgpack.packb({"v": 6, "t": "AgentMap", "f": fields}, use_bin_type=True)
+    return msgpack.packb({"v": SCHEMA_VERSION, "t": "AgentMap", "f": fields}, use_bin_type=True)
 
 
 @pytest.mark.parametrize("data", [

@@ -23,7 +23,7 @@ import pytest
 from conag.recording.mcap_log import McapRecorder
 from conag.viewer.scene import layer_cells
 from conag.viewer.server import LiveFeed, ViewerServer
-from protocol import encode
+from protocol import encode, keys
 from tests.conftest import ROOT, SCENARIOS, RunningWorld, make, wait_until
 from tests.test_viewer import LAYOUT, view
 
@@ -178,7 +178,7 @@ def test_the_recording_page_scrubs_the_timeline(tmp_path, browser):
     views = [view(0, 0.5, filled=False), view(50, 3.5, filled=False), view(100, 5.25, filled=True)]
     with McapRecorder(out) as rec:
         for v in views:
-            rec.add("conag/v6/world/w0/view", encode(v), v.tick)
+            rec.add(keys.view("w0"), encode(v), v.tick)
     from conag.commands.view import load_timeline
 
     with ViewerServer(load_timeline(str(out))).serve_in_thread() as server:
