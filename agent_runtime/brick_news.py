@@ -40,12 +40,16 @@ def report(agent_id: str, tick: int, seen: np.ndarray, taken: np.ndarray, claime
 
 def seen_cells(news: BrickNews) -> np.ndarray:
     """The free bricks the sender sees, (k, 2) world cells."""
-    return cells(list(zip(news.seen_xs, news.seen_ys)))
+    return _stacked(news.seen_xs, news.seen_ys)
 
 
 def gone_cells(news: BrickNews) -> np.ndarray:
     """The bricks the sender took or heads for, (k, 2) world cells: not to be fetched."""
-    return cells(list(zip(news.taken_xs + news.claimed_xs, news.taken_ys + news.claimed_ys)))
+    return _stacked(news.taken_xs + news.claimed_xs, news.taken_ys + news.claimed_ys)
+
+
+def _stacked(xs: tuple[int, ...], ys: tuple[int, ...]) -> np.ndarray:
+    return np.array([xs, ys], np.int64).T.reshape(-1, 2)
 
 
 def cells(pairs) -> np.ndarray:

@@ -333,19 +333,13 @@ class FarMemory:
         and the caches keep, when the news is old news."""
         if not self.remember:
             return
-        if len(taken) and len(self.bricks):
-            gone = _rows_in(self.bricks, taken)
-            if gone.any():
-                self.bricks = self.bricks[~gone]
-        if len(seen) and len(taken):
-            seen = seen[~_rows_in(seen, taken)]
-        if len(seen):
-            rows, cols = self.to_map(seen)
-            new = seen[~self._on_map(rows, cols)]
-            if len(self.bricks):
-                new = new[~_rows_in(new, self.bricks)]
-            if len(new):
-                self._remember(new)
+        gone = _rows_in(self.bricks, taken)
+        if gone.any():
+            self.bricks = self.bricks[~gone]
+        rows, cols = self.to_map(seen)
+        new = seen[~self._on_map(rows, cols) & ~_rows_in(seen, taken) & ~_rows_in(seen, self.bricks)]
+        if len(new):
+            self._remember(new)
 
     # ------------------------------------------------------------------ exploring
 
@@ -582,7 +576,8 @@ def _nearest_octile(cells: np.ndarray, targets: np.ndarray) -> np.ndarray:
 def _rows_in(cells: np.ndarray, among: np.ndarray) -> np.ndarray:
     """Which rows of `cells` ((k, 2) int) are rows of `among` ((j, 2) int), as a bool array."""
     def key(a: np.ndarray) -> np.ndarray:
-        return np.asarray(a, np.int64)[:, 0] * (1 << 32) + np.asarray(a, np.int64)[:, 1]
+        a = np.asarray(a, np.int64).reshape(-1, 2)
+        return a[:, 0] * (1 << 32) + a[:, 1]
     return np.isin(key(cells), key(among))
 
 

@@ -28,6 +28,8 @@ from __future__ import annotations
 import logging
 import threading
 from collections import Counter
+from collections.abc import Iterator
+from typing import TypeVar
 
 import zenoh
 
@@ -39,6 +41,7 @@ from protocol.messages import Blueprint, BrickNews
 
 log = logging.getLogger("conag.agent")
 
+T = TypeVar("T")
 STATE_EVERY = 100  # ticks between AgentState reports
 
 
@@ -93,16 +96,19 @@ class AgentFeeds:
     def newest_blueprint(self) -> Blueprint | None:
         """The highest-version Blueprint among those that arrived since the last call."""
         best = None
-        while (sample := self._blueprints.get(0)) is not None:
-            try:
-                bp = decode(sample.payload.to_bytes(), Blueprint)
-            except ProtocolError as exc:
-                self.bad += 1
-                log.debug("agent %s ignored a bad blueprint: %s", self.agent_id, exc)
-                continue
+        for _, bp in self._arrived(self._blueprints, Blueprint):
             if bp.world_id == self.world_id and (best is None or bp.version > best.version):
                 best = bp
         return best
+
+    def _arrived(self, inbox: Inbox, cls: type[T]) -> Iterator[tuple[zenoh.Sample, T]]:
+        """(sample, message) for each `cls` message waiting in `inbox`; bad ones counted and skipped."""
+        while (sample := inbox.get(0)) is not None:
+            try:
+                yield sample, decode(sample.payload.to_bytes(), cls)
+            except ProtocolError as exc:
+                self.bad += 1
+                log.debug("agent %s ignored a bad %s: %s", self.agent_id, cls.__name__, exc)
 
     def before_step(self, brain) -> None:
         """Hand the brain the newest blueprint, if one came (it keeps only newer versions),
@@ -116,18 +122,14 @@ class AgentFeeds:
 
     def brick_news(self) -> list[BrickNews]:
         """The other agents' BrickNews that arrived since the last call (bad ones counted)."""
+        assert self._news_in is not None
         out = []
-        while (sample := self._news_in.get(0)) is not None:
-            try:
-                news = decode(sample.payload.to_bytes(), BrickNews)
+        for sample, news in self._arrived(self._news_in, BrickNews):
+            if keys.agent_of(str(sample.key_expr)) != news.agent_id:
                 # Told in another's name: on a secure bus only a1 publishes on a1's key.
-                if keys.agent_of(str(sample.key_expr)) != news.agent_id:
-                    raise ProtocolError(f"news of {news.agent_id!r} on {sample.key_expr}")
-            except ProtocolError as exc:
                 self.bad += 1
-                log.debug("agent %s ignored bad brick news: %s", self.agent_id, exc)
-                continue
-            if news.agent_id != self.agent_id:
+                log.debug("agent %s ignored news of %s on %s", self.agent_id, news.agent_id, sample.key_expr)
+            elif news.agent_id != self.agent_id:
                 out.append(news)
         return out
 

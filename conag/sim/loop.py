@@ -61,6 +61,8 @@ class SimRun:
     on_step: Callable[[str, Step], None] | None = None  # sees every decision (the teacher's view)
     stall: StallClock | None = None  # the last run's, when it watched for stalls
     agent: dict = field(default_factory=dict)  # which agent runs (`AgentConfig.describe`), for SimResult
+    # The brains that tell and hear brick news, kept per number of brains (`_pass_news`).
+    _tellers: tuple[int, list[Brain]] = field(default=(-1, []), init=False, repr=False, compare=False)
 
     def step(self) -> None:
         """One lockstep tick: every brain answers its frame, then the world steps."""
@@ -79,10 +81,13 @@ class SimRun:
         """Each brain's brick news (`AgentConfig.share_bricks`) to every other brain: the
         loop stands in for a bus (agent_runtime.brick_news). A society's workers keep no maps:
         they neither tell nor hear."""
-        brains = [b for b in self.brains.values() if isinstance(b, Brain)]
-        for news in [b.brick_news() for b in brains]:
+        if self._tellers[0] != len(self.brains):
+            self._tellers = (len(self.brains), [b for b in self.brains.values()
+                                                if isinstance(b, Brain) and b.cfg.share_bricks])
+        tellers = self._tellers[1]
+        for news in [b.brick_news() for b in tellers]:
             if news is not None:
-                for brain in brains:
+                for brain in tellers:
                     brain.hear_bricks(news)
 
     def _record_fills(self) -> None:
