@@ -4,6 +4,8 @@
     python3 -m experiments.ablation --sample 60 --jobs 2  # the 60-layout table: ablation.md
     python3 -m experiments.ablation --cluster tcp://HOST:8786   # on a Dask cluster (experiments/runner.py)
     python3 -m experiments.ablation --sample 60 --resume  # go on with an interrupted run (same options)
+    python3 -m experiments.ablation --sample 60 --status  # how far its journal is, and its table so far
+    python3 -m experiments.ablation --quick --report-only # the table again from ablation_quick.json, running nothing
 
 Each layout of a sample of the generated suite (`--sample` files evenly spaced in name
 order, so every family and size comes in) is built in process (`conag.sim`, goal
@@ -139,10 +141,17 @@ def sweep(jobs: list[Job], execute: Callable[[list[Job]], Iterable[runner.Done]]
 
 
 def table(runs: list[Run]) -> str:
-    """The markdown table: one row per agent, in `variants()` order."""
+    """The markdown table: one row per agent, in `variants()` order. Beside each agent's own
+    figures, the paired ones against the default on the same layouts (the medians of the
+    completed runs alone compare different sets of layouts): the layouts it completes that
+    the default does not, and the reverse; on how many layouts its run is the default's to
+    the tick and the unit of distance (the addition switched off never changed a decision
+    there); and its ticks over the default's on the layouts both complete."""
     layouts = len({r.layout for r in runs})
-    lines = [f"| agent | completed (of {layouts}) | median ticks (completed) | median distance / bound |",
-             "|---|---:|---:|---:|"]
+    base = {r.layout: r for r in runs if r.agent == "default"}
+    lines = [(f"| agent | completed (of {layouts}) | gained / lost against default | same run as default | "
+              "median ticks (completed) | ticks / default's (median, both completed) | median distance / bound |"),
+             "|---|---:|---:|---:|---:|---:|---:|"]
     for agent in variants():
         mine = [r for r in runs if r.agent == agent]
         if not mine:
@@ -150,8 +159,45 @@ def table(runs: list[Run]) -> str:
         done = [r for r in mine if r.completed]
         ticks = f"{statistics.median(r.ticks for r in done):,.0f}" if done else "-"
         ratio = f"{statistics.median(r.distance / r.bound for r in done if r.bound > 0):.2f}" if done else "-"
-        lines.append(f"| {agent} | {len(done)} | {ticks} | {ratio} |")
+        paired = [(r, base[r.layout]) for r in mine if r.layout in base]
+        gained = sum(r.completed and not d.completed for r, d in paired)
+        lost = sum(d.completed and not r.completed for r, d in paired)
+        same = sum(r.completed == d.completed and r.ticks == d.ticks and r.distance == d.distance for r, d in paired)
+        both = [r.ticks / d.ticks for r, d in paired if r.completed and d.completed]
+        versus = f"{statistics.median(both):.2f}" if both else "-"
+        lines.append(f"| {agent} | {len(done)} | {gained} / {lost} | {same} of {len(paired)} | {ticks} | {versus} "
+                     f"| {ratio} |")
     return "\n".join(lines)
+
+
+def journal_status(journal: Journal, jobs: list[Job], code: str) -> str:
+    """What an unfinished sweep's journal holds: how many of `jobs` are done, and the table
+    of the layouts every agent has finished (an interim figure, not the sample's)."""
+    done = resumed(journal, jobs, code)[0]
+    agents = {j.agent for j in jobs}
+    by_layout: dict[str, list[Run]] = {}
+    for r in done.values():
+        by_layout.setdefault(r.layout, []).append(r)
+    whole = [r for rs in by_layout.values() if {r.agent for r in rs} == agents for r in rs]
+    head = (f"{len(done)} of {len(jobs)} runs done at this code; {len({r.layout for r in whole})} of "
+            f"{len({j.layout for j in jobs})} layouts have every agent's run")
+    return head + ("\n\n" + table(whole) if whole else "")
+
+
+def report_only(path: Path) -> int:
+    """Write `path`'s table (the .md beside it) from its runs, running nothing."""
+    try:
+        runs = [Run(**r) for r in json.loads(path.read_text(encoding="utf-8"))]
+    except FileNotFoundError:
+        print(f"error: {path}: no such file (a finished sweep writes it)", file=sys.stderr)
+        return 2
+    except (json.JSONDecodeError, TypeError) as exc:
+        print(f"error: {path}: not an ablation's runs ({exc})", file=sys.stderr)
+        return 2
+    text = table(runs)
+    path.with_suffix(".md").write_text(text + "\n", encoding="utf-8")
+    print(text)
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -167,6 +213,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--resume", action="store_true",
                     help="keep the runs an interrupted invocation with the same --out finished "
                          "(its journal there, ablation.partial.jsonl)")
+    ap.add_argument("--status", action="store_true",
+                    help="run nothing: say how far the journal under --out is, with the table of the layouts "
+                         "it holds every agent's run of")
+    ap.add_argument("--report-only", action="store_true",
+                    help="run nothing: write the table again from the json under --out (after a change to the table)")
     args = ap.parse_args(argv)
     names = sorted(p.name for p in materialise())
     layouts = list(QUICK) if args.quick else names[::max(len(names) // args.sample, 1)][:args.sample]
@@ -176,8 +227,13 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"unknown agent(s) {', '.join(unknown)}; known: {', '.join(variants())}")
     jobs = [job_of(layout, agent, args.stall) for layout in layouts for agent in agents]
     stem = "ablation_quick" if args.quick else "ablation"
+    if args.report_only:
+        return report_only(args.out / f"{stem}.json")
     args.out.mkdir(parents=True, exist_ok=True)
-    journal = Journal(args.out / f"{stem}.partial.jsonl", resume=args.resume)
+    journal = Journal(args.out / f"{stem}.partial.jsonl", resume=args.resume, readonly=args.status)
+    if args.status:
+        print(journal_status(journal, jobs, code_version()))
+        return 0
     where = runner.where_of(args, args.jobs)
     try:
         runs = sweep(jobs, lambda todo: runner.run(run_one, todo, where), journal, code_version())

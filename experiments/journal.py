@@ -25,11 +25,16 @@ CODE_DIRS = ("agent_runtime", "world_server", "conag/sim")   # what a run's outc
 class Journal:
     """Append-only JSON lines at `path`; `entries` are the lines read when it was opened."""
 
-    def __init__(self, path: Path, *, resume: bool, clock=time.time):
+    def __init__(self, path: Path, *, resume: bool, clock=time.time, readonly: bool = False):
+        """`resume`: keep the earlier entries (else the file is started anew). `readonly`: only
+        read them, writing nothing (a sweep may be appending to the file meanwhile)."""
         self.path = Path(path)
         self._clock = clock
         self._began = clock()
-        self.entries: list[dict[str, Any]] = _read(self.path) if resume else []
+        self.readonly = readonly
+        self.entries: list[dict[str, Any]] = _read(self.path) if resume or readonly else []
+        if readonly:
+            return
         if not resume:
             self.path.unlink(missing_ok=True)   # a fresh run: nothing earlier counts
         elif self.entries:
@@ -49,6 +54,8 @@ class Journal:
 
     def append(self, key: Any, result: Any) -> None:
         """Record one finished job now."""
+        if self.readonly:
+            raise ValueError(f"{self.path}: opened to read only")
         line = json.dumps({"run": self._began, "at": self._clock() - self._began, "key": key, "result": result})
         with self.path.open("a", encoding="utf-8") as f:
             f.write(line + "\n")

@@ -68,3 +68,37 @@ def test_the_estimate_of_what_remains_goes_by_the_pace_so_far():
     assert ablation.hms(ablation.remaining(120.0, 4, 10)) == "0:05:00"
     assert ablation.hms(3723.4) == "1:02:03"
     assert ablation.hms(ablation.remaining(0.0, 0, 10)) == "?"   # no run finished: no pace yet
+
+
+def _run(layout: str, agent: str, completed: bool, ticks: int, distance: float) -> ablation.Run:
+    return ablation.Run(layout, "wall", agent, completed, ticks, distance, bound=10.0)
+
+
+def test_the_table_pairs_each_agent_with_the_default_on_the_same_layouts():
+    runs = [_run("a", "default", True, 1000, 50.0), _run("b", "default", True, 2000, 80.0),
+            _run("c", "default", False, 9000, 90.0),
+            _run("a", "-unstick", True, 1000, 50.0),     # the default's run to the tick: unstick never acted
+            _run("b", "-unstick", True, 3000, 99.0),     # 1.5x the ticks
+            _run("c", "-unstick", True, 4000, 70.0),     # completes where the default stalls
+            _run("a", "paper", False, 3000, 10.0), _run("b", "paper", False, 3000, 10.0),
+            _run("c", "paper", False, 9000, 90.0)]       # stalled as the default did, to the tick
+    rows = {line.split(" | ")[0].lstrip("| "): line.split(" | ") for line in ablation.table(runs).splitlines()[2:]}
+    # agent | completed | gained / lost | same run | median ticks | ticks / default's | distance / bound
+    assert rows["default"][1:4] == ["2", "0 / 0", "3 of 3"]
+    assert rows["-unstick"][1:4] == ["3", "1 / 0", "1 of 3"]
+    assert rows["-unstick"][5] == "1.25"                  # the median of 1.0 and 1.5, on a and b
+    assert rows["paper"][1:4] == ["0", "0 / 2", "1 of 3"]
+    assert rows["paper"][5] == "-"
+
+
+def test_the_status_of_an_unfinished_sweep_counts_only_layouts_every_agent_finished(tmp_path):
+    path = tmp_path / "runs.jsonl"
+    with pytest.raises(Killed):
+        ablation.sweep(JOBS, executor([], kill_after=3), Journal(path, resume=False), "code")
+    before = path.read_bytes()
+    text = ablation.journal_status(Journal(path, resume=False, readonly=True), JOBS, "code")
+    assert path.read_bytes() == before                       # read only: a running sweep appends to it
+    assert text.startswith("3 of 6 runs done at this code; 1 of 3 layouts have every agent's run")
+    assert "completed (of 1)" in text
+    with pytest.raises(ValueError, match="read only"):
+        Journal(path, resume=False, readonly=True).append(["k"], {})

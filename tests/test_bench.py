@@ -78,3 +78,14 @@ def test_recorder_benchmark_replays_a_build_into_the_recorder_and_prints_its_cpu
     cpu = [line for line in r.stdout.splitlines() if "CPU s per 1000 ticks (median" in line]
     assert len(cpu) == 2 and all(float(line.split("recorder ")[1].split()[0]) > 0 for line in cpu), r.stdout
     assert sum("us per bus message" in line for line in r.stdout.splitlines()) == 2, r.stdout
+
+
+def test_step_contention_replays_the_recorded_decisions_in_every_arrangement():
+    r = subprocess.run([sys.executable, "-m", "bench.bench_step_contention", "--quick"], cwd=ROOT,
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr   # non-zero when any arrangement decided otherwise than the recording
+    rows = {line.split("|")[1].strip(): line.split("|")[2:] for line in r.stdout.splitlines()
+            if line.startswith("| ") and not line.startswith("| arrangement")}
+    assert set(rows) == {"one process", "processes, lockstep", "processes, free", "two hosts, lockstep"}
+    assert all(cells[-2].strip() == "yes" and float(cells[0]) > 0 for cells in rows.values())
+    assert rows["one process"][2].strip() == "1.00x"

@@ -435,7 +435,12 @@ def test_a_recorded_agent_attaches_only_once_it_hears_the_recorder(bus, start_wo
         stop=stop))
     agent.start()
     try:
-        time.sleep(1.5)
+        # The agent is up (its liveliness token is on the bus) and waits: it must not attach
+        # meanwhile (a bare sleep would pass before the agent had even started).
+        watcher = bus.client_session()
+        wait_until(lambda: list(watcher.liveliness().get(keys.agent_token(W, "a1"), timeout=1)), 20,
+                   what="a1's liveliness token")
+        time.sleep(0.5)
         assert rw.world.live_agents() == [] and rw.world.tick == 0
         token = bus.client_session().liveliness().declare_token(keys.recorder_token(W, "recorder"))
         wait_until(lambda: rw.world.live_agents() == ["a1"], 20, what="a1 to attach once the recorder is up")
