@@ -15,7 +15,10 @@ With `kill_world_every` the world process itself is SIGKILLed too, every few sec
 average, counted from when the restarted world's frames come again, and not before the
 world has ticked one checkpoint interval past where it started (`conag run` restarts it
 from its last checkpoint, and the agents attach again; a world that dies before it gets a
-checkpoint further, three times in a row, is taken for one that cannot start).
+checkpoint further, three times in a row, is taken for one that cannot start), nor before
+`world_min_life` ticks past it: as `min_life` does for agents, it makes the number of kills
+a build sees depend on its ticks more than on the machine's speed (a wall-clock schedule
+alone kills a fast machine's short build once and a slow machine's over and over).
 For each world kill the run records the ticks lost: the newest tick any agent's frame
 showed before the kill, less the tick the restarted world's first frame shows (at most the
 checkpoint interval). `kill_every` 0 kills no agents (only the world).
@@ -72,6 +75,7 @@ class ChaosOptions:
     run_timeout: float = 600.0     # wall seconds before a run is stopped (SIGTERM)
     world_seed: int | None = None  # --seed of `conag run` (default: the scenario's)
     kill_world_every: float = 0.0  # mean wall seconds between SIGKILLs of the world (0: never)
+    world_min_life: int = 0        # world ticks past where it (re)started before it may be killed
     checkpoint_every: int | None = None  # `conag run --checkpoint-every` (default: its own)
 
     def __post_init__(self) -> None:
@@ -85,6 +89,8 @@ class ChaosOptions:
             raise ValueError("nothing to kill: --kill-every and --kill-world-every are both 0")
         if self.min_life < 0:
             raise ValueError("--min-life must be >= 0 ticks")
+        if self.world_min_life < 0:
+            raise ValueError("--world-min-life must be >= 0 ticks")
         if not 0 <= self.restart_share <= 1:
             raise ValueError("--restart-share must be in [0, 1]")
         if self.min_alive < 1:
@@ -246,7 +252,7 @@ def chaos_run(opts: ChaosOptions, index: int, stop: threading.Event, log=print) 
             next_agent, next_world = now + _draw(rng, opts.kill_every), now + _draw(world_rng, opts.kill_world_every)
             # A world is killed only once it has got one checkpoint past where it started: one
             # that dies before (three times in a row) is taken for one that cannot start.
-            interval = opts.checkpoint_every or DEFAULT_EVERY
+            interval = max(opts.checkpoint_every or DEFAULT_EVERY, opts.world_min_life)
             while proc.poll() is None:
                 if stop.wait(0) or time.monotonic() - started > opts.run_timeout:
                     proc.send_signal(signal.SIGTERM)
@@ -367,6 +373,9 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--kill-world-every", type=float, default=0.0, metavar="S",
                    help="also SIGKILL the world process every S wall seconds on average (default 0: never); "
                         "conag run restarts it from its last checkpoint")
+    c.add_argument("--world-min-life", type=non_negative, default=0, metavar="N",
+                   help="kill the world only once it has ticked N ticks past where it (re)started (default 0: "
+                        "one checkpoint interval)")
     c.add_argument("--checkpoint-every", type=positive, metavar="N",
                    help=f"the world's checkpoint interval in ticks (default {DEFAULT_EVERY})")
     c.add_argument("--min-alive", type=int, default=1, metavar="N",
@@ -389,7 +398,8 @@ def _run(args) -> int:
                         restart_share=args.restart_share,
                         min_alive=args.min_alive, seed=args.seed, agents=args.agents, max_ticks=args.max_ticks,
                         stall_ticks=args.stall_ticks, run_timeout=args.run_timeout, world_seed=args.world_seed,
-                        kill_world_every=args.kill_world_every, checkpoint_every=args.checkpoint_every)
+                        kill_world_every=args.kill_world_every, world_min_life=args.world_min_life,
+                        checkpoint_every=args.checkpoint_every)
     with stop_on_signals() as stop:
         results = chaos(opts, stop, log=lambda line: print(line, flush=True))
     out = report(opts, results)

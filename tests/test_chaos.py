@@ -30,6 +30,8 @@ def test_a_kill_spares_an_agent_until_it_has_lived_min_life_ticks():
     assert roster.ready(0, 0) == ["a2"]
     with pytest.raises(ValueError, match="--min-life"):
         ChaosOptions("scenarios/fig6.toml", min_life=-1)
+    with pytest.raises(ValueError, match="--world-min-life"):
+        ChaosOptions("scenarios/fig6.toml", kill_world_every=1.0, world_min_life=-1)
 
 
 @pytest.mark.slow
@@ -56,13 +58,14 @@ def test_nested_squares_completes_under_random_kills_with_bricks_total_kept(tmp_
 @pytest.mark.slow
 @pytest.mark.timeout(600)
 def test_nested_squares_completes_while_its_world_is_sigkilled(tmp_path):
-    # The world process itself is SIGKILLed every second or so once it ticks (again);
-    # `conag run` restarts it from its last checkpoint and the agents attach again by
-    # themselves. One agent: a build of about 2,700 ticks, long enough for a few kills even
-    # on an idle machine (with two it ended after two kills, the second as it completed).
+    # The world process itself is SIGKILLed a third of a second or so after it has ticked 500
+    # ticks past where it (re)started; `conag run` restarts it from its last checkpoint and
+    # the agents attach again by themselves. One agent: a build of about 3,400 ticks, so some
+    # six kills on any machine (a kill a second alone gave an idle machine's 6 s build one).
     out = tmp_path / "chaos.json"
     r = chaos("scenarios/nested_squares.toml", "--agents", 1, "--runs", 1, "--kill-every", 0,
-              "--kill-world-every", 1, "--checkpoint-every", 50, "--seed", 2, "--json", out, timeout=600)
+              "--kill-world-every", 0.3, "--world-min-life", 500, "--checkpoint-every", 50, "--seed", 2,
+              "--json", out, timeout=600)
     assert r.returncode == 0, r.stdout + r.stderr
     report = json.loads(out.read_text())
     run = report["runs"][0]
