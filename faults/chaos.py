@@ -250,8 +250,9 @@ def chaos_run(opts: ChaosOptions, index: int, stop: threading.Event, log=print) 
                     break
             now = time.monotonic()
             next_agent, next_world = now + _draw(rng, opts.kill_every), now + _draw(world_rng, opts.kill_world_every)
-            # A world is killed only once it has got one checkpoint past where it started: one
-            # that dies before (three times in a row) is taken for one that cannot start.
+            # A world is killed only once it has got one checkpoint past where it started (one
+            # that dies before, three times in a row, is taken for one that cannot start) and
+            # `world_min_life` ticks past it.
             interval = max(opts.checkpoint_every or DEFAULT_EVERY, opts.world_min_life)
             while proc.poll() is None:
                 if stop.wait(0) or time.monotonic() - started > opts.run_timeout:
@@ -375,7 +376,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "conag run restarts it from its last checkpoint")
     c.add_argument("--world-min-life", type=non_negative, default=0, metavar="N",
                    help="kill the world only once it has ticked N ticks past where it (re)started (default 0: "
-                        "one checkpoint interval)")
+                        "as soon as it has one checkpoint past it)")
     c.add_argument("--checkpoint-every", type=positive, metavar="N",
                    help=f"the world's checkpoint interval in ticks (default {DEFAULT_EVERY})")
     c.add_argument("--min-alive", type=int, default=1, metavar="N",
