@@ -194,10 +194,15 @@ def report_only(path: Path) -> int:
     except (json.JSONDecodeError, TypeError) as exc:
         print(f"error: {path}: not an ablation's runs ({exc})", file=sys.stderr)
         return 2
-    text = table(runs)
-    path.with_suffix(".md").write_text(text + "\n", encoding="utf-8")
-    print(text)
+    write_table(path.with_suffix(".md"), runs)
     return 0
+
+
+def write_table(path: Path, runs: list[Run]) -> None:
+    """Write the runs' table to `path` (markdown) and print it."""
+    text = table(runs)
+    path.write_text(text + "\n", encoding="utf-8")
+    print(text)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -241,10 +246,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     (args.out / f"{stem}.json").write_text(json.dumps([asdict(r) for r in runs], indent=1) + "\n", encoding="utf-8")
-    text = table(runs)
-    (args.out / f"{stem}.md").write_text(text + "\n", encoding="utf-8")
     journal.remove()
-    print(text)
+    write_table(args.out / f"{stem}.md", runs)
     return 0
 
 
