@@ -298,9 +298,8 @@ def make(layout: str, seed: int = 0, agents: int = 1, **world) -> World:
     return World(scenario(layout, agents, **world), np.random.default_rng(seed))
 
 
-# Long enough (thirty sites, bricks spread out) that a restarted process is back before the
-# two others could finish alone (tests/test_run.py), and that a learning student meets every
-# state of the construction sequence many times (tests/test_teacher.py).
+# Thirty sites, bricks spread out: a learning student meets every state of the construction
+# sequence many times (tests/test_teacher.py). Tests that act mid-build run it `paced`.
 LONG_WALL = '''
 name = "long_walls"
 seed = 11
@@ -322,3 +321,11 @@ b.b.b.b.b.b.b.b.b.b.
 b.b.b.b.b.b.b.b.b.b.
 """
 '''
+
+
+def paced(scenario_text: str, tick_rate: float) -> str:
+    """`scenario_text` in realtime at `tick_rate` ticks a second: its build lasts a wall time
+    we know, so a test that acts "mid-build" acts before the end however fast this machine
+    steps (in lockstep an idle machine built LONG_WALL in 2 s, and a restarted agent came
+    back after the two others had finished it)."""
+    return 'tick_mode = "realtime"\n' + scenario_text + f"\n[world]\ntick_rate = {tick_rate}\n"

@@ -27,7 +27,7 @@ from conag.runs import (
     register,
     unregister,
 )
-from tests.conftest import LONG_WALL, ROOT, SCENARIOS, conag, wait_until
+from tests.conftest import LONG_WALL, ROOT, SCENARIOS, conag, paced, wait_until
 
 
 @pytest.fixture
@@ -148,7 +148,7 @@ def test_runs_of_the_same_and_of_different_scenarios_at_once_each_build_their_ow
 # LONG_WALL at 10 ticks a second: both runs must still be going when the test asks after them.
 # In lockstep they built it in 5-10 s and ended, and a status of a run that has ended finds
 # no run (this test failed 2 of 6 times so, in both of its waits).
-SLOW_WALL = 'tick_mode = "realtime"\n' + LONG_WALL + "\n[world]\ntick_rate = 10.0\n"
+SLOW_WALL = paced(LONG_WALL, 10.0)
 
 
 @pytest.mark.slow
