@@ -364,8 +364,9 @@ def test_a_recorded_run_of_three_agents_is_reproduced_frame_for_frame_by_a_fresh
     # The agents compile their kernels on their first step: no lockstep timeout meanwhile, so
     # that the test is quick (a replay waits through every timeout the recording had).
     scenario = replace(scenario, world=replace(scenario.world, lockstep_timeout=60.0))
-    ticks = 120
-    rw = start_world(scenario, wait_agents=3, max_ticks=ticks)
+    # No tick limit until the perturbation is answered: a world that reached a fixed limit
+    # first (80 ticks took less than a CI worker's query) stopped with the query unanswered.
+    rw = start_world(scenario, wait_agents=3, max_ticks=1_000_000)
     stop_rec, report = threading.Event(), RecordReport()
     recorder = threading.Thread(target=run_recorder, args=(bus.client_session(), W, tmp_path / "run.mcap", stop_rec),
                                 kwargs=dict(metadata={"seed": str(scenario.seed)}, report=report), daemon=True)
@@ -383,6 +384,8 @@ def test_a_recorded_run_of_three_agents_is_reproduced_frame_for_frame_by_a_fresh
     reply = next(iter(perturber.get(keys.perturb(W), payload=encode(Perturbation("remove", 9.5, 8.5, "food")),
                                     timeout=5)))
     assert decode(reply.ok.payload.to_bytes(), PerturbResult).ok
+    ticks = rw.world.tick + 80          # read by the world's loop after every tick
+    rw.server.max_ticks = ticks
     rw.thread.join(60)
     assert rw.world.tick == ticks
     stop_agents.set()
