@@ -6,10 +6,12 @@
     python3 -m experiments.ablation --sample 60 --resume  # go on with an interrupted run (same options)
     python3 -m experiments.ablation --sample 60 --status  # how far its journal is, and its table so far
     python3 -m experiments.ablation --quick --report-only # the table again from ablation_quick.json, running nothing
+    python3 -m experiments.ablation --files tests/layouts/spiral.toml --seeds 3 --agents default,-unstick
 
 Each layout of a sample of the generated suite (`--sample` files evenly spaced in name
-order, so every family and size comes in) is built in process (`conag.sim`, goal
-sequencing on) by several agents, named by `AgentConfig`:
+order, so every family and size comes in), or of the `--files` given, is built in process
+(`conag.sim`, goal sequencing on; `--seeds N`: with N seeds) by several agents, named by
+`AgentConfig`:
 
 * `default`: the best agent, every addition on;
 * `-NAME`: the default with one addition switched off, for each of ADDITIONS;
@@ -50,10 +52,11 @@ QUICK = ("000-gen-wall-20260000.toml", "001-gen-nested_rings-20260001.toml", "00
 
 @dataclass(frozen=True)
 class Job:
-    layout: str        # file name under LAYOUTS
+    layout: str        # the layout file's name
     agent: str         # a name of `variants()`
     stall: int
     text: str = field(default="", repr=False)   # the layout file's text: a task needs no file of the suite
+    seed: int = 0      # added to the layout's seed (`--seeds`)
 
 
 @dataclass(frozen=True)
@@ -66,6 +69,7 @@ class Run:
     distance: float
     bound: float
     seconds: float = 0.0   # the run's wall time on its worker (absent from runs made before it was kept)
+    seed: int = 0          # added to the layout's seed (absent from runs made before `--seeds`)
 
 
 def variants() -> dict[str, AgentConfig]:
@@ -77,9 +81,17 @@ def variants() -> dict[str, AgentConfig]:
     return out
 
 
-def job_of(layout: str, agent: str, stall: int) -> Job:
-    """The job of one run, with the layout's text read here (a cluster's workers have no suite files)."""
-    return Job(layout, agent, stall, (LAYOUTS / layout).read_text(encoding="utf-8"))
+def sample(n: int) -> list[Path]:
+    """`n` layout files of the suite, evenly spaced in name order (so every family and size
+    comes in)."""
+    paths = sorted(materialise(), key=lambda p: p.name)
+    return paths[::max(len(paths) // n, 1)][:n]
+
+
+def job_of(path: Path, agent: str, stall: int, seed: int = 0) -> Job:
+    """The job of one run of the layout file `path`, its text read here (a cluster's workers
+    have no suite files)."""
+    return Job(path.name, agent, stall, path.read_text(encoding="utf-8"), seed)
 
 
 def run_one(job: Job) -> Run:
@@ -87,18 +99,18 @@ def run_one(job: Job) -> Run:
 
     began = time.perf_counter()
     sc = parse_scenario(job.text, job.layout)
-    run = sim.start(sc, cfg=variants()[job.agent])
+    run = sim.start(sc, cfg=variants()[job.agent], seed=sc.seed + job.seed)
     starts = [tuple(int(v) for v in cell[::-1]) for cell in sc.to_cell(run.world.agent_poses()[:, :2])]
     result = run.run(sc.max_ticks, stall_ticks=stall_limit(sc, job.stall))
     status = run.world.status()
     return Run(layout=job.layout, family=family_of(sc), agent=job.agent, completed=result.completed,
                ticks=result.ticks, distance=float(sum(status.agent_distance)), bound=distance_bound(sc, starts),
-               seconds=time.perf_counter() - began)
+               seconds=time.perf_counter() - began, seed=job.seed)
 
 
 def job_key(job: Job, code: str) -> list:
     """A run's journal key: which run, under which settings and code."""
-    return [job.layout, job.agent, job.stall, code]
+    return [job.layout, job.agent, job.stall, code] + ([job.seed] if job.seed else [])
 
 
 def resumed(journal: Journal, jobs: list[Job], code: str) -> tuple[dict[Job, Run], list[Job]]:
@@ -146,12 +158,16 @@ def table(runs: list[Run]) -> str:
     completed runs alone compare different sets of layouts): the layouts it completes that
     the default does not, and the reverse; on how many layouts its run is the default's to
     the tick and the unit of distance (the addition switched off never changed a decision
-    there); and its ticks over the default's on the layouts both complete."""
-    layouts = len({r.layout for r in runs})
-    base = {r.layout: r for r in runs if r.agent == "default"}
+    there); and its ticks over the default's on the layouts both complete: their geometric
+    mean (a run twice as long and one half as long cancel; the median is 1.00 whenever
+    most runs are the default's), and on how many layouts it took more than 10% more or
+    fewer ticks."""
+    layouts = len({(r.layout, r.seed) for r in runs})
+    base = {(r.layout, r.seed): r for r in runs if r.agent == "default"}
     lines = [(f"| agent | completed (of {layouts}) | gained / lost against default | same run as default | "
-              "median ticks (completed) | ticks / default's (median, both completed) | median distance / bound |"),
-             "|---|---:|---:|---:|---:|---:|---:|"]
+              "median ticks (completed) | ticks / default's (geometric mean, both completed) | "
+              "> 10% more / fewer ticks | median distance / bound |"),
+             "|---|---:|---:|---:|---:|---:|---:|---:|"]
     for agent in variants():
         mine = [r for r in runs if r.agent == agent]
         if not mine:
@@ -159,14 +175,15 @@ def table(runs: list[Run]) -> str:
         done = [r for r in mine if r.completed]
         ticks = f"{statistics.median(r.ticks for r in done):,.0f}" if done else "-"
         ratio = f"{statistics.median(r.distance / r.bound for r in done if r.bound > 0):.2f}" if done else "-"
-        paired = [(r, base[r.layout]) for r in mine if r.layout in base]
+        paired = [(r, base[r.layout, r.seed]) for r in mine if (r.layout, r.seed) in base]
         gained = sum(r.completed and not d.completed for r, d in paired)
         lost = sum(d.completed and not r.completed for r, d in paired)
         same = sum(r.completed == d.completed and r.ticks == d.ticks and r.distance == d.distance for r, d in paired)
         both = [r.ticks / d.ticks for r, d in paired if r.completed and d.completed]
-        versus = f"{statistics.median(both):.2f}" if both else "-"
+        versus = f"{statistics.geometric_mean(both):.2f}" if both else "-"
+        apart = f"{sum(x > 1.1 for x in both)} / {sum(x < 1 / 1.1 for x in both)}" if both else "-"
         lines.append(f"| {agent} | {len(done)} | {gained} / {lost} | {same} of {len(paired)} | {ticks} | {versus} "
-                     f"| {ratio} |")
+                     f"| {apart} | {ratio} |")
     return "\n".join(lines)
 
 
@@ -209,12 +226,17 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help=f"the layouts {', '.join(QUICK)} only")
     ap.add_argument("--sample", type=int, default=60, help="layouts from the suite (default 60)")
+    ap.add_argument("--files", nargs="+", type=Path, metavar="LAYOUT",
+                    help="these layout files instead of the suite's (results: ablation_files.*)")
+    ap.add_argument("--seeds", type=int, default=1,
+                    help="runs per layout and agent, with the layout's seed plus 0, 1, ... (default 1)")
     ap.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     runner.add_cluster_argument(ap)
     ap.add_argument("--stall", type=int, default=DEFAULT_STALL, help="ticks with no site filled that stop a run")
     ap.add_argument("--agents", help="only these agents, comma separated (default: every one)")
     ap.add_argument("--out", type=Path, default=ROOT / "experiments",
-                    help="folder for the json and md (ablation_quick.* with --quick, else ablation.*)")
+                    help="folder for the json and md (ablation_quick.* with --quick, ablation_files.* with "
+                         "--files, else ablation.*)")
     ap.add_argument("--resume", action="store_true",
                     help="keep the runs an interrupted invocation with the same --out finished "
                          "(its journal there, ablation.partial.jsonl)")
@@ -224,14 +246,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--report-only", action="store_true",
                     help="run nothing: write the table again from the json under --out (after a change to the table)")
     args = ap.parse_args(argv)
-    names = sorted(p.name for p in materialise())
-    layouts = list(QUICK) if args.quick else names[::max(len(names) // args.sample, 1)][:args.sample]
+    missing = [str(p) for p in args.files or () if not p.is_file()]
+    if missing:
+        ap.error(f"no such layout file: {', '.join(missing)}")
+    if args.seeds < 1:
+        ap.error("--seeds must be at least 1")
+    layouts = [LAYOUTS / n for n in QUICK] if args.quick else args.files or sample(args.sample)
     agents = list(variants()) if not args.agents else args.agents.split(",")
     unknown = [a for a in agents if a not in variants()]
     if unknown:
         ap.error(f"unknown agent(s) {', '.join(unknown)}; known: {', '.join(variants())}")
-    jobs = [job_of(layout, agent, args.stall) for layout in layouts for agent in agents]
-    stem = "ablation_quick" if args.quick else "ablation"
+    jobs = [job_of(path, agent, args.stall, seed) for path in layouts for seed in range(args.seeds) for agent in agents]
+    stem = "ablation_quick" if args.quick else "ablation_files" if args.files else "ablation"
     if args.report_only:
         return report_only(args.out / f"{stem}.json")
     args.out.mkdir(parents=True, exist_ok=True)

@@ -83,12 +83,12 @@ def test_the_table_pairs_each_agent_with_the_default_on_the_same_layouts():
             _run("a", "paper", False, 3000, 10.0), _run("b", "paper", False, 3000, 10.0),
             _run("c", "paper", False, 9000, 90.0)]       # stalled as the default did, to the tick
     rows = {line.split(" | ")[0].lstrip("| "): line.split(" | ") for line in ablation.table(runs).splitlines()[2:]}
-    # agent | completed | gained / lost | same run | median ticks | ticks / default's | distance / bound
+    # agent | completed | gained / lost | same run | median ticks | ticks / default's | > 10% | distance / bound
     assert rows["default"][1:4] == ["2", "0 / 0", "3 of 3"]
     assert rows["-unstick"][1:4] == ["3", "1 / 0", "1 of 3"]
-    assert rows["-unstick"][5] == "1.25"                  # the median of 1.0 and 1.5, on a and b
+    assert rows["-unstick"][5:7] == ["1.22", "1 / 0"]     # the geometric mean of 1.0 and 1.5, on a and b
     assert rows["paper"][1:4] == ["0", "0 / 2", "1 of 3"]
-    assert rows["paper"][5] == "-"
+    assert rows["paper"][5:7] == ["-", "-"]
 
 
 def test_the_status_of_an_unfinished_sweep_counts_only_layouts_every_agent_finished(tmp_path):
@@ -102,3 +102,15 @@ def test_the_status_of_an_unfinished_sweep_counts_only_layouts_every_agent_finis
     assert "completed (of 1)" in text
     with pytest.raises(ValueError, match="read only"):
         Journal(path, resume=False, readonly=True).append(["k"], {})
+
+
+def test_runs_of_one_layout_with_other_seeds_are_paired_seed_by_seed():
+    runs = [ablation.Run("a", "wall", "default", True, 1000, 50.0, 10.0, seed=0),
+            ablation.Run("a", "wall", "default", False, 9000, 90.0, 10.0, seed=1),
+            ablation.Run("a", "wall", "-unstick", False, 9000, 90.0, 10.0, seed=0),   # loses seed 0
+            ablation.Run("a", "wall", "-unstick", True, 2000, 60.0, 10.0, seed=1)]    # gains seed 1
+    rows = {line.split(" | ")[0].lstrip("| "): line.split(" | ") for line in ablation.table(runs).splitlines()[2:]}
+    assert "completed (of 2)" in ablation.table(runs).splitlines()[0]
+    assert rows["-unstick"][1:4] == ["1", "1 / 1", "0 of 2"]
+    assert ablation.job_key(ablation.Job("a", "default", 3000, seed=2), "code")[-1] == 2
+    assert ablation.job_key(ablation.Job("a", "default", 3000), "code") == ["a", "default", 3000, "code"]  # as before
