@@ -66,7 +66,7 @@ def run_one(job: Job) -> Beliefs:
     from conag import sim
 
     sc = parse_scenario(job.text, job.layout)
-    run = sim.start(sc, cfg=variants()[job.agent])
+    run = sim.start(sc, cfg=variants()[job.agent], seed=sc.seed + job.seed)
     count = GhostCount()
     result = run.run(sc.max_ticks, stall_ticks=stall_limit(sc, job.stall), observers=[count])
     return Beliefs(job.layout, job.agent, result.completed, result.ticks, count.samples, count.ghost_sites,
