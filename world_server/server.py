@@ -311,7 +311,24 @@ class WorldServer:
             self._publish_view()
             if self.checkpoint is not None and self.checkpoint.path and self._checkpointed != self.world.tick:
                 self._checkpoint()  # stopped (SIGTERM), complete or out of ticks: the state as it ends
+            self._refuse_queued()
             return self._publish_status()
+
+    def _refuse_queued(self) -> None:
+        """Answer the queries still queued as the loop ends with an error saying so: a
+        perturbation or attach asked in the last moments would otherwise get no reply at all,
+        and its sender wait out its timeout for "no world answered". A view is answered."""
+        while True:
+            try:
+                event = self._events.get_nowait()
+            except queue.Empty:
+                return
+            match event:
+                case PerturbAsked(query) | AttachAsked(query):
+                    query.reply_err(f"world {self.world.world_id} stopped at tick {self.world.tick}".encode())
+                    query.drop()
+                case ViewAsked(query):
+                    self._answer_view(query)
 
     def _tick_time(self, last_tick: float) -> float:
         """When this tick counts as taken, for the next one's deadline. Lockstep: now (the
