@@ -53,7 +53,7 @@ QUICK = ("000-gen-wall-20260000.toml", "001-gen-nested_rings-20260001.toml", "00
 @dataclass(frozen=True)
 class Job:
     layout: str        # the layout file's name
-    agent: str         # a name of `variants()`
+    agent: str         # a name `agent_of` knows
     stall: int
     text: str = field(default="", repr=False)   # the layout file's text: a task needs no file of the suite
     seed: int = 0      # added to the layout's seed (`--seeds`)
@@ -81,6 +81,33 @@ def variants() -> dict[str, AgentConfig]:
     return out
 
 
+def agent_of(name: str) -> AgentConfig:
+    """The agent a name stands for: one of `variants()`, or the default with several
+    additions off, `-NAME-NAME...` (the names hold no hyphen), e.g. `-site_core-off_own_brick`.
+    A ValueError names what is wrong."""
+    known = variants()
+    if name in known:
+        return known[name]
+    names = name.split("-")[1:] if name.startswith("-") else []
+    wrong = [n for n in names if n not in ADDITIONS]
+    if not names or wrong or len(set(names)) != len(names):
+        raise ValueError(f"unknown agent {name!r}; known: {', '.join(known)}, or -NAME-NAME... of "
+                         f"{', '.join(ADDITIONS)}")
+    return AgentConfig(**dict.fromkeys(names, False))
+
+
+def agents_arg(ap: argparse.ArgumentParser, text: str | None) -> list[str]:
+    """The agents of a comma-separated `--agents` (none: every one of `variants()`); an
+    unknown one is the parser's usage error."""
+    agents = list(variants()) if not text else text.split(",")
+    for agent in agents:
+        try:
+            agent_of(agent)
+        except ValueError as exc:
+            ap.error(str(exc))
+    return agents
+
+
 def sample(n: int) -> list[Path]:
     """`n` layout files of the suite, evenly spaced in name order (so every family and size
     comes in)."""
@@ -99,7 +126,7 @@ def run_one(job: Job) -> Run:
 
     began = time.perf_counter()
     sc = parse_scenario(job.text, job.layout)
-    run = sim.start(sc, cfg=variants()[job.agent], seed=sc.seed + job.seed)
+    run = sim.start(sc, cfg=agent_of(job.agent), seed=sc.seed + job.seed)
     starts = [tuple(int(v) for v in cell[::-1]) for cell in sc.to_cell(run.world.agent_poses()[:, :2])]
     result = run.run(sc.max_ticks, stall_ticks=stall_limit(sc, job.stall))
     status = run.world.status()
@@ -153,7 +180,8 @@ def sweep(jobs: list[Job], execute: Callable[[list[Job]], Iterable[runner.Done]]
 
 
 def table(runs: list[Run]) -> str:
-    """The markdown table: one row per agent, in `variants()` order. Beside each agent's own
+    """The markdown table: one row per agent, in `variants()` order, then any other agent
+    (`agent_of`) in the order the runs first name it. Beside each agent's own
     figures, the paired ones against the default on the same layouts (the medians of the
     completed runs alone compare different sets of layouts): the layouts it completes that
     the default does not, and the reverse; on how many layouts its run is the default's to
@@ -168,7 +196,8 @@ def table(runs: list[Run]) -> str:
               "median ticks (completed) | ticks / default's (geometric mean, both completed) | "
               "> 10% more / fewer ticks | median distance / bound |"),
              "|---|---:|---:|---:|---:|---:|---:|---:|"]
-    for agent in variants():
+    named = list(variants())
+    for agent in named + [a for a in dict.fromkeys(r.agent for r in runs) if a not in named]:
         mine = [r for r in runs if r.agent == agent]
         if not mine:
             continue
@@ -233,7 +262,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     runner.add_cluster_argument(ap)
     ap.add_argument("--stall", type=int, default=DEFAULT_STALL, help="ticks with no site filled that stop a run")
-    ap.add_argument("--agents", help="only these agents, comma separated (default: every one)")
+    ap.add_argument("--agents", help="only these agents, comma separated (default: every one of the table); "
+                                     "-NAME-NAME... is the default with each NAME off (a list that starts "
+                                     "with - needs --agents=...)")
     ap.add_argument("--out", type=Path, default=ROOT / "experiments",
                     help="folder for the json and md (ablation_quick.* with --quick, ablation_files.* with "
                          "--files, else ablation.*)")
@@ -252,10 +283,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.seeds < 1:
         ap.error("--seeds must be at least 1")
     layouts = [LAYOUTS / n for n in QUICK] if args.quick else args.files or sample(args.sample)
-    agents = list(variants()) if not args.agents else args.agents.split(",")
-    unknown = [a for a in agents if a not in variants()]
-    if unknown:
-        ap.error(f"unknown agent(s) {', '.join(unknown)}; known: {', '.join(variants())}")
+    agents = agents_arg(ap, args.agents)
     jobs = [job_of(path, agent, args.stall, seed) for path in layouts for seed in range(args.seeds) for agent in agents]
     stem = "ablation_quick" if args.quick else "ablation_files" if args.files else "ablation"
     if args.report_only:

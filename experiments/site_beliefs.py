@@ -11,7 +11,7 @@ every `EVERY` ticks, for every agent, the blueprint sites it believes hold a bri
 (`FarMemory.site_open` false: a brick was seen on the site's cell) that the world has
 empty. In these runs no brick ever leaves a site, so each such belief is a wrong one: a
 ghost brick on a site, not a site filled out of sight. The layouts and agents are the
-ablation's (`experiments.ablation.variants`), built in process as it builds them.
+ablation's (`experiments.ablation.agent_of`), built in process as it builds them.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ import numpy as np
 
 from conag.sim import SimRun
 from experiments import runner
-from experiments.ablation import Job, job_of, sample, variants
+from experiments.ablation import Job, agent_of, agents_arg, job_of, sample
 from experiments.generalisation import DEFAULT_STALL, stall_limit
 from world_server.scenario import parse_scenario
 
@@ -66,7 +66,7 @@ def run_one(job: Job) -> Beliefs:
     from conag import sim
 
     sc = parse_scenario(job.text, job.layout)
-    run = sim.start(sc, cfg=variants()[job.agent], seed=sc.seed + job.seed)
+    run = sim.start(sc, cfg=agent_of(job.agent), seed=sc.seed + job.seed)
     count = GhostCount()
     result = run.run(sc.max_ticks, stall_ticks=stall_limit(sc, job.stall), observers=[count])
     return Beliefs(job.layout, job.agent, result.completed, result.ticks, count.samples, count.ghost_sites,
@@ -94,10 +94,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--agents", default="default,-site_core", help="comma separated (default: default,-site_core)")
     ap.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     args = ap.parse_args(argv)
-    agents = args.agents.split(",")
-    unknown = [a for a in agents if a not in variants()]
-    if unknown:
-        ap.error(f"unknown agent(s) {', '.join(unknown)}; known: {', '.join(variants())}")
+    agents = agents_arg(ap, args.agents)
     jobs = [job_of(path, agent, DEFAULT_STALL) for path in sample(args.sample) for agent in agents]
     began, rows = time.monotonic(), []
     for done in runner.run(run_one, jobs, runner.Where(workers=args.jobs)):

@@ -114,3 +114,14 @@ def test_runs_of_one_layout_with_other_seeds_are_paired_seed_by_seed():
     assert rows["-unstick"][1:4] == ["1", "1 / 1", "0 of 2"]
     assert ablation.job_key(ablation.Job("a", "default", 3000, seed=2), "code")[-1] == 2
     assert ablation.job_key(ablation.Job("a", "default", 3000), "code") == ["a", "default", 3000, "code"]  # as before
+
+
+def test_an_agent_with_several_additions_off_is_named_by_joining_them():
+    cfg = ablation.agent_of("-site_core-off_own_brick")
+    assert not cfg.site_core and not cfg.off_own_brick and cfg.agents_as_obstacles
+    assert ablation.agent_of("-unstick") == ablation.variants()["-unstick"]
+    for bad in ("-site_core-nope", "-", "site_core", "-unstick-unstick"):
+        with pytest.raises(ValueError, match="unknown agent"):
+            ablation.agent_of(bad)
+    runs = [_run("a", "default", True, 1000, 50.0), _run("a", "-site_core-off_own_brick", True, 1100, 55.0)]
+    assert ablation.table(runs).splitlines()[-1].startswith("| -site_core-off_own_brick | 1 | 0 / 0 |")
