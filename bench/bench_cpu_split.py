@@ -35,6 +35,7 @@ from bench.bench_scale import SCENARIO, process_tree
 ROOT = Path(__file__).resolve().parent.parent
 PROGRESS = re.compile(r"^tick\s+(\d+)\s")
 ROLES = ("world", "agents", "agent", "record", "view", "teacher", "run")
+MIN_SPAN = 1.0   # seconds of steady span, at the least, to split
 
 
 def role(cmdline: str) -> str:
@@ -95,6 +96,10 @@ def measure(scenario: str, agents: int, ticks: int, from_tick: int, port: int, e
         raise RuntimeError(f"too few progress lines past tick {from_tick} from {' '.join(cmd)} (exit "
                            f"{proc.returncode})")
     (t0, w0, c0), (t1, w1, c1) = first, last
+    if w1 - w0 < MIN_SPAN:
+        # /proc counts CPU in clock ticks (10 ms): a shorter span rounds whole processes to 0.
+        raise RuntimeError(f"the steady span was {t1 - t0} ticks in {w1 - w0:.2f} s, under {MIN_SPAN:g} s: "
+                           "too short to split its CPU; ask for more --ticks")
     return {"ticks": t1 - t0, "seconds": w1 - w0, "split": split(c0, c1)}
 
 
@@ -124,7 +129,12 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     if args.agents < 1 or args.ticks <= args.from_tick:
         p.error("need --agents >= 1 and --ticks > --from-tick")
-    print(report(measure(args.scenario, args.agents, args.ticks, args.from_tick, args.port, args.run_args)))
+    try:
+        measured = measure(args.scenario, args.agents, args.ticks, args.from_tick, args.port, args.run_args)
+    except RuntimeError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    print(report(measured))
     return 0
 
 

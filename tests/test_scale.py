@@ -262,7 +262,9 @@ def test_the_cpu_split_benchmark_reports_the_steady_span_of_a_run():
 
     from tests.conftest import ROOT, free_port
 
-    r = subprocess.run([sys.executable, "-m", "bench.bench_cpu_split", "--agents", "2", "--ticks", "300",
+    # 2,000 ticks: about 4 s of steady span on an idle machine (CI once got 300 ticks done
+    # with a span of 16 ticks in 0.03 s, the world's CPU there rounded to nothing).
+    r = subprocess.run([sys.executable, "-m", "bench.bench_cpu_split", "--agents", "2", "--ticks", "2000",
                         "--port", str(free_port())], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr[-3000:]
     assert "| agent | python3 |" in r.stdout and "| world | python3 |" in r.stdout
