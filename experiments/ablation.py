@@ -39,12 +39,16 @@ import time
 from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from agent_runtime.config import ADDITIONS, OFF_BY_DEFAULT, AgentConfig
 from experiments import runner
 from experiments.generalisation import DEFAULT_STALL, LAYOUTS, distance_bound, family_of, materialise, stall_limit
 from experiments.journal import Journal, code_version
-from world_server.scenario import parse_scenario
+from world_server.scenario import Scenario, parse_scenario
+
+if TYPE_CHECKING:
+    from conag.sim import SimRun
 
 ROOT = Path(__file__).resolve().parent.parent
 QUICK = ("000-gen-wall-20260000.toml", "001-gen-nested_rings-20260001.toml", "002-gen-polyomino-20260002.toml")
@@ -121,12 +125,17 @@ def job_of(path: Path, agent: str, stall: int, seed: int = 0) -> Job:
     return Job(path.name, agent, stall, path.read_text(encoding="utf-8"), seed)
 
 
-def run_one(job: Job) -> Run:
+def start_job(job: Job) -> tuple[Scenario, SimRun]:
+    """The job's scenario and its run, started (its agent, seed and layout), not yet stepped."""
     from conag import sim
 
-    began = time.perf_counter()
     sc = parse_scenario(job.text, job.layout)
-    run = sim.start(sc, cfg=agent_of(job.agent), seed=sc.seed + job.seed)
+    return sc, sim.start(sc, cfg=agent_of(job.agent), seed=sc.seed + job.seed)
+
+
+def run_one(job: Job) -> Run:
+    began = time.perf_counter()
+    sc, run = start_job(job)
     starts = [tuple(int(v) for v in cell[::-1]) for cell in sc.to_cell(run.world.agent_poses()[:, :2])]
     result = run.run(sc.max_ticks, stall_ticks=stall_limit(sc, job.stall))
     status = run.world.status()

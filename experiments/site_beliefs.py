@@ -25,9 +25,8 @@ import numpy as np
 
 from conag.sim import SimRun
 from experiments import runner
-from experiments.ablation import Job, agent_of, agents_arg, job_of, sample
+from experiments.ablation import Job, agents_arg, job_of, sample, start_job
 from experiments.generalisation import DEFAULT_STALL, stall_limit
-from world_server.scenario import parse_scenario
 
 EVERY = 10   # ticks between samples
 
@@ -63,10 +62,7 @@ class GhostCount:
 
 
 def run_one(job: Job) -> Beliefs:
-    from conag import sim
-
-    sc = parse_scenario(job.text, job.layout)
-    run = sim.start(sc, cfg=agent_of(job.agent), seed=sc.seed + job.seed)
+    sc, run = start_job(job)
     count = GhostCount()
     result = run.run(sc.max_ticks, stall_ticks=stall_limit(sc, job.stall), observers=[count])
     return Beliefs(job.layout, job.agent, result.completed, result.ticks, count.samples, count.ghost_sites,
