@@ -42,7 +42,7 @@ from agent_runtime.brick_news import NEWS_EVERY, gone_cells, report, seen_cells
 from agent_runtime.brick_news import cells as news_cells
 from agent_runtime.claims import claimed_by_others
 from agent_runtime.config import AgentConfig
-from agent_runtime.esm import AGENT, BRICK, CONFIG, FOOD, OBSTACLE, WATER, EgocentricMaps, Sensing
+from agent_runtime.esm import AGENT, BRICK, CONFIG, FOOD, OBSTACLE, WATER, EgocentricMaps, Sensing, map_extent
 from agent_runtime.far_memory import FarMemory, on_border
 from agent_runtime.field_cache import FieldCache
 from agent_runtime.matching import Matching, calculate_matching, select_goals
@@ -125,12 +125,14 @@ class Brain:
         self.sectors = welcome.sectors
         self.rng = rng if rng is not None else np.random.default_rng(0)
         self.network = network or engineered()
-        self.maps = EgocentricMaps(self.cfg.map_size, Sensing.of(self.cfg))
-        self.maps.seed_blueprint(welcome.x, welcome.y, welcome.site_xs, welcome.site_ys, welcome.cell_size)
         # The attach cell, in world cells: the origin of the agent's odometry frame.
         self._origin = np.floor(np.array([welcome.x, welcome.y]) / welcome.cell_size).astype(np.int64)
-        self.far = FarMemory(self.cfg.map_size, self._site_cells(welcome.site_xs, welcome.site_ys),
-                             self._world_bounds(welcome), remember=self.cfg.far_memory)
+        bounds = self._world_bounds(welcome)
+        self.size = map_extent(self.cfg.map_size, bounds)   # cells per side of every map
+        self.maps = EgocentricMaps(self.size, Sensing.of(self.cfg))
+        self.maps.seed_blueprint(welcome.x, welcome.y, welcome.site_xs, welcome.site_ys, welcome.cell_size)
+        self.far = FarMemory(self.size, self._site_cells(welcome.site_xs, welcome.site_ys), bounds,
+                             remember=self.cfg.far_memory)
         self.blueprint_version = welcome.blueprint_version
         self.far.config_layer(self.maps.maps[CONFIG])
         self.behaviour = NONE
@@ -153,7 +155,7 @@ class Brain:
         self.searched = 0                  # squares of the world first seen while searching for bricks
         self._tick = welcome.tick
         self.motivations = Motivations()
-        self.centre = self.cfg.map_size // 2
+        self.centre = self.size // 2
         self.seals = SealGuard(self.maps, self.far, self.centre)
         # Food and water remembered beyond the map that came back onto it and are not seen
         # again yet (a sector sees only the nearest disc of a wall). What was seen stays
@@ -161,7 +163,7 @@ class Brain:
         # what is seen (a disc remembered may be gone), so they are never a need's goal.
         # Forgotten, a water wall longer than the map is open ground again each time it
         # comes back, and agents walk to it, along it and back (as in gen-multi 025).
-        self._recalled = np.zeros((self.cfg.map_size,) * 2, bool)
+        self._recalled = np.zeros((self.size,) * 2, bool)
         self._attach_tick = welcome.tick
         self.plans: Plans | None = None
         self.fields = FieldCache()   # navigation maps, computed again only when their inputs change
@@ -186,7 +188,7 @@ class Brain:
         self._drop_unseen = False  # that drop was before this brain started (`_brick_underfoot`)
         self._took: list[np.ndarray] = []  # `share_bricks`: world cells of bricks taken since the last news
         # ... and the cells its sensors see now (the news is of bricks seen, not remembered)
-        self._in_sight = _disc_mask(self.cfg.map_size, self.sensor_range - 1.0) if self.cfg.share_bricks else None
+        self._in_sight = _disc_mask(self.size, self.sensor_range - 1.0) if self.cfg.share_bricks else None
         # Centre to centre, in cells, at which the world lets a dropped brick hold this body again.
         self._release = (welcome.agent_radius + welcome.disc_radius) / welcome.cell_size
         # `anchor_maps`: the belief of where the agent is, kept true by landmarks it sees.
@@ -376,9 +378,9 @@ class Brain:
         nearest site is filled even where it walls off another (as in Fig. 18 with several
         agents).
         """
-        mask = np.zeros((self.cfg.map_size,) * 2, bool)
+        mask = np.zeros((self.size,) * 2, bool)
         if cell is not None:
-            mask[on_border(np.array([cell]), self.cfg.map_size)] = True
+            mask[on_border(np.array([cell]), self.size)] = True
         return mask
 
     def _supply_beyond(self, far: np.ndarray) -> np.ndarray:
@@ -389,9 +391,9 @@ class Brain:
         no brick, protect no path, and sites would be filled nearest-first even where that
         walls off others. Bricks beyond the border enter it at the border, as they enter
         the brick NM."""
-        mask = np.zeros((self.cfg.map_size,) * 2, bool)
+        mask = np.zeros((self.size,) * 2, bool)
         if len(far):
-            mask[on_border(far, self.cfg.map_size)] = True
+            mask[on_border(far, self.size)] = True
         return mask
 
     def nav_masks(self, sequenced: bool = True) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
@@ -487,7 +489,7 @@ class Brain:
 
     def _no_supply(self) -> np.ndarray:
         if self._empty is None:
-            self._empty = np.zeros((self.cfg.map_size,) * 2, bool)
+            self._empty = np.zeros((self.size,) * 2, bool)
             self._empty.setflags(write=False)
         return self._empty
 

@@ -17,7 +17,7 @@ from typing import Any
 class AgentConfig:
     """The agent's settings (motivations, speeds, distances, map size, goal sequencing); frozen."""
 
-    map_size: int = 41              # cells per side of every ESM and NM (odd)
+    map_size: int = 41              # cells per side of every ESM and NM (odd; cut to a smaller world: esm.map_extent)
     hunger_rate: float = 0.002      # hunger and thirst grow by this much per tick ...
     thirst_rate: float = 0.0025
     need_threshold: float = 0.8     # ... and a need above this interrupts construction until one

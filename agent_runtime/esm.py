@@ -94,6 +94,29 @@ class Sensing:
         return cls(**{f.name: bool(getattr(cfg, f.name)) for f in dataclasses.fields(cls)})
 
 
+EDGE_RINGS = 2   # cells beyond the world's edge on every side of a map cut to the world (`map_extent`)
+
+
+def map_extent(size: int, world: tuple[int, int, int, int] | None) -> int:
+    """Cells per side an agent's maps need: `size` (the configured side, odd), or fewer
+    when the world is smaller than it (`world`: its cells (x0, y0, x1, y1), None if unknown).
+
+    The maps are centred on the agent, so a side of twice the world's longer side shows
+    the whole world from wherever the agent stands; `EDGE_RINGS` cells more on each side
+    hold the world's edge, which every map marks as a wall, and a reading that lands just
+    beyond it. Everything a larger map adds lies farther out, where nothing is: so the
+    smaller map makes the same decisions for a fraction of the work per step (a 121-cell
+    map of a 21 x 21 world is 47 cells a side, under a sixth of the cells). Odometry noise
+    is the exception: an agent whose belief of where it is drifts more than `EDGE_RINGS`
+    cells beyond the world's edge has part of the world off its map sooner (its far memory
+    then holds what left it, as it does on any map smaller than the world).
+    """
+    if world is None:
+        return size
+    x0, y0, x1, y1 = world
+    return min(size, 2 * (max(x1 - x0, y1 - y0) + EDGE_RINGS) + 1)
+
+
 class EgocentricMaps:
     """The agent's ESMs: `maps` (LAYERS, size, size) float32, the sub-cell offset `frac`
     and the refinements of the sensing rule it applies, `sensing` (default all)."""

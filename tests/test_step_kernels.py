@@ -5,13 +5,17 @@ plain reference on random maps (issue 31: decisions may not change)."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from agent_runtime import brain as brain_module
 from agent_runtime.brain import _extent, _mouth_side, _nearest_reading
+from agent_runtime.config import AgentConfig
+from agent_runtime.esm import EDGE_RINGS, map_extent
 from agent_runtime.far_memory import _age_sites, _observe_sites
 from agent_runtime.field_cache import FieldCache
 from agent_runtime.spreading import (
@@ -23,7 +27,11 @@ from agent_runtime.spreading import (
     reachable,
     seeded_distance_field,
 )
+from conag import sim
 from tests.test_spreading import grids
+from world_server.scenario import load_scenario
+
+ROOT = Path(__file__).resolve().parent.parent
 
 
 def _plain_gradient_step(dist: np.ndarray) -> tuple[int, int] | None:
@@ -270,3 +278,45 @@ def test_the_map_window_on_the_world_is_the_index_meshes(seed, size):
     want_map[np.ix_(rows, cols)] = world[np.ix_(gx[cols], gy[rows])].T
     assert np.array_equal(far.on_world(world, layer), want_world)
     assert np.array_equal(far.on_map(world), want_map)
+
+
+# ------------------------------------------------------------------ maps cut to the world
+
+def test_a_map_larger_than_the_world_needs_is_cut_to_the_world():
+    # Twice the longer side, plus the edge rings on each side: the whole world from any
+    # cell of it. Never larger than asked, and as asked when the world's size is unknown.
+    assert map_extent(121, (-5, -5, 16, 16)) == 2 * (21 + EDGE_RINGS) + 1
+    assert map_extent(121, (0, 0, 51, 50)) == 2 * (51 + EDGE_RINGS) + 1
+    assert map_extent(41, (0, 0, 51, 50)) == 41
+    assert map_extent(121, None) == 121
+    for w in range(1, 70):
+        side = map_extent(121, (-w // 2, 0, w - w // 2, 3))
+        assert side % 2 == 1 and side <= 121   # odd: the agent's cell is the centre
+        assert side == 121 or (side - 1) // 2 >= w + EDGE_RINGS - 1
+
+
+def _decisions(scenario, map_size: int, ticks: int) -> tuple[list[tuple], int]:
+    """Every decision of a lockstep run of `ticks` ticks (agent, tick, command, behaviour,
+    state nodes) and the side of the agents' maps."""
+    run = sim.start(scenario, cfg=AgentConfig(map_size=map_size))
+    out = []
+    for _ in range(ticks):
+        for frame in run.world.frames():
+            s = run.brains[frame.agent_id].step(frame)
+            out.append((frame.agent_id, frame.tick, s.speed, s.turn, s.action, s.behaviour, s.decision.state))
+            run.world.set_command(frame.agent_id, s.speed, s.turn, s.action)
+        run.world.step()
+    return out, next(iter(run.brains.values())).maps.size
+
+
+@pytest.mark.parametrize("layout", ["scenarios/fig6.toml", "tests/layouts/twin_pockets.toml"])
+def test_maps_cut_to_the_world_make_the_decisions_of_the_whole_map(layout, monkeypatch):
+    # What a map larger than the world adds lies outside it, where nothing is: the cut
+    # maps (a fraction of the work per step) must choose as the whole 121-cell map does,
+    # step for step, through walls, pockets and other agents.
+    scenario = load_scenario(ROOT / layout)
+    cut, cut_side = _decisions(scenario, 121, 250)
+    monkeypatch.setattr(brain_module, "map_extent", lambda size, world: size)
+    whole, whole_side = _decisions(scenario, 121, 250)
+    assert cut_side < 121 and whole_side == 121
+    assert cut == whole
