@@ -991,15 +991,28 @@ def _mouth_side_kernel(held, sites, depth):
 def _nearest_cell(cells, centre, fx, fy):
     """(found, row, col) of the marked cell nearest the point (fx, fy) cells from the
     centre cell's centre; the first in row order on a tie. Distances are compared as
-    `offset_of` and `np.hypot` give them, so the choice is the one numpy made."""
+    `offset_of` and `np.hypot` give them, so the choice is the one numpy made.
+
+    Searched ring by ring outwards from the centre (the cells k rows or columns away,
+    whichever more): a cell of ring k is at least k - max(|fx|, |fy|) from the point, so
+    once the best found is nearer than the next ring can be, no farther cell can win or
+    tie. A brick in sight ends the search after a few rings of a large map."""
     n, m = cells.shape
+    slack = max(abs(fx), abs(fy))
     best, br, bc = np.inf, -1, -1
-    for r in range(n):
-        for c in range(m):
-            if cells[r, c]:
-                d = np.hypot(c - centre - fx, centre - r - fy)
-                if d < best:
-                    best, br, bc = d, r, c
+    for k in range(max(n, m)):
+        if best < k - slack:
+            break
+        for r in range(max(centre - k, 0), min(centre + k, n - 1) + 1):
+            edge = r == centre - k or r == centre + k   # a whole row of the ring, else its two ends
+            step = 1 if edge else 2 * k
+            c = centre - k
+            while c <= centre + k:
+                if 0 <= c < m and cells[r, c]:
+                    d = np.hypot(c - centre - fx, centre - r - fy)
+                    if d < best or (d == best and (r < br or (r == br and c < bc))):
+                        best, br, bc = d, r, c
+                c += step
     return br >= 0, br, bc
 
 

@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agent_runtime import brain as brain_module
-from agent_runtime.brain import _extent, _mouth_side, _nearest_reading
+from agent_runtime.brain import _extent, _mouth_side, _nearest_cell, _nearest_reading
 from agent_runtime.config import AgentConfig
 from agent_runtime.esm import EDGE_RINGS, map_extent
 from agent_runtime.far_memory import _age_sites, _observe_sites
@@ -92,6 +92,28 @@ def test_the_compiled_mouth_side_marks_what_the_plain_one_marks(grid, seed):
     assert np.array_equal(_mouth_side(held, sites, depth), _plain_mouth_side(held, sites, depth))
 
 
+def _plain_nearest_cell(cells, centre, fx, fy):
+    """_nearest_cell as a scan of every cell in row order (the reference)."""
+    best, found = np.inf, (False, -1, -1)
+    for r, c in zip(*np.nonzero(cells)):
+        d = np.hypot(c - centre - fx, centre - r - fy)
+        if d < best:
+            best, found = d, (True, int(r), int(c))
+    return found
+
+
+@settings(max_examples=300, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), size=st.sampled_from([1, 3, 5, 11, 41]),
+       density=st.sampled_from([0.0, 0.002, 0.02, 0.3]), frac=st.sampled_from([0.0, 0.5, -0.5, None]))
+def test_the_ring_search_for_the_nearest_cell_finds_what_a_whole_scan_finds(seed, size, density, frac):
+    # Ties are common (whole-cell offsets: frac 0 or a half), and the first in row order wins.
+    rng = np.random.default_rng(seed)
+    cells = rng.random((size, size)) < density
+    fx, fy = (float(v) for v in rng.uniform(-0.5, 0.5, 2)) if frac is None else (frac, -frac)
+    got = _nearest_cell(cells, size // 2, fx, fy)
+    assert (bool(got[0]), int(got[1]), int(got[2])) == _plain_nearest_cell(cells, size // 2, fx, fy)
+
+
 def test_a_cached_field_is_the_kernels_read_only_and_computed_once_per_input():
     goals = np.zeros((9, 9), bool)
     goals[1, 1] = True
@@ -105,6 +127,32 @@ def test_a_cached_field_is_the_kernels_read_only_and_computed_once_per_input():
         first[0, 0] = 0.0   # shared: nobody may write into it
     obstacles[4, 7] = True  # another input, another field
     assert not np.array_equal(cache.distance(goals, obstacles), first) and cache.misses == 2
+
+
+def test_inputs_whose_digests_collide_still_get_each_its_own_field(monkeypatch):
+    # The dictionary files keys by a 64-bit digest; two inputs under one digest must cost
+    # a computation, never hand one the other's field. Every digest the same here:
+    from agent_runtime import field_cache
+    monkeypatch.setattr(field_cache, "_digest", lambda key: np.uint64(7))
+    cache = FieldCache()
+    obstacles = np.zeros((7, 7), bool)
+    a, b = np.zeros((7, 7), bool), np.zeros((7, 7), bool)
+    a[0, 0], b[6, 6] = True, True
+    for goals in (a, b, a, b):
+        assert np.array_equal(cache.distance(goals, obstacles), distance_field(goals, obstacles))
+    assert cache.misses == 4
+
+
+def test_the_digest_tells_apart_inputs_one_cell_apart():
+    from agent_runtime.field_cache import _digest
+    rng = np.random.default_rng(5)
+    goals, obstacles = rng.random((41, 41)) < 0.1, rng.random((41, 41)) < 0.3
+    seen = set()
+    for k in range(goals.size):
+        g = goals.copy()
+        g.flat[k] ^= True
+        seen.add(int(_digest(np.frombuffer(g.tobytes() + obstacles.tobytes(), np.uint8))))
+    assert len(seen) == goals.size
 
 
 def test_a_field_with_no_goal_is_all_inf_without_the_kernel():
