@@ -129,7 +129,7 @@ class Brain:
         self._origin = np.floor(np.array([welcome.x, welcome.y]) / welcome.cell_size).astype(np.int64)
         bounds = self._world_bounds(welcome)
         self.size = map_extent(self.cfg.map_size, bounds)   # cells per side of every map
-        self.maps = EgocentricMaps(self.size, Sensing.of(self.cfg))
+        self.maps = EgocentricMaps(self.size, Sensing.of(self.cfg), occluding=welcome.occlusion)
         self.maps.seed_blueprint(welcome.x, welcome.y, welcome.site_xs, welcome.site_ys, welcome.cell_size)
         self.far = FarMemory(self.size, self._site_cells(welcome.site_xs, welcome.site_ys), bounds,
                              remember=self.cfg.far_memory)

@@ -67,9 +67,11 @@ class AgentConfig:
     site_core: bool = True          # a site cell is cleared of bricks only by the sectors covering its centre
     obstacle_trust: bool = True     # walls only from readings near enough to land in their cell; far food
                                     # and water never on a blueprint site
-    # Corrections for noisy worlds (docs/noise.md), off by default: CORRECTIONS.
+    # Corrections for noisy worlds (docs/noise.md): CORRECTIONS.
     anchor_maps: bool = False       # the belief of where the agent is follows structure bricks and the
                                     # world's edge it sees (agent_runtime.anchoring), so the maps stay true
+    occlusion_clearing: bool = True  # where the world's sensors occlude, a colour not reported is cleared
+                                     # only in front of the nearest thing reported (agent_runtime.esm)
 
     def __post_init__(self) -> None:
         if not (isinstance(self.map_size, int) and self.map_size >= 5 and self.map_size % 2 == 1):
@@ -141,10 +143,11 @@ ADDITIONS = ("far_memory", "obstacle_layer", "agents_as_obstacles", "explore_swe
              "ghost_association", "clear_margins", "site_core", "obstacle_trust")
 # Additions that the default agent leaves off (docs/design.md says why for each).
 OFF_BY_DEFAULT = ("idle_wait", "yield_goals", "spread_search", "share_bricks")
-# Corrections for a world the paper's agent assumed away (odometry noise, docs/noise.md), in
-# AgentConfig order. Unlike ADDITIONS they are off in the default agent: in a world without
-# noise they would only ever move a true belief by the sensors' noise.
-CORRECTIONS = ("anchor_maps",)
+# Corrections for a world the paper's agent assumed away (odometry noise, occluding sensors,
+# docs/noise.md), in AgentConfig order. anchor_maps is off in the default agent: in a world
+# without noise it would only ever move a true belief by the sensors' noise. occlusion_clearing
+# is on: it acts only where the world says its sensors occlude, and changes nothing elsewhere.
+CORRECTIONS = ("anchor_maps", "occlusion_clearing")
 # Named agents: "default" is the best agent, "paper" the agent as the paper describes it:
 # every addition off but ghost association. One object seen from two places is one object,
 # and the paper's agent built its own figures, so its maps kept no ghosts, whatever its

@@ -23,7 +23,7 @@ disc sitting on a cell centre lands in its very cell while that is under half a 
 (d < 2.5 cells with 16 sectors) and at most one cell off while it is under 1.5 (all of
 a 6-cell range). Cells behind a reading keep what they had: a sector reports only the
 nearest object, so it says nothing about what lies beyond. That is the plain rule, the
-paper's agent's (`Sensing(False, False, False, False)`). Four refinements, each a flag
+paper's agent's (`Sensing(False, False, False, False, False)`). Four refinements, each a flag
 of `agent_runtime.config.AgentConfig` and of `Sensing`, are on by default:
 
 * `ghost_association`: a reading is attributed to a cell of its band already holding
@@ -42,6 +42,12 @@ of `agent_runtime.config.AgentConfig` and of `Sensing`, are on by default:
   where bricks go (no layout puts a disc on one), so the disc is the one beside it (as
   the far discs of two water walls landed in the one-cell slot of sites between them and
   shut it, gen-pocket 20261127). Near readings are written wherever they land.
+
+One more, `occlusion_clearing`, acts only when the world's sensors occlude (a sector
+reports only its nearest object of any colour, `occluding`; docs/noise.md): a colour a
+sector did not report is then cleared only in front of the nearest thing it did report,
+since what lies behind that is hidden, not absent. Without it a brick behind a food disc
+is wiped off the map each time the disc hides it.
 
 Pure numpy, no bus. The per-sector geometry of the cells within sensor range is
 computed for a window of cell offsets fixed per sensor range, and cached per `frac`.
@@ -87,6 +93,7 @@ class Sensing:
     clear_margins: bool = True
     site_core: bool = True
     obstacle_trust: bool = True
+    occlusion_clearing: bool = True   # acts only where the world says its sensors occlude (`EgocentricMaps`)
 
     @classmethod
     def of(cls, cfg: Any) -> Sensing:
@@ -123,11 +130,15 @@ class EgocentricMaps:
     """The agent's ESMs: `maps` (LAYERS, size, size) float32, the sub-cell offset `frac`
     and the refinements of the sensing rule it applies, `sensing` (default all)."""
 
-    def __init__(self, size: int = 41, sensing: Sensing | None = None):
+    def __init__(self, size: int = 41, sensing: Sensing | None = None, occluding: bool = False):
         if not (isinstance(size, int) and size >= 1 and size % 2 == 1):
             raise ValueError("map size must be an odd positive integer")
         self.size = size
         self.sensing = sensing or Sensing()
+        # Whether a sector reports only the nearest object of any colour (the world's
+        # occlusion, stated in the Welcome): then a colour with no reading is absent only in
+        # front of the nearest thing the sector saw, whatever its colour.
+        self.occluding = occluding
         self.centre = size // 2
         self.maps = np.zeros((LAYERS, size, size), np.float32)
         # A flat view, valid for the map's lifetime because `maps` is only ever changed in place.
@@ -268,7 +279,8 @@ class EgocentricMaps:
                       float(self.frac[0]), float(self.frac[1]), dirs[0], dirs[1],
                       obstacle_trust(sectors) if on.obstacle_trust else math.inf,
                       _CHANNEL_LAYER_I64, _FOOD_OR_WATER_FLAT, CLEAR_MARGIN if on.clear_margins else 0.0,
-                      RANGE_MARGIN if on.clear_margins else 0.0, on.site_core, on.ghost_association)
+                      RANGE_MARGIN if on.clear_margins else 0.0, on.site_core, on.ghost_association,
+                      self.occluding and on.occlusion_clearing)
 
     def _set_cells(self, layer: int, row: np.ndarray, col: np.ndarray) -> None:
         inside = (row >= 0) & (row < self.size) & (col >= 0) & (col < self.size)
@@ -507,16 +519,23 @@ def _min_limit(limit, ch, sector, first, end):
 @njit(cache=True)
 def _sense_kernel(flat, clear_age, known, cells, dist, k, sector, starts, core_sector, core_starts, vx, vy, r,
                   reach, size, centre, f0, f1, cos_s, sin_s, trust, layer_of_channel, food_or_water, clear_margin,
-                  range_margin, site_core, associate):
+                  range_margin, site_core, associate, occluded):
     """`EgocentricMaps.sense` on the flat maps: clear, age, associate, write (see there);
-    the last four arguments and `trust` (inf: none) are the refinements of `Sensing`."""
+    the last five arguments and `trust` (inf: none) are the refinements of `Sensing`."""
     nn = size * size
     n_ch, sectors = r.shape
     ncell = dist.shape[0]
     limit = np.empty((_DISC_CHANNELS, sectors))
-    for ch in range(_DISC_CHANNELS):
-        for s in range(sectors):
-            d = r[ch, s]
+    for s in range(sectors):
+        # Occluded, a sector proves every colour absent only in front of the nearest thing
+        # it saw, of any colour (agents too): behind it lies what it cannot see.
+        nearest = -1.0
+        if occluded:
+            for ch in range(n_ch):
+                if r[ch, s] >= 0.0 and (nearest < 0.0 or r[ch, s] < nearest):
+                    nearest = r[ch, s]
+        for ch in range(_DISC_CHANNELS):
+            d = r[ch, s] if r[ch, s] >= 0.0 else nearest
             limit[ch, s] = d - clear_margin if d >= 0.0 else reach - range_margin
     clear = np.zeros((_DISC_CHANNELS, ncell), np.bool_)
     for i in range(ncell):

@@ -19,7 +19,7 @@ p.add_argument("--connect", default="tcp/127.0.0.1:7447")
 p.add_argument("--id", default="x1")
 p.add_argument("--world", default="w0")
 args = p.parse_args()
-root = f"conag/v7/world/{args.world}/agent/{args.id}"
+root = f"conag/v8/world/{args.world}/agent/{args.id}"
 pack = lambda t, f: msgpack.packb({"v": 7, "t": t, "f": f}, use_bin_type=True)  # noqa: E731
 no_mark = [0.0, 0.0, "site"]  # AgentCommand's mark_dx, mark_dy, mark_kind: this agent never marks
 floats = lambda b: struct.unpack(f"<{len(b) // 8}d", b)  # noqa: E731 -- a bin of float64s
@@ -28,7 +28,7 @@ conf = zenoh.Config()
 conf.insert_json5("scouting/multicast/enabled", "false")
 conf.insert_json5("connect/endpoints", json.dumps([args.connect]))
 with zenoh.open(conf) as session:
-    token = session.liveliness().declare_token(f"conag/v7/world/{args.world}/alive/agent/{args.id}")  # 1. token
+    token = session.liveliness().declare_token(f"conag/v8/world/{args.world}/alive/agent/{args.id}")  # 1. token
     frames = session.declare_subscriber(f"{root}/sensors", zenoh.handlers.RingChannel(1))  # 2. frames first
     errors = session.declare_subscriber(  # why the world rejected a command (CommandRejected.reason)
         f"{root}/error", lambda s: print(msgpack.unpackb(s.payload.to_bytes())["f"][2], file=sys.stderr))

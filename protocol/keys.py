@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import re
 
-ROOT = "conag/v7"  # v + messages.SCHEMA_VERSION: incompatible versions never meet
+ROOT = "conag/v8"  # v + messages.SCHEMA_VERSION: incompatible versions never meet
 
 # \Z, not $: `$` also matches before a trailing newline, which would let "a1\n" through.
 _ID = re.compile(r"^[A-Za-z0-9_.\-]{1,64}\Z")

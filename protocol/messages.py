@@ -21,8 +21,9 @@ from protocol.keys import check_id
 #    AgentCommand.mark_*, Welcome.cue_reach.
 # 6: the cues lying in the world in WorldView (cue_xs, cue_ys, cue_kinds), for viewers and recorders.
 # 7: BrickNews between agents, on the key agent/<id>/bricks (AgentConfig.share_bricks).
+# 8: Welcome.occlusion: whether the world's sensors occlude (a sector's nearest object of any channel).
 # An incompatible change raises this and keys.ROOT together (see docs/protocol.md, Versioning).
-SCHEMA_VERSION = 7
+SCHEMA_VERSION = 8
 
 # Sensor channels, in the order of SensorFrame.ranges (channel-major).
 # Disc-like channels first (food, water, brick, obstacle: fixed `#` cells and the world's
@@ -139,6 +140,8 @@ class Welcome:
     odometry_noise: float = 0.0  # odometry error: normal, std odometry_noise x distance moved
     epoch: int = 0               # this run of the world: every SensorFrame it sends carries it
     cue_reach: float = 0.0       # a body marks cells within this distance; 0: the world has no cues
+    occlusion: bool = False      # a sector reports only the nearest object of any channel (a range
+                                 # sensor's view): a channel with no reading may be hidden, not absent
 
     def __post_init__(self) -> None:
         check_id(self.world_id, "world id")

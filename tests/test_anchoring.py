@@ -107,7 +107,7 @@ def test_a_correction_is_at_most_a_quarter_cell_a_tick():
 
 
 def test_the_correction_is_a_named_switch_off_by_default():
-    assert CORRECTIONS == ("anchor_maps",) and not set(CORRECTIONS) & set(ADDITIONS)
+    assert CORRECTIONS == ("anchor_maps", "occlusion_clearing") and not set(CORRECTIONS) & set(ADDITIONS)
     assert AgentConfig().anchor_maps is False
     assert AgentConfig.from_mapping({"anchor_maps": True}).anchor_maps is True
     with pytest.raises(ValueError, match="anchor_maps must be true or false"):

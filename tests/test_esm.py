@@ -494,13 +494,16 @@ def test_real_sensor_readings_put_discs_in_their_cells_from_any_sub_cell_positio
 ALL = Sensing()
 
 
-def reference_sense(m: EgocentricMaps, ranges: np.ndarray, reach: float, on: Sensing = ALL) -> np.ndarray:
+def reference_sense(m: EgocentricMaps, ranges: np.ndarray, reach: float, on: Sensing = ALL,
+                    occluding: bool = False) -> np.ndarray:
     """The rule of EgocentricMaps.sense, cell by cell (slow and plain), on a copy of the maps.
 
     1. A cell is cleared when it is nearer than (reading - 0.75) of every sector it
        overlaps (reach - 0.5 for a sector with no reading; without `clear_margins`, the
        reading and reach themselves); on the brick layer, a site cell only needs the
-       sectors within 0.35 cell of its centre (`site_core`).
+       sectors within 0.35 cell of its centre (`site_core`). With `occluding` (and
+       `occlusion_clearing`), a sector with no reading of the layer counts its nearest
+       reading of any channel as the layer's.
     2. Each disc reading is attributed to the best cell of its band (cells overlapping its
        wedge within 0.75 of its distance): score = distance to the measured point, minus 2
        if the cell is marked in that layer, minus 1 for a brick on a blueprint cell; the best
@@ -511,6 +514,14 @@ def reference_sense(m: EgocentricMaps, ranges: np.ndarray, reach: float, on: Sen
        nor far food and water on a site.
     """
     margin, range_margin = (0.75, 0.5) if on.clear_margins else (0.0, 0.0)
+
+    def seen(layer: int, s: int) -> float:
+        """What sector s proves about the layer: its own reading, or occluded, the nearest of any."""
+        if ranges[layer, s] >= 0 or not (occluding and on.occlusion_clearing):
+            return float(ranges[layer, s])
+        any_channel = [float(d) for d in ranges[:, s] if d >= 0]
+        return min(any_channel) if any_channel else -1.0
+
     out = m.maps.copy()
     n, sectors = m.size, ranges.shape[1]
     # Which sectors each cell overlaps is taken from the map's own geometry: at exact sector
@@ -532,7 +543,7 @@ def reference_sense(m: EgocentricMaps, ranges: np.ndarray, reach: float, on: Sen
                 continue
             if layer == BRICK and on.site_core and m.maps[CONFIG][cell] > 0.5:
                 overlapped = core.get(cell, set())   # a site's brick lies near its centre
-            limits = [ranges[layer, s] - margin if ranges[layer, s] >= 0 else reach - range_margin for s in overlapped]
+            limits = [seen(layer, s) - margin if seen(layer, s) >= 0 else reach - range_margin for s in overlapped]
             if d < min(limits):
                 out[layer][cell] = 0.0
     cleared = out.copy()
@@ -598,16 +609,16 @@ def test_sense_follows_its_rule_cell_by_cell(size, fx, fy, sectors, reach, seed)
 @settings(max_examples=40, deadline=None)
 @given(st.sampled_from([7, 15, 41]), st.floats(-0.5, 0.4999), st.floats(-0.5, 0.4999),
        st.sampled_from([1, 4, 16, 64]), st.floats(1.0, 12.0), st.integers(0, 2**32 - 1),
-       st.builds(Sensing, st.booleans(), st.booleans(), st.booleans(), st.booleans()))
-def test_sense_follows_its_rule_with_any_refinement_switched_off(size, fx, fy, sectors, reach, seed, on):
+       st.builds(Sensing, st.booleans(), st.booleans(), st.booleans(), st.booleans(), st.booleans()), st.booleans())
+def test_sense_follows_its_rule_with_any_refinement_switched_off(size, fx, fy, sectors, reach, seed, on, occluding):
     rng = np.random.default_rng(seed)
-    m = EgocentricMaps(size, on)
+    m = EgocentricMaps(size, on, occluding)
     m.frac[:] = (fx, fy)
     m.maps[:] = rng.random(m.maps.shape) < 0.5
     m.maps[CONFIG] = rng.random(m.maps[CONFIG].shape) < 0.2
     for tick in range(3):
         ranges = np.where(rng.random((NCH, sectors)) < 0.6, rng.uniform(0, reach, (NCH, sectors)), NO_READING)
-        expected = reference_sense(m, ranges, reach, on)
+        expected = reference_sense(m, ranges, reach, on, occluding)
         m.sense(ranges, reach)
         np.testing.assert_array_equal(m.maps, expected)
         if tick:
@@ -615,12 +626,13 @@ def test_sense_follows_its_rule_with_any_refinement_switched_off(size, fx, fy, s
 
 
 def test_each_sensing_refinement_is_the_agent_config_flag_of_its_name():
-    from agent_runtime.config import ADDITIONS, AgentConfig
+    from agent_runtime.config import ADDITIONS, CORRECTIONS, AgentConfig
 
     assert Sensing.of(AgentConfig()) == Sensing()
-    assert Sensing.of(AgentConfig.preset("paper")) == Sensing(True, False, False, False)  # config.py says why
+    # config.py says why; the occlusion correction stays (it acts only where sensors occlude)
+    assert Sensing.of(AgentConfig.preset("paper")) == Sensing(True, False, False, False, True)
     for name in Sensing.__dataclass_fields__:
-        assert name in ADDITIONS
+        assert name in ADDITIONS + CORRECTIONS
         assert Sensing.of(AgentConfig(**{name: False})) == Sensing(**{name: False})
 
 
@@ -774,3 +786,42 @@ def test_cells_seen_free_of_walls_are_known_and_the_cells_behind_a_wall_are_not(
     assert not m.known[C, C + 4]                         # behind the disc: never seen
     m.move(1.0, 0.0)                                     # known ground moves with the map
     assert m.known[C, C - 1] and not m.known[C, C + 3]
+
+
+# Along sector 1's centre angle (33.75 degrees of 16 sectors), so each reading is written
+# in the cell of the disc that made it.
+_ALONG = np.array([math.cos(3 * math.pi / 16), math.sin(3 * math.pi / 16)])
+_HERE = np.array([[10.5, 10.5]])
+
+
+def _look(maps: EgocentricMaps, discs: list[tuple[float, str]], occluding: bool) -> None:
+    """Sense discs lying `d` cells from the agent along _ALONG, each of its kind."""
+    xy = np.array([_HERE[0] + d * _ALONG for d, _ in discs])
+    ch = np.array([CHANNELS.index(kind) for _, kind in discs], np.int64)
+    ranges = world_sense(_HERE, np.array([True]), xy, ch, 16, 6.0, (30.0, 30.0), occlusion=occluding)[0]
+    maps.sense(ranges, 6.0)
+
+
+@pytest.mark.parametrize("occluding", [True, False])
+def test_a_brick_hidden_behind_food_stays_mapped_where_sensors_occlude(occluding):
+    # A brick 4 cells off is seen, then a food disc rolls in 2 cells off, in front of it.
+    # With occlusion the sector now reports only the food: the brick is hidden, not gone,
+    # and stays on the map. Without occlusion the brick channel still reports it.
+    maps = EgocentricMaps(SIZE, occluding=occluding)
+    brick = maps.cell_of(*(4.0 * _ALONG))
+    _look(maps, [(4.0, "brick")], occluding)
+    assert maps.maps[BRICK][brick] == 1.0
+    _look(maps, [(4.0, "brick"), (2.0, "food")], occluding)
+    assert maps.maps[FOOD][maps.cell_of(*(2.0 * _ALONG))] == 1.0
+    assert maps.maps[BRICK][brick] == 1.0
+
+
+def test_without_the_occlusion_correction_a_hidden_brick_is_wiped():
+    # The plain rule reads "no brick reading" as "no brick in range": behind the food, the
+    # brick is cleared each time it is hidden (what occlusion_clearing is for).
+    maps = EgocentricMaps(SIZE, Sensing(occlusion_clearing=False), occluding=True)
+    brick = maps.cell_of(*(4.0 * _ALONG))
+    _look(maps, [(4.0, "brick")], True)
+    assert maps.maps[BRICK][brick] == 1.0
+    _look(maps, [(4.0, "brick"), (2.0, "food")], True)
+    assert maps.maps[BRICK][brick] == 0.0

@@ -316,7 +316,7 @@ def test_protocol_error_is_a_value_error():
     assert issubclass(ProtocolError, ValueError)
 
 
-@pytest.mark.parametrize("version", [0, 1, 2, 3, 4, 5, 6, 8, -1, 2**40, "7", b"\x07", None, True, [7], {"v": 7}])
+@pytest.mark.parametrize("version", [0, 1, 2, 3, 4, 5, 6, 7, 9, -1, 2**40, "8", b"\x08", None, True, [8], {"v": 8}])
 def test_wrong_schema_version(version):
     _bad(_pack("Hello", ["a1", 1], version=version))
 

@@ -169,7 +169,7 @@ class World:
             sensor_range=self.cfg.sensor_range, cell_size=self.cfg.cell_size,
             site_xs=tuple(self.sites_xy[:, 0].tolist()), site_ys=tuple(self.sites_xy[:, 1].tolist()),
             world_width=float(self.size[0]), world_height=float(self.size[1]),
-            blueprint_version=self.blueprint_version, epoch=self.epoch,
+            blueprint_version=self.blueprint_version, epoch=self.epoch, occlusion=bool(self.cfg.occlusion),
             **{name: float(getattr(self.cfg, name)) for name in WELCOME_CONSTANTS})
 
     def halt(self, agent_id: str) -> None:

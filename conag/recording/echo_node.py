@@ -1,6 +1,6 @@
 """`conag echo KEY_EXPR`: the zenoh shell around `conag.recording.echo`.
 
-Subscribes to any key expression (`conag/v7/world/w0/agent/a1/command`, or a wildcard),
+Subscribes to any key expression (`conag/v8/world/w0/agent/a1/command`, or a wildcard),
 and prints each message decoded (`conag.recording.echo.describe`) or, with `hz`, a rate line
 every `period` seconds instead (`conag.recording.echo.RateMeter`, like `ros2 topic hz`).
 Samples are queued by zenoh's callback and printed by the caller's thread, so output is
