@@ -17,8 +17,9 @@ from agent_runtime.config import ADDITIONS, CORRECTIONS, OFF_BY_DEFAULT, AgentCo
 from agent_runtime.node import Learning
 
 # What --with switches on: the corrections for noisy worlds and the additions the default agent
-# leaves off.
+# leaves off; what --without switches off: the additions, and the corrections.
 SWITCH_ON = CORRECTIONS + OFF_BY_DEFAULT
+SWITCH_OFF = ADDITIONS + CORRECTIONS
 
 
 @dataclass(frozen=True)
@@ -27,7 +28,7 @@ class AgentSettings:
     whether it is a learning student, at which rate."""
 
     preset: str = "default"
-    without: tuple[str, ...] = ()     # additions switched off (agent_runtime.config.ADDITIONS)
+    without: tuple[str, ...] = ()     # additions and corrections switched off (SWITCH_OFF)
     with_: tuple[str, ...] = ()       # corrections and off-by-default additions switched on (SWITCH_ON)
     map_size: int = AgentConfig.map_size
     nearest_first: bool = False       # no goal sequencing (paper §4)
@@ -46,9 +47,9 @@ class AgentSettings:
 
     def config(self) -> AgentConfig:
         """The AgentConfig these settings describe (ValueError names what is wrong)."""
-        unknown = [n for n in self.without if n not in ADDITIONS]
+        unknown = [n for n in self.without if n not in SWITCH_OFF]
         if unknown:
-            raise ValueError(f"--without: unknown addition(s) {', '.join(unknown)}; known: {', '.join(ADDITIONS)}")
+            raise ValueError(f"--without: unknown name(s) {', '.join(unknown)}; known: {', '.join(SWITCH_OFF)}")
         wrong = [n for n in self.with_ if n not in SWITCH_ON]
         if wrong:
             raise ValueError(f"--with: unknown name(s) {', '.join(wrong)}; known: {', '.join(SWITCH_ON)}")
@@ -91,7 +92,8 @@ def add_kind_args(p: argparse.ArgumentParser) -> None:
                         "every addition off but ghost association); see docs/design.md")
     p.add_argument("--without", metavar="NAMES",
                    help="switch these additions off, comma separated (e.g. unstick,seal_guard; "
-                        "agent_runtime.config.ADDITIONS names them all)")
+                        "agent_runtime.config.ADDITIONS names them all), or a correction on by default "
+                        "(occlusion_clearing)")
 
 
 def add_correction_args(p: argparse.ArgumentParser) -> None:

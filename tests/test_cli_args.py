@@ -191,6 +191,16 @@ def test_with_switches_on_corrections_and_the_additions_the_default_agent_leaves
         AgentSettings.from_args(build_parser().parse_args(["run", "fig6.toml", "--with", "unstick"])).config()
 
 
+def test_without_switches_off_a_correction_on_by_default():
+    from conag.agent_settings import AgentSettings
+
+    args = build_parser().parse_args(["run", "fig6.toml", "--without", "occlusion_clearing,unstick"])
+    cfg = AgentSettings.from_args(args).config()
+    assert not cfg.occlusion_clearing and not cfg.unstick and AgentSettings().config().occlusion_clearing
+    with pytest.raises(ValueError, match=r"unknown name.*nonsense"):
+        AgentSettings.from_args(build_parser().parse_args(["run", "fig6.toml", "--without", "nonsense"])).config()
+
+
 def test_conag_run_passes_its_attach_timeout_to_every_agent_process():
     from conag import run as run_module
     from conag.commands.run import run_options
