@@ -77,6 +77,7 @@ class RunOptions:
     agents: int | None = None
     seed: int | None = None
     max_ticks: int | None = None
+    max_tick_rate: float | None = None  # lockstep: at most this many ticks a wall second (`conag world`)
     summary: str | None = None
     headless: bool = False
     quiet: bool = False
@@ -595,6 +596,8 @@ def _start_world(opts: RunOptions, n_agents: int, final_path: Path, checkpoint: 
             cmd += ["--cue-reach", repr(opts.cue_reach)]
     if opts.profile:
         cmd += ["--profile", opts.profile]
+    if opts.max_tick_rate:
+        cmd += ["--max-tick-rate", repr(opts.max_tick_rate)]
     if opts.record:  # restarted, it lets the agents attach again only once the recorder is linked to it
         cmd.append("--recorded")
     # stdin: `without ID` lines, for agents that died before the first tick (EarlyDeaths)

@@ -326,6 +326,6 @@ b.b.b.b.b.b.b.b.b.b.
 def paced(scenario_text: str, tick_rate: float) -> str:
     """`scenario_text` in realtime at `tick_rate` ticks a second: its build lasts a wall time
     we know, so a test that acts "mid-build" acts before the end however fast this machine
-    steps (in lockstep an idle machine built LONG_WALL in 2 s, and a restarted agent came
-    back after the two others had finished it)."""
+    steps. (A lockstep run gets the same from `conag run --max-tick-rate`, and keeps its
+    lockstep dynamics: the restart tests use that.)"""
     return 'tick_mode = "realtime"\n' + scenario_text + f"\n[world]\ntick_rate = {tick_rate}\n"

@@ -217,3 +217,24 @@ def test_conag_run_passes_its_attach_timeout_to_every_agent_process():
     assert timeout("--agents", "1000", "--per-process", "100", "--attach-timeout", "900") == "900.0"
     with pytest.raises(SystemExit):
         build_parser().parse_args(["run", path, "--attach-timeout", "0"])
+
+
+def test_conag_run_passes_its_max_tick_rate_to_the_world(monkeypatch, tmp_path):
+    from conag import run as run_module
+    from conag.commands.run import run_options
+    from tests.conftest import SCENARIOS
+
+    started = []
+    monkeypatch.setattr(run_module.subprocess, "Popen", lambda cmd, **kw: started.append(cmd))
+
+    def world_cmd(*extra):
+        opts = run_options(build_parser().parse_args(["run", str(SCENARIOS / "fig6.toml"), "--listen",
+                                                      "tcp/127.0.0.1:1", *extra]))
+        run_module._start_world(opts, 3, tmp_path / "final.json", tmp_path / "world.ckpt")
+        return started.pop()
+
+    assert "--max-tick-rate" not in world_cmd()
+    cmd = world_cmd("--max-tick-rate", "50")
+    assert cmd[cmd.index("--max-tick-rate") + 1] == "50.0"
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["run", "fig6.toml", "--max-tick-rate", "0"])

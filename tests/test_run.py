@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from tests.conftest import LONG_WALL, conag, free_port, paced, run_and_restart_mid_build
+from tests.conftest import LONG_WALL, conag, free_port, run_and_restart_mid_build
 
 pytestmark = pytest.mark.slow
 
@@ -42,9 +42,11 @@ def test_the_papers_agent_builds_fig6_and_the_summary_says_it_ran(tmp_path):
 def test_an_agent_killed_mid_build_and_restarted_rejoins_and_the_structure_completes(tmp_path):
     # `conag restart` SIGKILLs the process (mid-build, perhaps holding a brick) and starts
     # a new one with the same id at once; a separate `conag kill` first would let the
-    # two others finish this small structure before the new process is up. Paced at 100
-    # ticks a second, the build lasts about 10 s whatever the machine's speed.
-    s, restarted = run_and_restart_mid_build(tmp_path, paced(LONG_WALL, 100.0))
+    # two others finish this small structure before the new process is up. In lockstep at
+    # most 100 ticks a second, the build lasts about 10 s whatever the machine's speed
+    # (in realtime the agents' timing differs run to run, and 1 build in 4 of the 10 fresh-
+    # clone CI runs stalled at 29 of 30 sites: an agent's fragility, not the restart's).
+    s, restarted = run_and_restart_mid_build(tmp_path, LONG_WALL, "--max-tick-rate", 100)
     assert restarted.returncode == 0 and "started a2" in restarted.stdout, restarted.stderr
     assert s["completed"] and s["bricks_total"] == 32
     restarts = {a["id"]: a["restarts"] for a in s["agents"]}

@@ -118,10 +118,10 @@ def test_loop_times_count_from_when_everyone_is_there_and_realtime_lag():
 
 @pytest.mark.slow
 def test_hosted_agents_build_and_a_restarted_one_rejoins_as_a_process_of_its_own(tmp_path):
-    from tests.conftest import LONG_WALL, paced, run_and_restart_mid_build
+    from tests.conftest import LONG_WALL, run_and_restart_mid_build
 
-    s, restarted = run_and_restart_mid_build(tmp_path, paced(LONG_WALL, 100.0), "--agents", 4, "--per-process", 2,
-                                             timeout=300)
+    s, restarted = run_and_restart_mid_build(tmp_path, LONG_WALL, "--agents", 4, "--per-process", 2,
+                                             "--max-tick-rate", 100, timeout=300)
     assert restarted.returncode == 0 and "stopped a2 in its host" in restarted.stdout, restarted.stderr
     assert s["completed"] and s["bricks_total"] == 32
     # a2 alone came back (as a process of its own); a1, its host mate, and the other host went on

@@ -53,6 +53,9 @@ def configure(u: argparse.ArgumentParser) -> None:
                    help=f"how far (world units) a body marks, in a society's world (default {DEFAULT_CUE_REACH:g})")
     u.add_argument("--seed", type=int, help="override the scenario's seed")
     u.add_argument("--max-ticks", type=int, help="stop after this many ticks (default: the scenario's)")
+    u.add_argument("--max-tick-rate", type=positive_float, metavar="HZ",
+                   help="lockstep: step at most HZ ticks per wall second, to watch a run or to give an operator "
+                        "time to act on it (default: as fast as the agents answer)")
     u.add_argument("--stall-ticks", type=non_negative, default=DEFAULT_STALL_TICKS, metavar="N",
                    help=f"stop as stalled when no site has been filled for N ticks (default {DEFAULT_STALL_TICKS}; "
                         "0: never)")
@@ -160,6 +163,7 @@ def run_options(args: argparse.Namespace) -> RunOptions:
     unbuildable = warn_if_unbuildable(args.scenario, scenario, agents)  # a repair experiment may want it
     return RunOptions(scenario_path=args.scenario, scenario=scenario, endpoint=endpoint, world_id=args.world_id,
                       agents=args.agents, seed=args.seed, max_ticks=args.max_ticks, summary=args.summary,
+                      max_tick_rate=args.max_tick_rate,
                       headless=args.headless, quiet=args.quiet, agent=agent,
                       teacher=args.teacher, weights_dir=args.weights_dir, stall_ticks=args.stall_ticks,
                       unbuildable=unbuildable, record=args.record, record_priority=args.record_priority,
