@@ -20,7 +20,7 @@ p.add_argument("--id", default="x1")
 p.add_argument("--world", default="w0")
 args = p.parse_args()
 root = f"conag/v8/world/{args.world}/agent/{args.id}"
-pack = lambda t, f: msgpack.packb({"v": 7, "t": t, "f": f}, use_bin_type=True)  # noqa: E731
+pack = lambda t, f: msgpack.packb({"v": 8, "t": t, "f": f}, use_bin_type=True)  # noqa: E731
 no_mark = [0.0, 0.0, "site"]  # AgentCommand's mark_dx, mark_dy, mark_kind: this agent never marks
 floats = lambda b: struct.unpack(f"<{len(b) // 8}d", b)  # noqa: E731 -- a bin of float64s
 
