@@ -657,8 +657,9 @@ def test_a_one_cell_gap_in_a_wall_is_never_sealed_by_the_map(path, seed):
 
 
 @pytest.mark.xfail(strict=True, reason="esm.EgocentricMaps.sense gives a near wall reading to a marked wall cell "
-                   "beside its own; the fix (a near wall reading is always its own cell) made 117-gen-pocket and "
-                   "unseen gen-polyomino-11240006 stall, so it waits (issue 35)")
+                   "beside its own; both fixes tried (the narrower on branch wall-centre-association) stall "
+                   "117-gen-pocket (a corridor jam) and unseen gen-polyomino-11240006 (sites sealed in), so it "
+                   "waits for the agent change that retakes every figure (issue 35)")
 def test_a_wall_cell_beside_the_agent_is_mapped_though_its_neighbour_is_marked():
     # Hypothesis found it (issue 35): at (9.3, 13.5) the agent maps the wall cells (10, 12-14);
     # two cells south, at (9.3, 11.5), wall cell (10, 11) is 1.2 cells due east, read by
