@@ -18,8 +18,8 @@ made.
 Fields handed out are read-only: one array may be returned to several callers. A field
 with no goal is all inf and needs no kernel (the kernel's answer too).
 
-Pure numpy (and one numba kernel); one cache per agent (a few dozen fields: the hits are on recent inputs), so
-agents hosted in one process never share or contend for it.
+Numpy and one numba kernel (the digest); one cache per agent (a few dozen fields: the hits
+are on recent inputs), so agents hosted in one process never share or contend for it.
 """
 
 from __future__ import annotations
@@ -129,9 +129,10 @@ def _frozen(grid: np.ndarray) -> bool:
 def _digest(key):
     """A 64-bit digest of the bytes `key` (uint8), for the cache's dictionary: a key found
     under its digest is compared whole, so a collision costs a computation, never a wrong
-    field. Python's own hash of a key is several microseconds at 81 x 81 and over ten at
-    121 x 121 (a keyed SipHash, byte by byte); this reads it 8 bytes at a time, each word
-    mixed with its index (`_mix`) and summed, so the loop has no chain and vectorises."""
+    field. Python's own hash of a key (a keyed SipHash, each word through a chain of
+    rounds) is several microseconds at 81 x 81 and over ten at 121 x 121; this reads it
+    8 bytes at a time, each word mixed with its index (`_mix`) and summed, so the loop has
+    no chain from word to word and vectorises."""
     n8 = key.size // 8
     words = key[:n8 * 8].view(np.uint64)
     h = np.uint64(key.size)
