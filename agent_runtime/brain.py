@@ -459,7 +459,9 @@ class Brain:
         if self.cfg.mouth_side and np.count_nonzero(held):
             # Closed sites are passable for this: the depth of a site behind one must
             # stay finite, or every site would count as "no deeper" than its neighbour.
-            depth = self.fields.distance(i.supply_bricks, i.obstacles, "depth")
+            # Asked as the matching asks for its step 1 (bricks on obstacles are no goals
+            # either way), so with no site closed the cache holds it already.
+            depth = self.fields.distance(i.supply_bricks & ~i.obstacles, i.obstacles, "depth")
             config_goals &= ~_mouth_side(held, config_goals, depth)
         config_goals.setflags(write=False)
         brick_goals.setflags(write=False)
@@ -500,7 +502,7 @@ class Brain:
         closed = np.zeros_like(sites) if closed is None else closed
         key = b"".join(np.ascontiguousarray(g, dtype=np.bool_).tobytes() for g in (bricks, sites, obstacles, closed))
         if self._matching is None or self._matching[0] != key:
-            self._matching = (key, calculate_matching(bricks, sites, obstacles, closed))
+            self._matching = (key, calculate_matching(bricks, sites, obstacles, closed, self.fields.distance))
         return self._matching[1]
 
     def plan(self) -> Plans:
@@ -784,8 +786,11 @@ class Brain:
         kept = self._need_fields.get(layer)
         if kept is not None and kept[0] is m:
             return kept[1]
-        others = (m[FOOD] | m[WATER] | m[BRICK] | m[OBSTACLE]) & ~m[layer]
-        field = self.fields.distance(m[layer], self._free_centre(others), _NEED_SLOTS[layer])
+        if not m[layer].any():   # none on the map (most steps): no way, and no obstacles to make
+            field = self.fields.no_way(m[layer].shape)
+        else:
+            others = (m[FOOD] | m[WATER] | m[BRICK] | m[OBSTACLE]) & ~m[layer]
+            field = self.fields.distance(m[layer], self._free_centre(others), _NEED_SLOTS[layer])
         self._need_fields[layer] = (m, field)
         return field
 
@@ -996,11 +1001,15 @@ def _nearest_cell(cells, centre, fx, fy):
     Searched ring by ring outwards from the centre (the cells k rows or columns away,
     whichever more): a cell of ring k is at least k - max(|fx|, |fy|) from the point, so
     once the best found is nearer than the next ring can be, no farther cell can win or
-    tie. A brick in sight ends the search after a few rings of a large map."""
+    tie. A brick in sight ends the search after a few rings of a large map; with none
+    marked there is no search (the rings would visit every cell), and no ring lies wholly
+    off the grid."""
     n, m = cells.shape
+    if not _any_marked(cells):
+        return False, -1, -1
     slack = max(abs(fx), abs(fy))
     best, br, bc = np.inf, -1, -1
-    for k in range(max(n, m)):
+    for k in range(max(centre, n - 1 - centre, m - 1 - centre) + 1):
         if best < k - slack:
             break
         for r in range(max(centre - k, 0), min(centre + k, n - 1) + 1):
@@ -1014,6 +1023,21 @@ def _nearest_cell(cells, centre, fx, fy):
                         best, br, bc = d, r, c
                 c += step
     return br >= 0, br, bc
+
+
+@njit(cache=True)
+def _any_marked(cells):
+    """Whether any cell of the bool grid `cells` is marked: its bytes OR-ed 8 at a time
+    (a loop that vectorises, where a scan that stops at the first mark does not)."""
+    flat = np.ascontiguousarray(cells).reshape(-1).view(np.uint8)
+    n8 = flat.size // 8
+    acc = np.uint64(0)
+    words = flat[:n8 * 8].view(np.uint64)
+    for i in range(n8):
+        acc |= words[i]
+    for i in range(n8 * 8, flat.size):
+        acc |= np.uint64(flat[i])
+    return acc != 0
 
 
 @njit(cache=True)

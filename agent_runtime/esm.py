@@ -156,8 +156,9 @@ class EgocentricMaps:
         self._windows: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._sector_dirs: dict[int, np.ndarray] = {}
         self._geometry_key: tuple | None = None
-        self._geometry: tuple[np.ndarray, ...] | None = None
+        self._geometry: tuple | None = None   # `_geometry_for`'s, for `_geometry_key`
         self._geometry_buffers: dict[float, tuple[np.ndarray, ...]] = {}
+        self._pair_buffers: dict[tuple[float, int], tuple[np.ndarray, ...]] = {}
 
     # ------------------------------------------------------------------ coordinates
 
@@ -335,11 +336,28 @@ class EgocentricMaps:
             # is dropped there), so for site cells only the sectors of that core count.
             _half_angle_ratios(dist, _PAIR_RADII, ratio)
             np.arcsin(ratio, out=half)
-            pairs, core = _pairs_both(angle, half, sectors / (2.0 * np.pi), sectors)
+            per = sectors / (2.0 * np.pi)
+            pairs, core = (self._pairs(reach, run, angle, half[run], per, sectors) for run in (0, 1))
             self._geometry = (cells, dist, pairs, vx, vy, core)
             self._geometry_key = key
         assert self._geometry is not None
         return self._geometry
+
+    def _pairs(self, reach: float, run: int, angle: np.ndarray, half: np.ndarray, per: float,
+               sectors: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """`_pairs_into`'s (cell of pair, sector, starts) of one run (0: whole cells, 1: site
+        cores), in kept arrays (views of them): grown when a step needs more pairs."""
+        bufs = self._pair_buffers.get((reach, run))
+        if bufs is None:
+            n = angle.shape[0]
+            bufs = self._pair_buffers[(reach, run)] = (np.empty(4 * n, np.int64), np.empty(4 * n, np.int64),
+                                                       np.empty(n, np.int64))
+        total = _pairs_into(angle, half, per, sectors, *bufs)
+        if total < 0:   # more pairs than the arrays hold: room for twice as many
+            bufs = self._pair_buffers[(reach, run)] = (np.empty(-2 * total, np.int64),
+                                                       np.empty(-2 * total, np.int64), bufs[2])
+            total = _pairs_into(angle, half, per, sectors, *bufs)
+        return bufs[0][:total], bufs[1][:total], bufs[2]
 
     def _buffers_for(self, reach: float) -> tuple[np.ndarray, ...]:
         """Kept arrays for `_geometry_for` (vx, vy, angle, dist, ratio, half), per window:
@@ -373,36 +391,34 @@ def _half_angle_ratios(dist, radii, out):
             out[j, i] = min(radii[j] / max(dist[i], 1e-9), 1.0)
 
 
-@njit(cache=True)
-def _pairs_both(angle, half, per, sectors):
-    """`_pairs_kernel` for each row of `half`: (the whole cells' runs, the site cores' runs)."""
-    return _pairs_kernel(angle, half[0], per, sectors), _pairs_kernel(angle, half[1], per, sectors)
+@njit(cache=True, inline="always")
+def _sector_run(angle, half, per, sectors):
+    """(first sector, how many) of the sectors within the half angle `half` of `angle`."""
+    lo = np.int64(math.floor((angle - half) * per))
+    return lo, min(np.int64(math.floor((angle + half) * per)) - lo + 1, sectors)
 
 
 @njit(cache=True)
-def _pairs_kernel(angle, half, per, sectors):
+def _pairs_into(angle, half, per, sectors, cell_of_pair, sector, starts):
     """Every (cell, sector) pair where the sector comes within the half angle `half` of the
-    cell's centre direction `angle`, grouped by cell in window order: (cell of pair, sector,
-    starts)."""
+    cell's centre direction `angle`, grouped by cell in window order, into `cell_of_pair`,
+    `sector` and `starts` (the first pair of each cell); returns how many pairs there are,
+    or minus that when `cell_of_pair` and `sector` hold fewer (nothing written)."""
     n = angle.shape[0]
-    lo = np.empty(n, np.int64)
-    span = np.empty(n, np.int64)
     total = 0
     for i in range(n):
-        lo[i] = np.int64(math.floor((angle[i] - half[i]) * per))
-        span[i] = min(np.int64(math.floor((angle[i] + half[i]) * per)) - lo[i] + 1, sectors)
-        total += span[i]
-    cell_of_pair = np.empty(total, np.int64)
-    sector = np.empty(total, np.int64)
-    starts = np.empty(n, np.int64)
+        total += _sector_run(angle[i], half[i], per, sectors)[1]
+    if total > cell_of_pair.shape[0]:
+        return -total
     p = 0
     for i in range(n):
+        lo, span = _sector_run(angle[i], half[i], per, sectors)
         starts[i] = p
-        for j in range(span[i]):
+        for j in range(span):
             cell_of_pair[p] = i
-            sector[p] = (lo[i] + j) % sectors
+            sector[p] = (lo + j) % sectors
             p += 1
-    return cell_of_pair, sector, starts
+    return total
 
 
 def obstacle_trust(sectors: int) -> float:

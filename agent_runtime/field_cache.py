@@ -29,6 +29,7 @@ from collections import OrderedDict
 import numpy as np
 from numba import njit
 
+from agent_runtime.field_repair import repair_from_bytes
 from agent_runtime.spreading import FieldWork, distance_field, seeded_distance_field
 
 DEFAULT_CAPACITY = 32  # fields kept; 32 x 41 x 41 float64 is 430 KB, at 121 x 121 3.7 MB
@@ -47,7 +48,8 @@ class FieldCache:
         self._slots: dict[str, tuple[bytes, np.ndarray, np.ndarray, np.ndarray]] = {}
         self._work: FieldWork | None = None   # the kernels' buffers, for the last shape asked
         self.hits = 0
-        self.misses = 0
+        self.misses = 0      # of which `repairs` were repaired from the slot's last field
+        self.repairs = 0
 
     def distance(self, goals: np.ndarray, obstacles: np.ndarray, slot: str | None = None) -> np.ndarray:
         """`spreading.distance_field(goals, obstacles)`, read-only; `slot`: see the module."""
@@ -63,8 +65,9 @@ class FieldCache:
             return distance_field(goals, obstacles)
         if not np.count_nonzero(goals):
             return self._all_inf(goals.shape)
-        key = b"d" + _shape_bytes(goals.shape) + goals.tobytes() + obstacles.tobytes()
-        return self._lookup(key, lambda: distance_field(goals, obstacles, self._work_for(goals.shape)), slot, asked)
+        key = b"".join((_prefix(b"d", goals.shape), goals.tobytes(), obstacles.tobytes()))
+        return self._lookup(key, lambda: distance_field(goals, obstacles, self._work_for(goals.shape)), slot, asked,
+                            lambda before, field: _repaired(before, field, key))
 
     def seeded(self, seed: np.ndarray, obstacles: np.ndarray, slot: str | None = None) -> np.ndarray:
         """`spreading.seeded_distance_field(seed, obstacles)`, read-only; `slot`: see the module."""
@@ -72,11 +75,15 @@ class FieldCache:
         obstacles = np.ascontiguousarray(obstacles, dtype=np.bool_)
         if seed.shape != obstacles.shape:
             return seeded_distance_field(seed, obstacles)
-        key = b"s" + _shape_bytes(seed.shape) + seed.tobytes() + obstacles.tobytes()
+        key = b"".join((_prefix(b"s", seed.shape), seed.tobytes(), obstacles.tobytes()))
         return self._lookup(key, lambda: seeded_distance_field(seed, obstacles, self._work_for(seed.shape)), slot,
                             (_NOT_ASKED, _NOT_ASKED))
 
-    def _lookup(self, key: bytes, compute, slot: str | None, asked: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    def _lookup(self, key: bytes, compute, slot: str | None, asked: tuple[np.ndarray, np.ndarray],
+                repair=None) -> np.ndarray:
+        """The field of `key`: the slot's last, or a kept one, or `repair(the slot's last
+        key, its field)` (None: cannot), or `compute()`."""
+        last = None
         if slot is not None:
             last = self._slots.get(slot)
             if last is not None and last[0] == key:   # compared, not hashed
@@ -90,7 +97,12 @@ class FieldCache:
             self.hits += 1
         else:   # not kept, or another input with the same digest: this one replaces it
             self.misses += 1
-            field = compute()
+            repaired = repair(last[0], last[1]) if repair is not None and last is not None else None
+            if repaired is None:
+                field = compute()
+            else:
+                field = repaired
+                self.repairs += 1
             field.setflags(write=False)
             self._fields[digest] = (key, field)
             self._fields.move_to_end(digest)
@@ -106,6 +118,10 @@ class FieldCache:
         if self._work is None or self._work.shape != shape:
             self._work = FieldWork((shape[0], shape[1]))
         return self._work
+
+    def no_way(self, shape: tuple[int, ...]) -> np.ndarray:
+        """The field of no goal, all inf (read-only): what `distance` gives for no goal."""
+        return self._all_inf(shape)
 
     def _all_inf(self, shape: tuple[int, ...]) -> np.ndarray:
         field = self._nowhere.get(shape)
@@ -151,5 +167,24 @@ def _mix(x):
     return x ^ (x >> np.uint64(31))
 
 
-def _shape_bytes(shape: tuple[int, ...]) -> bytes:
-    return b"".join(int(n).to_bytes(4, "little") for n in shape)
+def _prefix(kind: bytes, shape: tuple[int, ...]) -> bytes:
+    """A key's head: the kind of field and the shape of its grids."""
+    head = _PREFIXES.get((kind, shape))
+    if head is None:
+        head = _PREFIXES[(kind, shape)] = kind + b"".join(int(n).to_bytes(4, "little") for n in shape)
+    return head
+
+
+_PREFIXES: dict[tuple[bytes, tuple[int, ...]], bytes] = {}
+
+
+def _repaired(before: bytes, field: np.ndarray, key: bytes) -> np.ndarray | None:
+    """The distance field of `key` repaired from `field`, the one of the key `before`
+    (`field_repair`); None when `before` is not a plain field of the same shape, or too
+    much changed. Both keys hold the grids themselves: they are read where they lie."""
+    if len(before) != len(key) or before[:_HEAD] != key[:_HEAD]:
+        return None
+    return repair_from_bytes(field, np.frombuffer(before, np.uint8), np.frombuffer(key, np.uint8), _HEAD)
+
+
+_HEAD = 9   # the bytes of a 2-D key's `_prefix`

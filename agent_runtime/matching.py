@@ -27,12 +27,14 @@ sequencing (§6)".
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 from numba import njit
 
-from agent_runtime.spreading import _DC, _DR, _STEP, _TIE, _field_kernel, _move_masks, _shift, readonly
+from agent_runtime.spreading import _DC, _DR, _STEP, _TIE, _move_masks, _shift, distance_field, readonly
 
 
 @dataclass(frozen=True)
@@ -59,14 +61,13 @@ def _grids(bricks, sites, obstacles, closed=None) -> tuple[np.ndarray, np.ndarra
     return readonly(bricks & ~obstacles), readonly(sites), readonly(obstacles | (closed & sites))
 
 
-def _result(match, rounds, site_r, site_c, brick_r, brick_c, sites) -> Matching:
+def _result(match, rounds, site_r, site_c, brick_r, brick_c, left_r, left_c) -> Matching:
+    """The Matching of the rounds' pairs; `left_r`, `left_c`: the unmatched sites in
+    reading order."""
     n = int(rounds)
     sr, sc, br, bc = (a[:n].tolist() for a in (site_r, site_c, brick_r, brick_c))
     pairs = tuple(((r, c), (rb, cb)) for r, c, rb, cb in zip(sr, sc, br, bc))
-    matched = set(zip(sr, sc))
-    rows, cols = np.nonzero(sites)
-    unmatched = tuple(cell for cell in zip(rows.tolist(), cols.tolist()) if cell not in matched)
-    return Matching(match, pairs, unmatched)
+    return Matching(match, pairs, tuple(zip(left_r.tolist(), left_c.tolist())))
 
 
 # --- compiled ---------------------------------------------------------------------------
@@ -145,9 +146,10 @@ def _site_value(da, obstacles, r, c):
 
 
 @njit(cache=True)
-def _matching_kernel(bricks, sites, obstacles):
+def _matching_kernel(bricks, sites, obstacles, da):
+    """The rounds of Fig. 16 over `da`, the distance field of the free bricks round the
+    obstacles (step 1: a = 1 - k d): the grid, the rounds' pairs and the unmatched sites."""
     n, m = bricks.shape
-    da = _field_kernel(bricks, obstacles)                       # step 1 (distances: a = 1 - k d)
     total = 0
     for r in range(n):
         for c in range(m):
@@ -192,13 +194,12 @@ def _matching_kernel(bricks, sites, obstacles):
                         brick_r[done], brick_c[done] = br, bc
             site_r[done], site_c[done] = r, c
             done += 1
-    return match, done, site_r, site_c, brick_r, brick_c
+    return match, done, site_r, site_c, brick_r, brick_c, rows[todo], cols[todo]
 
 
-def _compiled(bricks, sites, obstacles, closed) -> Matching:
+def _compiled(bricks, sites, obstacles, closed, distance: Callable[[np.ndarray, np.ndarray], np.ndarray]) -> Matching:
     bricks, sites, walls = _grids(bricks, sites, obstacles, closed)
-    match, done, site_r, site_c, brick_r, brick_c = _matching_kernel(bricks, sites, walls)
-    return _result(match, done, site_r, site_c, brick_r, brick_c, sites)
+    return _result(*_matching_kernel(bricks, sites, walls, readonly(distance(bricks, walls))))
 
 
 def _around_closed(matcher, bricks, sites, obstacles, closed) -> Matching:
@@ -215,15 +216,20 @@ def _around_closed(matcher, bricks, sites, obstacles, closed) -> Matching:
 
 
 def calculate_matching(bricks: np.ndarray, sites: np.ndarray, obstacles: np.ndarray,
-                       closed: np.ndarray | None = None) -> Matching:
+                       closed: np.ndarray | None = None,
+                       distance: Callable[[np.ndarray, np.ndarray], np.ndarray] = distance_field) -> Matching:
     """Fig. 16, compiled: `bricks` free bricks (S), `sites` unfilled drop sites (T),
     `obstacles` every other disc (X); bool grids of one shape, indexed [row, col].
 
     `closed` marks sites that other paths should not cross (the agent has not seen them
     open lately: another agent may have filled them). They are matched like any site; a
     site whose only ways out cross closed sites is matched as if they were open.
+
+    `distance`: how step 1's distance field of the free bricks is made, as
+    `spreading.distance_field` makes it (an agent passes its field cache's, which often
+    holds it already: it is also the mouth-side rule's depth).
     """
-    return _around_closed(_compiled, bricks, sites, obstacles, closed)
+    return _around_closed(partial(_compiled, distance=distance), bricks, sites, obstacles, closed)
 
 
 # --- Fig. 16 as whole-grid steps (the reference) ----------------------------------------
@@ -302,7 +308,9 @@ def _whole_grid(bricks, sites, obstacles, closed) -> Matching:
         for r, c_ in zip(*np.nonzero(chosen)):  # the pairs, for the report only
             pairs.append((r, c_, *_trace_end(int(succ_r[r, c_]), int(succ_c[r, c_]), da, succ_r, succ_c)))
     site_r, site_c, brick_r, brick_c = np.array(pairs, np.int64).reshape(-1, 4).T
-    return _result(match, len(pairs), site_r, site_c, brick_r, brick_c, sites)
+    left = sites.copy()
+    left[site_r, site_c] = False
+    return _result(match, len(pairs), site_r, site_c, brick_r, brick_c, *np.nonzero(left))
 
 
 def _trace_end(r: int, c: int, da: np.ndarray, succ_r: np.ndarray, succ_c: np.ndarray) -> tuple[int, int]:

@@ -35,6 +35,7 @@ class SealGuard:
     def __init__(self, maps: EgocentricMaps, far: FarMemory, centre: int):
         self.maps, self.far, self.centre = maps, far, centre
         self._found: dict[tuple[int, int], int] = {}   # far-memory cell -> tick found sealing
+        self._found_version = 0   # counts the changes to the cells of `_found` (for `_found_mask`)
         self._squares: dict[tuple[int, tuple[int, ...]], np.ndarray] = {}  # `_square`'s masks
         self._judged: tuple[tuple, np.ndarray] | None = None  # `judge`: (inputs, verdict) of the last one
         self._grids: tuple[tuple, tuple[np.ndarray, ...]] | None = None  # `_remembered`: (key, grids)
@@ -69,24 +70,31 @@ class SealGuard:
         gen-pocket 11230010). A verdict lasts SEAL_MEMORY ticks at most, since what it was
         made on goes stale."""
         any_unsafe = bool(np.count_nonzero(unsafe))
-        if not self._found and not any_unsafe:
+        found = self._found
+        if not found and not any_unsafe:
             return unsafe   # nothing remembered, nothing new: the rest would change nothing
-        judged = goals & self._square(SEAL_RADIUS, goals.shape)
-        if judged.any():
-            for cell in map(tuple, self.far.from_map(*np.nonzero(judged)).tolist()):
-                self._found.pop(cell, None)
+        if found:   # verdicts on the sites judged again now give way to the new ones
+            judged = goals & self._square(SEAL_RADIUS, goals.shape)
+            if judged.any():
+                for cell in map(tuple, self.far.from_map(*np.nonzero(judged)).tolist()):
+                    if found.pop(cell, None) is not None:
+                        self._found_version += 1
         if any_unsafe:
             for cell in map(tuple, self.far.from_map(*np.nonzero(unsafe)).tolist()):
-                self._found[cell] = tick
-        self._found = {k: t for k, t in self._found.items() if tick - t <= SEAL_MEMORY}
-        if not self._found:
+                if cell not in found:
+                    self._found_version += 1
+                found[cell] = tick
+        if found and tick - min(found.values()) > SEAL_MEMORY:
+            self._found = found = {k: t for k, t in found.items() if tick - t <= SEAL_MEMORY}
+            self._found_version += 1
+        if not found:
             return unsafe
-        return unsafe | self._found_mask()
+        return unsafe | self._found_mask() if any_unsafe else self._found_mask()
 
     def _found_mask(self) -> np.ndarray:
         """The sites found sealing lately (`_found`) that lie on the map, as a mask (read-only),
         kept while they and the agent's cell stay the same (most steps both do)."""
-        key = (self.far.cell, frozenset(self._found))
+        key = (self.far.cell, self._found_version)
         if self._mask is None or self._mask[0] != key:
             mask = self.far.map_mask(np.array(list(self._found), np.int64))
             mask.setflags(write=False)

@@ -368,3 +368,29 @@ def test_maps_cut_to_the_world_make_the_decisions_of_the_whole_map(layout, monke
     whole, whole_side = _decisions(scenario, 121, 250)
     assert cut_side < 121 and whole_side == 121
     assert cut == whole
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), sectors=st.sampled_from([4, 16, 33]), room=st.sampled_from([0, 3, 10_000]))
+def test_the_sector_pairs_are_written_whole_or_not_at_all(seed, sectors, room):
+    """`_pairs_into` into arrays that may be too small: it then writes nothing and says how
+    many pairs it needs, and with room it gives the pairs of a plain loop."""
+    from agent_runtime.esm import _pairs_into
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 40))
+    angle, half = rng.uniform(-math.pi, math.pi, n), rng.uniform(0.0, math.pi / 2, n)
+    per = sectors / (2 * math.pi)
+    plain = []
+    for i in range(n):
+        lo = math.floor((angle[i] - half[i]) * per)
+        span = min(math.floor((angle[i] + half[i]) * per) - lo + 1, sectors)
+        plain += [(i, (lo + j) % sectors) for j in range(span)]
+    cell_of_pair, sector, starts = (np.full(room, -7, np.int64), np.full(room, -7, np.int64),
+                                    np.full(n, -7, np.int64))
+    total = _pairs_into(angle, half, per, sectors, cell_of_pair, sector, starts)
+    if room < len(plain):
+        assert total == -len(plain) and (cell_of_pair == -7).all() and (starts == -7).all()
+    else:
+        assert total == len(plain)
+        assert list(zip(cell_of_pair[:total].tolist(), sector[:total].tolist())) == plain
+        assert starts.tolist() == [next(p for p, (i, _) in enumerate(plain) if i == c) for c in range(n)]
