@@ -179,8 +179,8 @@ class Brain:
         # The last inputs made: handed back by `nav_inputs` while unchanged, so what is made
         # from them alone is kept by identity (`_sequenced_goals`, the NMs' obstacles).
         self._last_inputs: NavInputs | None = None
-        self._sequenced_kept: tuple[NavInputs, np.ndarray, np.ndarray] | None = None
-        self._obstacles_kept: tuple[np.ndarray, NavInputs, np.ndarray, tuple[np.ndarray, np.ndarray]] | None = None
+        self._sequenced_kept: tuple[tuple, np.ndarray, np.ndarray] | None = None
+        self._obstacles_kept: list[tuple[tuple, tuple[np.ndarray, np.ndarray]]] = []   # `nav_masks`: (inputs, masks)
         self._empty: np.ndarray | None = None   # an empty map mask, read-only
         self._supply_kept: tuple[tuple[int, int] | None, np.ndarray, np.ndarray] | None = None  # `_supply`
         self._taken_from: np.ndarray | None = None  # (dx, dy) cells to where the held brick was taken
@@ -209,7 +209,9 @@ class Brain:
                                     -1 if self.cfg.obstacle_layer else _CH["obstacle"])
         self._tick = frame.tick
         if frame.tick > self._attach_tick:  # the attach pose already includes the last move
-            self._odo += (frame.odom_dx / self.cell, frame.odom_dy / self.cell)
+            odo = self._odo   # element by element: no array made from the pair each step
+            odo[0] += frame.odom_dx / self.cell
+            odo[1] += frame.odom_dy / self.cell
             self._shift_belief(frame.odom_dx, frame.odom_dy)
             if self.anchor is not None:
                 self.anchor.predict(math.hypot(frame.odom_dx, frame.odom_dy) / self.cell)
@@ -312,7 +314,7 @@ class Brain:
         self.blueprint_version = version
         self.far.set_sites(self._site_cells(site_xs, site_ys))
         self.far.config_layer(self.maps.maps[CONFIG])
-        self._matching = None
+        self._matching = self._sequenced_kept = None
         return True
 
     def _track_source(self, frame: SensorFrame) -> None:
@@ -325,7 +327,8 @@ class Brain:
             if self.cfg.share_bricks:
                 self._took.append(self._world_cell(*self._taken_from))
         else:
-            self._taken_from -= (frame.odom_dx / self.cell, frame.odom_dy / self.cell)
+            self._taken_from[0] -= frame.odom_dx / self.cell
+            self._taken_from[1] -= frame.odom_dy / self.cell
 
     def _world_cell(self, ox: float, oy: float) -> np.ndarray:
         """The world cell (x, y) of the point at offset (ox, oy) cells from the agent."""
@@ -437,21 +440,26 @@ class Brain:
                 config_goals = self._yield(config_goals)
         # Bricks that are not goals (the structure's, and with sequencing the unmatched free
         # ones) are in the way: a path must not lead through one to a matched brick beyond.
-        kept = self._obstacles_kept
-        if kept is None or kept[0] is not m or kept[1] is not i or kept[2] is not brick_goals:
+        # Kept for the last two sets of inputs: a step that falls back to the plain goals
+        # (`plan`) asks twice, with the sequenced brick goals and then with all of them.
+        read = (m, i.in_the_way, brick_goals)
+        both = next((masks for known, masks in self._obstacles_kept if all(a is b for a, b in zip(known, read))), None)
+        if both is None:
             both = nm_obstacles(i.in_the_way, m[BRICK], brick_goals, self.centre)
             for mask in both:
                 mask.setflags(write=False)
-            self._obstacles_kept = kept = (m, i, brick_goals, both)
-        config_obstacles, brick_obstacles = kept[3]
+            self._obstacles_kept = [(read, both), *self._obstacles_kept[:1]]
+        config_obstacles, brick_obstacles = both
         return (config_goals, config_obstacles), (brick_goals, brick_obstacles)
 
     def _sequenced_goals(self, i: NavInputs) -> tuple[np.ndarray, np.ndarray]:
         """(site goals, brick goals) with goal sequencing (§6.2): the Matching grid's, less
-        the sites on the mouth side of a held-open path (`mouth_side`). A function of the
-        step's `NavInputs` alone, so kept (read-only) while they are the same object."""
+        the sites on the mouth side of a held-open path (`mouth_side`). A function of five
+        of the step's `NavInputs` masks alone (not of where other agents are), so kept
+        (read-only) while those are the same objects (`nav_inputs`)."""
+        read = (i.supply_bricks, i.config_goals, i.obstacles, i.closed, i.brick_goals)
         kept = self._sequenced_kept
-        if kept is not None and kept[0] is i:
+        if kept is not None and all(a is b for a, b in zip(kept[0], read)):
             return kept[1], kept[2]
         matching = self.matching(i.supply_bricks, i.config_goals, i.obstacles, i.closed)
         config_goals, brick_goals = select_goals(matching, i.brick_goals, i.config_goals)
@@ -465,7 +473,7 @@ class Brain:
             config_goals &= ~_mouth_side(held, config_goals, depth)
         config_goals.setflags(write=False)
         brick_goals.setflags(write=False)
-        self._sequenced_kept = (i, config_goals, brick_goals)
+        self._sequenced_kept = (read, config_goals, brick_goals)
         return config_goals, brick_goals
 
     def _yield(self, goals: np.ndarray) -> np.ndarray:

@@ -158,7 +158,7 @@ class EgocentricMaps:
         self._geometry_key: tuple | None = None
         self._geometry: tuple | None = None   # `_geometry_for`'s, for `_geometry_key`
         self._geometry_buffers: dict[float, tuple[np.ndarray, ...]] = {}
-        self._pair_buffers: dict[tuple[float, int], tuple[np.ndarray, ...]] = {}
+        self._pair_buffers: dict[float, tuple[np.ndarray, ...]] = {}
 
     # ------------------------------------------------------------------ coordinates
 
@@ -336,28 +336,30 @@ class EgocentricMaps:
             # is dropped there), so for site cells only the sectors of that core count.
             _half_angle_ratios(dist, _PAIR_RADII, ratio)
             np.arcsin(ratio, out=half)
-            per = sectors / (2.0 * np.pi)
-            pairs, core = (self._pairs(reach, run, angle, half[run], per, sectors) for run in (0, 1))
+            pairs, core = self._pairs(reach, angle, half, sectors / (2.0 * np.pi), sectors)
             self._geometry = (cells, dist, pairs, vx, vy, core)
             self._geometry_key = key
         assert self._geometry is not None
         return self._geometry
 
-    def _pairs(self, reach: float, run: int, angle: np.ndarray, half: np.ndarray, per: float,
-               sectors: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """`_pairs_into`'s (cell of pair, sector, starts) of one run (0: whole cells, 1: site
-        cores), in kept arrays (views of them): grown when a step needs more pairs."""
-        bufs = self._pair_buffers.get((reach, run))
+    def _pairs(self, reach: float, angle: np.ndarray, half: np.ndarray, per: float,
+               sectors: int) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
+        """`_pairs_into`'s (cell of pair, sector, starts) of both runs (half[0]: whole cells,
+        half[1]: site cores), in kept arrays (views of them): (2, k) pairs and (2, n) starts,
+        grown when a step needs more pairs."""
+        bufs = self._pair_buffers.get(reach)
         if bufs is None:
             n = angle.shape[0]
-            bufs = self._pair_buffers[(reach, run)] = (np.empty(4 * n, np.int64), np.empty(4 * n, np.int64),
-                                                       np.empty(n, np.int64))
-        total = _pairs_into(angle, half, per, sectors, *bufs)
-        if total < 0:   # more pairs than the arrays hold: room for twice as many
-            bufs = self._pair_buffers[(reach, run)] = (np.empty(-2 * total, np.int64),
-                                                       np.empty(-2 * total, np.int64), bufs[2])
-            total = _pairs_into(angle, half, per, sectors, *bufs)
-        return bufs[0][:total], bufs[1][:total], bufs[2]
+            bufs = self._pair_buffers[reach] = (np.empty((2, 4 * n), np.int64), np.empty((2, 4 * n), np.int64),
+                                                np.empty((2, n), np.int64))
+        whole, core = _both_pairs_into(angle, half, per, sectors, *bufs)
+        if whole < 0 or core < 0:   # more pairs than the arrays hold: room for twice as many
+            room = 2 * max(abs(whole), abs(core))
+            bufs = self._pair_buffers[reach] = (np.empty((2, room), np.int64), np.empty((2, room), np.int64), bufs[2])
+            whole, core = _both_pairs_into(angle, half, per, sectors, *bufs)
+        of_pair, sector, starts = bufs
+        return ((of_pair[0, :whole], sector[0, :whole], starts[0]),
+                (of_pair[1, :core], sector[1, :core], starts[1]))
 
     def _buffers_for(self, reach: float) -> tuple[np.ndarray, ...]:
         """Kept arrays for `_geometry_for` (vx, vy, angle, dist, ratio, half), per window:
@@ -396,6 +398,14 @@ def _sector_run(angle, half, per, sectors):
     """(first sector, how many) of the sectors within the half angle `half` of `angle`."""
     lo = np.int64(math.floor((angle - half) * per))
     return lo, min(np.int64(math.floor((angle + half) * per)) - lo + 1, sectors)
+
+
+@njit(cache=True)
+def _both_pairs_into(angle, half, per, sectors, cell_of_pair, sector, starts):
+    """`_pairs_into` for both rows of `half` (the whole cells, the site cores), into the
+    rows of the (2, k) and (2, n) arrays: each run's count (or minus it, see there)."""
+    return (_pairs_into(angle, half[0], per, sectors, cell_of_pair[0], sector[0], starts[0]),
+            _pairs_into(angle, half[1], per, sectors, cell_of_pair[1], sector[1], starts[1]))
 
 
 @njit(cache=True)
@@ -469,9 +479,10 @@ def _span(shift: int, n: int) -> tuple[slice, slice]:
 
 
 @njit(cache=True)
-def _associate_kernel(flat, cells, dist, sector, vx, vy, disc, cos_s, sin_s, config_base, brick, band_width,
+def _associate_kernel(flat, cells, dist, k, sector, vx, vy, disc, cos_s, sin_s, config_base, brick, band_width,
                       channels):
-    """The association of `EgocentricMaps.sense` over (cell, sector) pairs; returns `explained`.
+    """The association of `EgocentricMaps.sense` over (cell, sector) pairs, pair p being
+    window cell k[p] (`cells`, `dist`, `vx`, `vy` are per window cell); returns `explained`.
 
     One compiled pass finds each reading's best cell; a second collects winners and
     ghosts from the same (pre-update) map, which are then applied: ghosts cleared first,
@@ -485,11 +496,11 @@ def _associate_kernel(flat, cells, dist, sector, vx, vy, disc, cos_s, sin_s, con
         for p in range(pairs):
             s = sector[p]
             d = disc[ch, s]
-            if d < 0.0 or abs(dist[p] - d) > band_width:
+            if d < 0.0 or abs(dist[k[p]] - d) > band_width:
                 continue
-            err = math.hypot(vx[p] - d * cos_s[s], vy[p] - d * sin_s[s])
-            marked = flat[cells[ch, p]] > 0.5
-            blueprint = ch == brick and flat[config_base + cells[0, p]] > 0.5
+            err = math.hypot(vx[k[p]] - d * cos_s[s], vy[k[p]] - d * sin_s[s])
+            marked = flat[cells[ch, k[p]]] > 0.5
+            blueprint = ch == brick and flat[config_base + cells[0, k[p]]] > 0.5
             score[ch, p] = err - 2.0 * marked - 1.0 * blueprint
             if score[ch, p] < best[ch * sectors + s]:
                 best[ch * sectors + s] = score[ch, p]
@@ -503,14 +514,14 @@ def _associate_kernel(flat, cells, dist, sector, vx, vy, disc, cos_s, sin_s, con
             if score[ch, p] == np.inf:
                 continue
             s = sector[p]
-            marked = flat[cells[ch, p]] > 0.5
-            blueprint = ch == brick and flat[config_base + cells[0, p]] > 0.5
+            marked = flat[cells[ch, k[p]]] > 0.5
+            blueprint = ch == brick and flat[config_base + cells[0, k[p]]] > 0.5
             if score[ch, p] <= best[ch * sectors + s] and (marked or blueprint):
-                winners[n_win] = cells[ch, p]
+                winners[n_win] = cells[ch, k[p]]
                 n_win += 1
                 explained[ch, s] = True
             elif ch == brick and marked and not blueprint:
-                ghosts[n_ghost] = cells[ch, p]
+                ghosts[n_ghost] = cells[ch, k[p]]
                 n_ghost += 1
     for i in range(n_ghost):
         flat[ghosts[i]] = 0.0
@@ -577,18 +588,7 @@ def _sense_kernel(flat, clear_age, known, cells, dist, k, sector, starts, core_s
             known[cells[FOOD, i] - FOOD * nn] = True
     known[centre * size + centre] = True  # the agent stands there
     if associate:
-        pairs = k.shape[0]
-        cells_k = np.empty((_DISC_CHANNELS, pairs), np.int64)
-        dist_k = np.empty(pairs)
-        vx_k = np.empty(pairs)
-        vy_k = np.empty(pairs)
-        for p in range(pairs):
-            for ch in range(_DISC_CHANNELS):
-                cells_k[ch, p] = cells[ch, k[p]]
-            dist_k[p] = dist[k[p]]
-            vx_k[p] = vx[k[p]]
-            vy_k[p] = vy[k[p]]
-        explained = _associate_kernel(flat, cells_k, dist_k, sector, vx_k, vy_k,
+        explained = _associate_kernel(flat, cells, dist, k, sector, vx, vy,
                                       np.ascontiguousarray(r[:_DISC_CHANNELS]), cos_s, sin_s, nn * CONFIG, BRICK,
                                       BAND, n_ch)
     else:  # the plain rule: every reading is written where its sector's centre angle puts it

@@ -49,25 +49,24 @@ def nav_inputs(marks: np.ndarray, recalled: np.ndarray, extra_supply: np.ndarray
 
     `previous`: the inputs of the step before. When every mask is as it was, `previous`
     itself comes back (the same object), so the stages made from it can tell by identity
-    that their inputs did not change (most steps, on layouts where others seldom pass)."""
-    stack = _stack_of(previous, marks.shape[1:])
+    that their inputs did not change (most steps, on layouts where others seldom pass);
+    and each mask that is as it was is `previous`'s own (others moving on the map change
+    `in_the_way` alone, and what the matching reads is then the same objects)."""
     masks, any_open = _inputs_kernel(readonly(marks), recalled, readonly(extra_supply), clear_age, float(site_memory),
-                                     agents_block, closed_sites, centre, stack if stack is not None else _NO_MARKS,
-                                     stack is not None)
-    if masks is None:
-        assert previous is not None
-        return previous
+                                     agents_block, closed_sites, centre)
     masks.setflags(write=False)   # shared by every reader of the step (and its views are read-only too)
-    config_goals, brick_goals, obstacles, supply_bricks, closed, in_the_way = masks
-    return NavInputs(config_goals, brick_goals, obstacles, supply_bricks, closed, in_the_way, bool(any_open))
+    if previous is None or previous.config_goals.shape != marks.shape[1:]:
+        return NavInputs(*_six(masks), bool(any_open))
+    same = _same_masks(masks, *previous[:6])   # read-only already (views of an earlier step's masks)
+    if all(same):
+        return previous
+    return NavInputs(*_six([old if kept else new for old, new, kept in zip(previous[:6], masks, same)]),
+                     bool(any_open))
 
 
-def _stack_of(inputs: NavInputs | None, shape: tuple[int, ...]) -> np.ndarray | None:
-    """The one (6, n, m) array whose views are `inputs`' masks (None: none of this shape)."""
-    if inputs is None or inputs.config_goals.shape != shape:
-        return None
-    base = inputs.config_goals.base
-    return base if isinstance(base, np.ndarray) and base.shape == (6, *shape) else None
+def _six(masks) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    a, b, c, d, e, f = masks
+    return a, b, c, d, e, f
 
 
 class StepMarks(NamedTuple):
@@ -111,10 +110,8 @@ def nm_obstacles(in_the_way: np.ndarray, bricks: np.ndarray, brick_goals: np.nda
 
 
 @njit(cache=True)
-def _inputs_kernel(marks, recalled, extra_supply, clear_age, site_memory, agents_block, closed_sites, centre,
-                   previous, compare):
-    """The six masks as one (6, n, m) array, and whether any site is open; (None, any_open)
-    when `compare` and they equal `previous` (a (6, n, m) array)."""
+def _inputs_kernel(marks, recalled, extra_supply, clear_age, site_memory, agents_block, closed_sites, centre):
+    """The six masks as one (6, n, m) array, and whether any site is open."""
     # Bitwise operators on bools, not `and`/`or`: no branch per cell, so the loop vectorises.
     n, m = recalled.shape
     out = np.empty((6, n, m), np.bool_)
@@ -136,9 +133,14 @@ def _inputs_kernel(marks, recalled, extra_supply, clear_age, site_memory, agents
             any_open |= site
     # The cells around the agent are never in doubt: it would be touching a brick there.
     closed[max(centre - 1, 0):centre + 2, max(centre - 1, 0):centre + 2] = False
-    if compare and _equal(out, previous):
-        return None, any_open
     return out, any_open
+
+
+@njit(cache=True)
+def _same_masks(masks, a, b, c, d, e, f):
+    """Per mask of the (6, n, m) `masks`: whether it equals the previous one (a to f)."""
+    return (_equal(masks[0], a), _equal(masks[1], b), _equal(masks[2], c), _equal(masks[3], d),
+            _equal(masks[4], e), _equal(masks[5], f))
 
 
 @njit(cache=True)

@@ -37,7 +37,10 @@ class SealGuard:
         self._found: dict[tuple[int, int], int] = {}   # far-memory cell -> tick found sealing
         self._found_version = 0   # counts the changes to the cells of `_found` (for `_found_mask`)
         self._squares: dict[tuple[int, tuple[int, ...]], np.ndarray] = {}  # `_square`'s masks
-        self._judged: tuple[tuple, np.ndarray] | None = None  # `judge`: (inputs, verdict) of the last one
+        # `judge`: (inputs, verdict) of the last two: a step that falls back to the plain
+        # goals (Brain.plan) judges twice, the sequenced goals then all of them.
+        self._judged: list[tuple[tuple, np.ndarray]] = []
+        self._step_shared: tuple | None = None   # `_shared`: (tick, its three masks, what they gave)
         self._grids: tuple[tuple, tuple[np.ndarray, ...]] | None = None  # `_remembered`: (key, grids)
         self._mask: tuple[tuple, np.ndarray] | None = None  # `_found_mask`: (key, mask)
 
@@ -57,7 +60,7 @@ class SealGuard:
     def unsafe(self, goals: np.ndarray, open_sites: np.ndarray, blocked: np.ndarray,
                supply: np.ndarray, tick: int) -> np.ndarray:
         """The goal sites that are no goals this step: found sealing now or lately."""
-        return self.remember(goals, self.judge(goals, open_sites, blocked, supply), tick)
+        return self.remember(goals, self.judge(goals, open_sites, blocked, supply, tick), tick)
 
     def remember(self, goals: np.ndarray, unsafe: np.ndarray, tick: int) -> np.ndarray:
         """`unsafe` (this step's verdicts, within SEAL_RADIUS cells) and the sites found
@@ -102,7 +105,7 @@ class SealGuard:
         return self._mask[1]
 
     def judge(self, goals: np.ndarray, open_sites: np.ndarray, blocked: np.ndarray,
-              supply: np.ndarray) -> np.ndarray:
+              supply: np.ndarray, tick: int | None = None) -> np.ndarray:
         """The goal sites near the agent (within SEAL_RADIUS cells) whose brick would cut an
         open site off from the supply, on the ground the agent has seen open (see the
         sealing module). Only cells seen free and open sites are passable; a site whose
@@ -115,26 +118,48 @@ class SealGuard:
         than the map, judged on the map alone, is either cut off from everything at the
         border (nothing checked: a site filled with open sites deeper in, as in gen-pocket
         153) or, with the border counted open, open at a far end that is a wall (its mouth
-        filled first, as in gen-pocket 117)."""
+        filled first, as in gen-pocket 117).
+
+        `tick`: the step's, when the maps and the far memory will not change before the
+        step ends; then what two judgements of one step share is worked out once (a step
+        that falls back to the plain goals judges twice)."""
         c, r = self.centre, SEAL_RADIUS
         if not np.count_nonzero(goals[max(c - r, 0):c + r + 1, max(c - r, 0):c + r + 1]):
             return self._nothing(goals.shape)   # no goal near: nothing to judge
         near = goals & self._square(SEAL_RADIUS, goals.shape)
+        recent, structure, memory, shared = self._shared(open_sites, blocked, supply, tick)
         # Only open sites seen empty lately are ways through (a stale one may have been
         # filled since); the sites judged are, as the agent is about to fill one of them.
-        fresh = (open_sites & (self.maps.clear_age <= FRESH_SITE)) | near
-        structure = (self.maps.maps[BRICK] > 0.5) & (self.maps.maps[CONFIG] > 0.5)
+        fresh = recent | near
         # A verdict is a pure function of these grids and of the far memory, and half the
         # time an agent beside a site judges again exactly what it judged a step before.
-        memory = self._memory_key()
-        key = (b"".join(g.tobytes() for g in (near, open_sites, blocked, supply, fresh, self.maps.known, structure)),
-               memory, self._where())
-        if self._judged is not None and self._judged[0] == key:
-            return self._judged[1]
+        key = (near.tobytes(), shared)
+        for i, (known, verdict) in enumerate(self._judged):
+            if known == key:
+                self._judged.insert(0, self._judged.pop(i))
+                return verdict
         unsafe = self._judge(near, open_sites, blocked, supply, fresh, structure, memory)
         unsafe.setflags(write=False)
-        self._judged = (key, unsafe)
+        self._judged = [(key, unsafe), *self._judged[:1]]
         return unsafe
+
+    def _shared(self, open_sites: np.ndarray, blocked: np.ndarray, supply: np.ndarray,
+                tick: int | None) -> tuple[np.ndarray, np.ndarray, tuple, tuple]:
+        """What a judgement reads besides its goals: the open sites seen empty lately, the
+        structure, the far memory's `_memory_key`, and all of it (with the agent's cell)
+        as a comparable key; kept for the rest of step `tick` (None: not kept)."""
+        kept = self._step_shared
+        if (tick is not None and kept is not None and kept[0] == tick and kept[1] is open_sites
+                and kept[2] is blocked and kept[3] is supply):
+            return kept[4]
+        recent = open_sites & (self.maps.clear_age <= FRESH_SITE)
+        structure = (self.maps.maps[BRICK] > 0.5) & (self.maps.maps[CONFIG] > 0.5)
+        memory = self._memory_key()
+        key = (b"".join(g.tobytes() for g in (open_sites, blocked, supply, recent, self.maps.known, structure)),
+               memory, self._where())
+        shared = (recent, structure, memory, key)
+        self._step_shared = (tick, open_sites, blocked, supply, shared)
+        return shared
 
     def _memory_key(self) -> tuple:
         """What the far memory's own world grids (`_remembered`) are made of, as comparable
