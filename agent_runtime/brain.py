@@ -181,6 +181,7 @@ class Brain:
         self._last_inputs: NavInputs | None = None
         self._sequenced_kept: tuple[tuple, np.ndarray, np.ndarray] | None = None
         self._obstacles_kept: list[tuple[tuple, tuple[np.ndarray, np.ndarray]]] = []   # `nav_masks`: (inputs, masks)
+        self._less_kept: list[tuple[tuple, np.ndarray]] = []   # `_goals_less`: (inputs, result)
         self._empty: np.ndarray | None = None   # an empty map mask, read-only
         self._supply_kept: tuple[tuple[int, int] | None, np.ndarray, np.ndarray] | None = None  # `_supply`
         self._taken_from: np.ndarray | None = None  # (dx, dy) cells to where the held brick was taken
@@ -433,7 +434,7 @@ class Brain:
             # Also when sequencing gives way (plan's fallback): no site that seals another.
             unsafe = self.seals.unsafe(config_goals, open_sites, obstacles, supply_bricks, self._tick)
             if np.count_nonzero(unsafe):
-                config_goals = config_goals & ~unsafe
+                config_goals = self._goals_less(config_goals, unsafe)
         if self.cfg.yield_goals:
             brick_goals = self._yield(brick_goals)
             if self._taken_from is not None:
@@ -451,6 +452,17 @@ class Brain:
             self._obstacles_kept = [(read, both), *self._obstacles_kept[:1]]
         config_obstacles, brick_obstacles = both
         return (config_goals, config_obstacles), (brick_goals, brick_obstacles)
+
+    def _goals_less(self, goals: np.ndarray, unsafe: np.ndarray) -> np.ndarray:
+        """`goals & ~unsafe`, read-only, the same object while both are (kept for the last
+        two: a plain-fallback step asks twice), so the field cache knows it by identity."""
+        for known, less in self._less_kept:
+            if known[0] is goals and known[1] is unsafe:
+                return less
+        less = goals & ~unsafe
+        less.setflags(write=False)
+        self._less_kept = [((goals, unsafe), less), *self._less_kept[:1]]
+        return less
 
     def _sequenced_goals(self, i: NavInputs) -> tuple[np.ndarray, np.ndarray]:
         """(site goals, brick goals) with goal sequencing (§6.2): the Matching grid's, less

@@ -28,8 +28,6 @@ random changes. Pure numpy and numba: no bus.
 
 from __future__ import annotations
 
-import heapq
-
 import numpy as np
 from numba import njit
 
@@ -135,11 +133,14 @@ def _repair_kernel(field, before, after, offset, limit, budget):
         return False, np.empty((0, 0))
     d = field.copy()
     flags = np.zeros(n * m, np.uint8)
+    # A binary heap of (value, cell) in two arrays: at most `budget` cells are queued
+    # (then the repair is given up) plus what the changed cells start, in either step.
+    cap = 2 * budget + 9 * changed.size + 32
+    keys, cells = np.empty(cap), np.empty(cap, np.int64)
+    size = 0
+    invalid = np.empty(budget + 16, np.int64)
+    n_invalid = 0
     # 1. invalidate, in order of old value
-    heap = [(0.0, np.int64(0))]   # typed by its first entry
-    heap.pop()
-    invalid = [np.int64(0)]
-    invalid.pop()
     for i in changed:
         r0, c0 = i // m, i % m
         for j in range(-1, 8):
@@ -147,10 +148,11 @@ def _repair_kernel(field, before, after, offset, limit, budget):
             v = r * m + c
             if 0 <= r < n and 0 <= c < m and d[r, c] < np.inf and not flags[v] & _QUEUED:
                 flags[v] |= _QUEUED
-                heapq.heappush(heap, (d[r, c], v))
-    queued = len(heap)
-    while heap:
-        _, v = heapq.heappop(heap)
+                size = _push(keys, cells, size, d[r, c], v)
+    queued = size
+    while size:
+        _, v = _pop(keys, cells, size)
+        size -= 1
         r, c = v // m, v % m
         if obstacles[r, c]:
             valid = False
@@ -161,13 +163,14 @@ def _repair_kernel(field, before, after, offset, limit, budget):
         if valid:
             continue
         d[r, c] = np.inf
-        invalid.append(v)
+        invalid[n_invalid] = v
+        n_invalid += 1
         for j in range(8):
             rr, cc = r + _DR[j], c + _DC[j]
             u = rr * m + cc
             if 0 <= rr < n and 0 <= cc < m and d[rr, cc] < np.inf and not flags[u] & _QUEUED:
                 flags[u] |= _QUEUED
-                heapq.heappush(heap, (d[rr, cc], u))
+                size = _push(keys, cells, size, d[rr, cc], u)
                 queued += 1
         if queued > budget:
             return False, d
@@ -177,12 +180,14 @@ def _repair_kernel(field, before, after, offset, limit, budget):
         for j in range(-1, 8):
             r, c = (r0, c0) if j < 0 else (r0 + _DR[j], c0 + _DC[j])
             if 0 <= r < n and 0 <= c < m:
-                _seed(d, goals, obstacles, flags, heap, r, c, m)
-    for v in invalid:
-        _seed(d, goals, obstacles, flags, heap, v // m, v % m, m)
-    queued += len(heap)
-    while heap:
-        t, v = heapq.heappop(heap)
+                size = _seed(d, goals, obstacles, flags, keys, cells, size, r, c, m)
+    for k in range(n_invalid):
+        v = invalid[k]
+        size = _seed(d, goals, obstacles, flags, keys, cells, size, v // m, v % m, m)
+    queued += size
+    while size:
+        t, v = _pop(keys, cells, size)
+        size -= 1
         r, c = v // m, v % m
         if t != d[r, c]:
             continue   # lowered since it was queued
@@ -192,7 +197,7 @@ def _repair_kernel(field, before, after, offset, limit, budget):
                 nd = t + _STEP[j]
                 if nd < d[rr, cc]:
                     d[rr, cc] = nd
-                    heapq.heappush(heap, (nd, rr * m + cc))
+                    size = _push(keys, cells, size, nd, rr * m + cc)
                     queued += 1
         if queued > budget:
             return False, d
@@ -200,13 +205,50 @@ def _repair_kernel(field, before, after, offset, limit, budget):
 
 
 @njit(cache=True)
-def _seed(d, goals, obstacles, flags, heap, r, c, m):
-    """Step 2's start at the cell (r, c): the best of its moves in, once."""
+def _seed(d, goals, obstacles, flags, keys, cells, size, r, c, m):
+    """Step 2's start at the cell (r, c): the best of its moves in, once; the heap's size."""
     v = r * m + c
     if flags[v] & _SEEDED or obstacles[r, c]:
-        return
+        return size
     flags[v] |= _SEEDED
     t = 0.0 if goals[r, c] else _best_move_in(d, obstacles, r, c)
     if t < d[r, c]:
         d[r, c] = t
-        heapq.heappush(heap, (t, v))
+        size = _push(keys, cells, size, t, v)
+    return size
+
+
+@njit(cache=True, inline="always")
+def _push(keys, cells, size, key, cell):
+    """Add (key, cell) to the binary heap of `size` entries; returns the new size."""
+    i = size
+    while i > 0:
+        parent = (i - 1) >> 1
+        if keys[parent] <= key:
+            break
+        keys[i], cells[i] = keys[parent], cells[parent]
+        i = parent
+    keys[i], cells[i] = key, cell
+    return size + 1
+
+
+@njit(cache=True, inline="always")
+def _pop(keys, cells, size):
+    """The least (key, cell) of the binary heap of `size` entries, taken out (the heap
+    then holds size - 1)."""
+    top_key, top_cell = keys[0], cells[0]
+    size -= 1
+    key, cell = keys[size], cells[size]
+    i = 0
+    while True:
+        child = 2 * i + 1
+        if child >= size:
+            break
+        if child + 1 < size and keys[child + 1] < keys[child]:
+            child += 1
+        if keys[child] >= key:
+            break
+        keys[i], cells[i] = keys[child], cells[child]
+        i = child
+    keys[i], cells[i] = key, cell
+    return top_key, top_cell
