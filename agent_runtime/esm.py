@@ -56,6 +56,7 @@ computed for a window of cell offsets fixed per sensor range, and cached per `fr
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -431,6 +432,7 @@ def _pairs_into(angle, half, per, sectors, cell_of_pair, sector, starts):
     return total
 
 
+@functools.cache
 def obstacle_trust(sectors: int) -> float:
     """Distance (cells) within which a reading written at its sector's centre angle lies
     within 0.45 cell of the true direction, i.e. in the cell of an object on a cell centre."""

@@ -94,10 +94,29 @@ def _changed_cells(before, after, offset, cells, limit):
             if before[b] != after[b]:
                 if k == 2 * limit:
                     return found[:0], False
-                found[k] = (b - offset) % cells
+                found[k] = b - offset
                 k += 1
-    changed = np.unique(found[:k])
-    return changed, changed.size <= limit
+    # Byte order is the goals' cells in order, then the obstacles' (cells + b): merge the
+    # two sorted runs, a cell in both once.
+    split = 0
+    while split < k and found[split] < cells:
+        split += 1
+    changed = np.empty(k, np.int64)
+    i, j, n = 0, split, 0
+    while i < split or j < k:
+        if j == k or (i < split and found[i] < found[j] - cells):
+            cell = found[i]
+            i += 1
+        elif i == split or found[j] - cells < found[i]:
+            cell = found[j] - cells
+            j += 1
+        else:   # the same cell in both runs
+            cell = found[i]
+            i += 1
+            j += 1
+        changed[n] = cell
+        n += 1
+    return changed[:n], n <= limit
 
 
 @njit(cache=True)
