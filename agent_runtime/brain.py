@@ -444,7 +444,7 @@ class Brain:
         # Kept for the last two sets of inputs: a step that falls back to the plain goals
         # (`plan`) asks twice, with the sequenced brick goals and then with all of them.
         read = (m, i.in_the_way, brick_goals)
-        both = next((masks for known, masks in self._obstacles_kept if all(a is b for a, b in zip(known, read))), None)
+        both = next((masks for known, masks in self._obstacles_kept if _same_objects(known, read)), None)
         if both is None:
             both = nm_obstacles(i.in_the_way, m[BRICK], brick_goals, self.centre)
             for mask in both:
@@ -471,7 +471,7 @@ class Brain:
         (read-only) while those are the same objects (`nav_inputs`)."""
         read = (i.supply_bricks, i.config_goals, i.obstacles, i.closed, i.brick_goals)
         kept = self._sequenced_kept
-        if kept is not None and all(a is b for a, b in zip(kept[0], read)):
+        if kept is not None and _same_objects(kept[0], read):
             return kept[1], kept[2]
         matching = self.matching(i.supply_bricks, i.config_goals, i.obstacles, i.closed)
         config_goals, brick_goals = select_goals(matching, i.brick_goals, i.config_goals)
@@ -972,6 +972,15 @@ class Brain:
         k = int(np.argmin(np.where(readings >= 0, readings, np.inf)))
         angle = (k + 0.5) * 2 * math.pi / len(readings)
         return readings[k] * math.cos(angle), readings[k] * math.sin(angle)
+
+
+def _same_objects(a: tuple, b: tuple) -> bool:
+    """Whether the two tuples hold the very same objects, place by place (a loop: a
+    generator in `all` costs more than the few comparisons)."""
+    for x, y in zip(a, b):  # noqa: SIM110 (see above)
+        if x is not y:
+            return False
+    return True
 
 
 def _mouth_side(held: np.ndarray, sites: np.ndarray, depth: np.ndarray) -> np.ndarray:

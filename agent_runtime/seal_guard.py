@@ -5,7 +5,7 @@ another open site off if filled now (`judge`: the sealing module's pure judgemen
 whole world as the agent's far memory holds it, or on its map alone while the world's
 extent is unknown), and keeps each such verdict for SEAL_MEMORY ticks once the agent has
 walked out of the check's reach (`remember`). It reads the agent's maps and far memory and
-owns only those verdicts. Numpy, no bus.
+owns only those verdicts. Numpy and a small numba kernel, no bus.
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from agent_runtime.esm import BRICK, CONFIG, EgocentricMaps
 from agent_runtime.far_memory import FarMemory
@@ -27,6 +28,7 @@ from agent_runtime.sealing import (
     cut_off,
     walling_in,
 )
+from agent_runtime.spreading import readonly
 
 
 class SealGuard:
@@ -72,7 +74,7 @@ class SealGuard:
         for ever (as in a one-cell slot of water whose far end it had not seen,
         gen-pocket 11230010). A verdict lasts SEAL_MEMORY ticks at most, since what it was
         made on goes stale."""
-        any_unsafe = bool(np.count_nonzero(unsafe))
+        any_unsafe = unsafe is not self._nothing(unsafe.shape) and bool(np.count_nonzero(unsafe))
         found = self._found
         if not found and not any_unsafe:
             return unsafe   # nothing remembered, nothing new: the rest would change nothing
@@ -123,8 +125,7 @@ class SealGuard:
         `tick`: the step's, when the maps and the far memory will not change before the
         step ends; then what two judgements of one step share is worked out once (a step
         that falls back to the plain goals judges twice)."""
-        c, r = self.centre, SEAL_RADIUS
-        if not np.count_nonzero(goals[max(c - r, 0):c + r + 1, max(c - r, 0):c + r + 1]):
+        if not _any_within(readonly(goals), self.centre, SEAL_RADIUS):
             return self._nothing(goals.shape)   # no goal near: nothing to judge
         near = goals & self._square(SEAL_RADIUS, goals.shape)
         recent, structure, memory, shared = self._shared(open_sites, blocked, supply, tick)
@@ -246,6 +247,17 @@ class SealGuard:
                 g.setflags(write=False)
             self._grids = kept = (key, grids)
         return kept[1]
+
+
+@njit(cache=True)
+def _any_within(goals, centre, radius):
+    """Whether a goal lies within `radius` cells (rows and columns) of (centre, centre)."""
+    n, m = goals.shape
+    for r in range(max(centre - radius, 0), min(centre + radius + 1, n)):
+        for c in range(max(centre - radius, 0), min(centre + radius + 1, m)):
+            if goals[r, c]:
+                return True
+    return False
 
 
 @dataclass(frozen=True)

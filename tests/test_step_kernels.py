@@ -394,3 +394,14 @@ def test_the_sector_pairs_are_written_whole_or_not_at_all(seed, sectors, room):
         assert total == len(plain)
         assert list(zip(cell_of_pair[:total].tolist(), sector[:total].tolist())) == plain
         assert starts.tolist() == [next(p for p, (i, _) in enumerate(plain) if i == c) for c in range(n)]
+
+
+@settings(max_examples=100, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), size=st.sampled_from([1, 4, 9, 41]), radius=st.integers(0, 6),
+       density=st.sampled_from([0.0, 0.01, 0.2]))
+def test_the_seal_guards_goal_near_check_is_the_numpy_slice(seed, size, radius, density):
+    from agent_runtime.seal_guard import _any_within
+    goals = np.random.default_rng(seed).random((size, size)) < density
+    c = size // 2
+    expected = bool(np.count_nonzero(goals[max(c - radius, 0):c + radius + 1, max(c - radius, 0):c + radius + 1]))
+    assert _any_within(goals, c, radius) == expected
