@@ -13,12 +13,14 @@ A caller may also name the `slot` it asks from (the configuration NM, the brick 
 the slot's last key is compared first, which spares even the digest on the most common
 hit, the same inputs as a tick before; and when the inputs are the very arrays the slot
 was last asked with, and read-only (nothing can have changed them), not even the key is
-made.
+made. A plain field the slot has not seen is repaired from the slot's last one when few
+cells changed (`field_repair`: another agent's move changes two), bit for bit the field
+the kernel would compute.
 
 Fields handed out are read-only: one array may be returned to several callers. A field
 with no goal is all inf and needs no kernel (the kernel's answer too).
 
-Numpy and one numba kernel (the digest); one cache per agent (a few dozen fields: the hits
+Numpy and one numba kernel here (the digest); one cache per agent (a few dozen fields: the hits
 are on recent inputs), so agents hosted in one process never share or contend for it.
 """
 

@@ -65,6 +65,7 @@ def nav_inputs(marks: np.ndarray, recalled: np.ndarray, extra_supply: np.ndarray
 
 
 def _six(masks) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The six masks of `NavInputs`, in order, as a typed tuple."""
     a, b, c, d, e, f = masks
     return a, b, c, d, e, f
 

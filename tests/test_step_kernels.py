@@ -405,3 +405,18 @@ def test_the_seal_guards_goal_near_check_is_the_numpy_slice(seed, size, radius, 
     c = size // 2
     expected = bool(np.count_nonzero(goals[max(c - radius, 0):c + radius + 1, max(c - radius, 0):c + radius + 1]))
     assert _any_within(goals, c, radius) == expected
+
+
+def test_a_slot_asked_with_a_few_cells_changed_gets_the_kernels_field_repaired():
+    # As the NMs are asked step after step while other agents move: the field comes from
+    # the slot's last one (`repairs` counts it), and is the kernel's, bit for bit.
+    rng = np.random.default_rng(21)
+    goals = rng.random((31, 31)) < 0.01
+    obstacles = rng.random((31, 31)) < 0.15
+    cache = FieldCache()
+    cache.distance(goals, obstacles, "config")
+    for _ in range(30):
+        obstacles = obstacles.copy()
+        obstacles.flat[rng.integers(0, obstacles.size, 2)] ^= True   # an agent's mark moves
+        assert np.array_equal(cache.distance(goals, obstacles, "config"), distance_field(goals, obstacles))
+    assert cache.repairs >= 20 and cache.misses <= 31
