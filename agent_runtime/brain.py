@@ -247,7 +247,9 @@ class Brain:
         remembered, what comes back onto it is written in again; without `far_memory`, as
         in the paper, what shifts off the maps is gone)."""
         if not self.cfg.far_memory:
-            self.far.move(*self.maps.move(dx, dy, self.cell), None)   # only the agent's cell
+            kx, ky = self.maps.move(dx, dy, self.cell)
+            self.far.move(kx, ky, None)   # only the agent's cell
+            self.fields.moved(ky, -kx)   # the maps' contents move the other way
             return
         layers = self.maps.maps
         kx, ky = self.maps.crossing(dx, dy, self.cell)
@@ -259,6 +261,7 @@ class Brain:
         discs = (layers[FOOD] > 0.5) | (layers[WATER] > 0.5)
         ground = self.maps.known & ~walls & ~discs      # before the maps shift
         kx, ky = self.maps.move(dx, dy, self.cell)   # the cells `crossing` said
+        self.fields.moved(ky, -kx)   # the maps' contents move the other way
         self.far.save_walls(walls, discs | self._recalled, ground)
         back = self.far.move(kx, ky, free)
         layers[BRICK][back] = 1.0

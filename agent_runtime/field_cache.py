@@ -46,9 +46,10 @@ class FieldCache:
         self.capacity = capacity
         self._fields: OrderedDict[int, tuple[bytes, np.ndarray]] = OrderedDict()  # digest -> (key, field)
         self._nowhere: dict[tuple[int, ...], np.ndarray] = {}  # the all-inf field per shape
-        # slot -> (its last key, field, and the goals and obstacles it was asked with)
-        self._slots: dict[str, tuple[bytes, np.ndarray, np.ndarray, np.ndarray]] = {}
+        # slot -> (its last key, field, the goals and obstacles it was asked with, and `_at` then)
+        self._slots: dict[str, tuple[bytes, np.ndarray, np.ndarray, np.ndarray, tuple[int, int]]] = {}
         self._work: FieldWork | None = None   # the kernels' buffers, for the last shape asked
+        self._at = (0, 0)   # how far the maps' contents moved in all (`moved`), in rows and columns
         self.hits = 0
         self.misses = 0      # of which `repairs` were repaired from the slot's last field
         self.repairs = 0
@@ -69,7 +70,7 @@ class FieldCache:
             return self._all_inf(goals.shape)
         key = b"".join((_prefix(b"d", goals.shape), goals.tobytes(), obstacles.tobytes()))
         return self._lookup(key, lambda: distance_field(goals, obstacles, self._work_for(goals.shape)), slot, asked,
-                            lambda before, field: _repaired(before, field, key))
+                            lambda before, field, moved: _repaired(before, field, key, moved))
 
     def seeded(self, seed: np.ndarray, obstacles: np.ndarray, slot: str | None = None) -> np.ndarray:
         """`spreading.seeded_distance_field(seed, obstacles)`, read-only; `slot`: see the module."""
@@ -84,7 +85,7 @@ class FieldCache:
     def _lookup(self, key: bytes, compute, slot: str | None, asked: tuple[np.ndarray, np.ndarray],
                 repair=None) -> np.ndarray:
         """The field of `key`: the slot's last, or a kept one, or `repair(the slot's last
-        key, its field)` (None: cannot), or `compute()`."""
+        key, its field, how far the map moved since)` (None: cannot), or `compute()`."""
         last = None
         if slot is not None:
             last = self._slots.get(slot)
@@ -99,7 +100,9 @@ class FieldCache:
             self.hits += 1
         else:   # not kept, or another input with the same digest: this one replaces it
             self.misses += 1
-            repaired = repair(last[0], last[1]) if repair is not None and last is not None else None
+            repaired = None
+            if repair is not None and last is not None:
+                repaired = repair(last[0], last[1], (self._at[0] - last[4][0], self._at[1] - last[4][1]))
             if repaired is None:
                 field = compute()
             else:
@@ -111,8 +114,13 @@ class FieldCache:
             if len(self._fields) > self.capacity:
                 self._fields.popitem(last=False)
         if slot is not None:
-            self._slots[slot] = (key, field, *asked)
+            self._slots[slot] = (key, field, *asked, self._at)
         return field
+
+    def moved(self, rows: int, cols: int) -> None:
+        """The maps' contents moved by (rows, cols) (the agent crossed into another cell):
+        a slot's next field may be repaired from its last one moved as far."""
+        self._at = (self._at[0] + rows, self._at[1] + cols)
 
     def _work_for(self, shape: tuple[int, ...]) -> FieldWork | None:
         if len(shape) != 2:
@@ -180,13 +188,14 @@ def _prefix(kind: bytes, shape: tuple[int, ...]) -> bytes:
 _PREFIXES: dict[tuple[bytes, tuple[int, ...]], bytes] = {}
 
 
-def _repaired(before: bytes, field: np.ndarray, key: bytes) -> np.ndarray | None:
-    """The distance field of `key` repaired from `field`, the one of the key `before`
-    (`field_repair`); None when `before` is not a plain field of the same shape, or too
-    much changed. Both keys hold the grids themselves: they are read where they lie."""
-    if len(before) != len(key) or before[:_HEAD] != key[:_HEAD]:
+def _repaired(before: bytes, field: np.ndarray, key: bytes, moved: tuple[int, int]) -> np.ndarray | None:
+    """The distance field of `key` repaired from `field`, the one of the key `before`, on
+    a map that moved by `moved` since (`field_repair`); None when `before` is not a plain
+    field of the same shape, the map moved more than a cell, or too much changed. Both
+    keys hold the grids themselves: they are read where they lie."""
+    if len(before) != len(key) or before[:_HEAD] != key[:_HEAD] or max(abs(moved[0]), abs(moved[1])) > 1:
         return None
-    return repair_from_bytes(field, np.frombuffer(before, np.uint8), np.frombuffer(key, np.uint8), _HEAD)
+    return repair_from_bytes(field, np.frombuffer(before, np.uint8), np.frombuffer(key, np.uint8), _HEAD, moved)
 
 
 _HEAD = 9   # the bytes of a 2-D key's `_prefix`

@@ -56,11 +56,18 @@ def repair_distance_field(field: np.ndarray, goals_before: np.ndarray, obstacles
     return repair_from_bytes(field, packed(goals_before, obstacles_before), packed(goals, obstacles), 0)
 
 
-def repair_from_bytes(field: np.ndarray, before: np.ndarray, after: np.ndarray, offset: int) -> np.ndarray | None:
+def repair_from_bytes(field: np.ndarray, before: np.ndarray, after: np.ndarray, offset: int,
+                      moved: tuple[int, int] = (0, 0)) -> np.ndarray | None:
     """`repair_distance_field` with the grids as bytes (uint8): from `offset` on, the goals'
     bytes then the obstacles' (as `FieldCache` keys them), in `before` and in `after`,
-    which are alike up to `offset`."""
-    done, out = _repair_kernel(field, before, after, offset, MAX_CHANGED, MAX_QUEUED)
+    which are alike up to `offset`.
+
+    `moved`: (rows, cols) by which the map's contents moved since `before` (the agent
+    crossed into another cell; `esm` shifts the maps). Cell (r, c) before is then cell
+    (r + rows, c + cols) now, and the cells that come onto the map were not there: it is
+    repaired only when every cell that left the map was an obstacle (as beyond the
+    world's edge), so that no way led through them, and the newcomers count as changed."""
+    done, out = _repair_kernel(field, before, after, offset, MAX_CHANGED, MAX_QUEUED, moved[0], moved[1])
     return out if done else None
 
 
@@ -120,6 +127,36 @@ def _changed_cells(before, after, offset, cells, limit):
 
 
 @njit(cache=True)
+def _moved(field, goals_before, obstacles_before, goals, obstacles, dr, dc, limit):
+    """For a map whose contents moved by (dr, dc): whether it can be repaired (every cell
+    that left the map was an obstacle, at most `limit` cells differ), the cells that
+    differ (those come onto the map count as obstacles before), and the old field moved
+    (inf where nothing was)."""
+    n, m = field.shape
+    for r in range(n):
+        for c in range(m):
+            if not (0 <= r + dr < n and 0 <= c + dc < m) and not obstacles_before[r, c]:
+                return False, np.empty(0, np.int64), np.empty((0, 0))
+    d = np.full((n, m), np.inf)
+    changed = np.empty(limit + 1, np.int64)
+    k = 0
+    for r in range(n):
+        for c in range(m):
+            rb, cb = r - dr, c - dc
+            inside = 0 <= rb < n and 0 <= cb < m
+            if inside:
+                d[r, c] = field[rb, cb]
+            was_goal = inside and goals_before[rb, cb]
+            was_obstacle = not inside or obstacles_before[rb, cb]
+            if was_goal != goals[r, c] or was_obstacle != obstacles[r, c]:
+                if k == limit:
+                    return False, changed[:0], d
+                changed[k] = r * m + c
+                k += 1
+    return True, changed[:k], d
+
+
+@njit(cache=True)
 def _best_move_in(d, obstacles, r, c):
     """The least d[u] + step over the moves into the free cell (r, c) (inf: none)."""
     best = np.inf
@@ -143,14 +180,19 @@ def _has_witness(d, obstacles, r, c):
 
 
 @njit(cache=True)
-def _repair_kernel(field, before, after, offset, limit, budget):
+def _repair_kernel(field, before, after, offset, limit, budget, dr, dc):
     n, m = field.shape
     goals = after[offset:offset + n * m].reshape(n, m)
     obstacles = after[offset + n * m:offset + 2 * n * m].reshape(n, m)
-    changed, few = _changed_cells(before, after, offset, n * m, limit)
+    if dr == 0 and dc == 0:
+        changed, few = _changed_cells(before, after, offset, n * m, limit)
+        d = field.copy()
+    else:
+        few, changed, d = _moved(field, before[offset:offset + n * m].reshape(n, m),
+                                 before[offset + n * m:offset + 2 * n * m].reshape(n, m), goals, obstacles, dr, dc,
+                                 limit)
     if not few:
         return False, np.empty((0, 0))
-    d = field.copy()
     flags = np.zeros(n * m, np.uint8)
     # A binary heap of (value, cell) in two arrays: at most `budget` cells are queued
     # (then the repair is given up) plus what the changed cells start, in either step.

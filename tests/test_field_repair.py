@@ -151,3 +151,37 @@ def test_within_the_budget_the_repairs_of_random_small_changes_are_exact_and_mos
             made += 1
             assert np.array_equal(got, distance_field(goals, new))
     assert made >= 40, f"only {made} of 60 repaired within MAX_QUEUED={MAX_QUEUED}"
+
+
+def _moved(grid: np.ndarray, dr: int, dc: int, fill: bool) -> np.ndarray:
+    """The grid's contents moved by (dr, dc), `fill` on the cells that come onto it."""
+    out = np.full(grid.shape, fill)
+    n, m = grid.shape
+    out[max(dr, 0):n + min(dr, 0), max(dc, 0):m + min(dc, 0)] = grid[max(-dr, 0):n - max(dr, 0),
+                                                                     max(-dc, 0):m - max(dc, 0)]
+    return out
+
+
+@settings(max_examples=150, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), size=st.sampled_from([5, 12, 31]), density=st.sampled_from([0.0, 0.2, 0.4]),
+       move=st.sampled_from([(0, 1), (1, 0), (-1, 0), (0, -1), (1, 1), (-1, 1), (1, -1), (-1, -1)]))
+def test_a_field_repaired_across_a_move_of_the_map_is_the_field_computed_afresh(seed, size, density, move):
+    """The agent crossed into the next cell: the map's contents moved by one row or column
+    or both. Where everything that left the map was an obstacle (a world smaller than the
+    map), the old field moved and repaired is the new one, bit for bit; else no repair."""
+    rng = np.random.default_rng(seed)
+    goals, obstacles = _grids(rng, size, density, walled=True)
+    field = distance_field(goals, obstacles)
+    dr, dc = move
+    new_goals, new_obstacles = _change(rng, _moved(goals, dr, dc, False), _moved(obstacles, dr, dc, True))
+    inside = _moved(np.ones(goals.shape, bool), -dr, -dc, False)   # the cells that stay on the map
+    leaving_free = bool((~obstacles & ~inside).any())
+    before = np.frombuffer(goals.tobytes() + obstacles.tobytes(), np.uint8)
+    after = np.frombuffer(new_goals.tobytes() + new_obstacles.tobytes(), np.uint8)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(field_repair, "MAX_QUEUED", 10**9)
+        got = field_repair.repair_from_bytes(field, before, after, 0, move)
+    if leaving_free:
+        assert got is None
+    else:
+        assert got is not None and np.array_equal(got, distance_field(new_goals, new_obstacles))
