@@ -133,9 +133,15 @@ def _moved(field, goals_before, obstacles_before, goals, obstacles, dr, dc, limi
     differ (those come onto the map count as obstacles before), and the old field moved
     (inf where nothing was)."""
     n, m = field.shape
-    for r in range(n):
+    # The cells that left: the rows past the edge the contents moved towards, then the
+    # columns (a corner cell is looked at twice).
+    for r in range(n - dr, n) if dr > 0 else range(-dr):
         for c in range(m):
-            if not (0 <= r + dr < n and 0 <= c + dc < m) and not obstacles_before[r, c]:
+            if not obstacles_before[r, c]:
+                return False, np.empty(0, np.int64), np.empty((0, 0))
+    for c in range(m - dc, m) if dc > 0 else range(-dc):
+        for r in range(n):
+            if not obstacles_before[r, c]:
                 return False, np.empty(0, np.int64), np.empty((0, 0))
     d = np.full((n, m), np.inf)
     changed = np.empty(limit + 1, np.int64)
