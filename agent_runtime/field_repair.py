@@ -22,6 +22,9 @@ point from the old one, bit for bit:
    order of value, carries every decrease on. Afterwards no move can lower a value, and
    every value is that of a path: the fixed point.
 
+When the agent has crossed into the next cell its maps' contents moved by a row or a
+column: the old field is moved with them first (`repair_from_bytes`'s `moved`).
+
 `tests/test_field_repair.py` holds repairs to fresh fields, bit for bit, through chains of
 random changes. Pure numpy and numba: no bus.
 """
@@ -48,8 +51,9 @@ _QUEUED, _SEEDED = 1, 2   # a cell's flags: queued in step 1, started from in st
 def repair_distance_field(field: np.ndarray, goals_before: np.ndarray, obstacles_before: np.ndarray,
                           goals: np.ndarray, obstacles: np.ndarray) -> np.ndarray | None:
     """`spreading.distance_field(goals, obstacles)`, from `field`, the distance field of
-    `goals_before` and `obstacles_before`; None when more than MAX_CHANGED cells differ
-    (compute it afresh). The grids are bool, of `field`'s 2-D shape."""
+    `goals_before` and `obstacles_before`; None when more than MAX_CHANGED cells differ or
+    the repair would queue more than MAX_QUEUED (compute it afresh). The grids are bool,
+    of `field`'s 2-D shape."""
     def packed(g, o):
         return np.frombuffer(np.ascontiguousarray(g, np.bool_).tobytes() + np.ascontiguousarray(o, np.bool_).tobytes(),
                              np.uint8)
