@@ -180,8 +180,8 @@ class Brain:
         # from them alone is kept by identity (`_sequenced_goals`, the NMs' obstacles).
         self._last_inputs: NavInputs | None = None
         self._sequenced_kept: tuple[tuple, np.ndarray, np.ndarray] | None = None
-        self._obstacles_kept: list[tuple[tuple, tuple[np.ndarray, np.ndarray]]] = []   # `nav_masks`: (inputs, masks)
-        self._less_kept: list[tuple[tuple, np.ndarray]] = []   # `_goals_less`: (inputs, result)
+        self._obstacles_kept = _KeptForTwo()   # `nav_masks`: the NM obstacles by their inputs
+        self._less_kept = _KeptForTwo()        # `_goals_less`: the result by its inputs
         self._empty: np.ndarray | None = None   # an empty map mask, read-only
         self._supply_kept: tuple[tuple[int, int] | None, np.ndarray, np.ndarray] | None = None  # `_supply`
         self._taken_from: np.ndarray | None = None  # (dx, dy) cells to where the held brick was taken
@@ -444,27 +444,24 @@ class Brain:
                 config_goals = self._yield(config_goals)
         # Bricks that are not goals (the structure's, and with sequencing the unmatched free
         # ones) are in the way: a path must not lead through one to a matched brick beyond.
-        # Kept for the last two sets of inputs: a step that falls back to the plain goals
-        # (`plan`) asks twice, with the sequenced brick goals and then with all of them.
-        read = (m, i.in_the_way, brick_goals)
-        both = next((masks for known, masks in self._obstacles_kept if _same_objects(known, read)), None)
+        read = (m, i.in_the_way, brick_goals)   # kept for two: sequenced, then plain goals
+        both = self._obstacles_kept.get(read)
         if both is None:
             both = nm_obstacles(i.in_the_way, m[BRICK], brick_goals, self.centre)
             for mask in both:
                 mask.setflags(write=False)
-            self._obstacles_kept = [(read, both), *self._obstacles_kept[:1]]
+            self._obstacles_kept.put(read, both)
         config_obstacles, brick_obstacles = both
         return (config_goals, config_obstacles), (brick_goals, brick_obstacles)
 
     def _goals_less(self, goals: np.ndarray, unsafe: np.ndarray) -> np.ndarray:
         """`goals & ~unsafe`, read-only, the same object while both are (kept for the last
         two: a plain-fallback step asks twice), so the field cache knows it by identity."""
-        for known, less in self._less_kept:
-            if known[0] is goals and known[1] is unsafe:
-                return less
-        less = goals & ~unsafe
-        less.setflags(write=False)
-        self._less_kept = [((goals, unsafe), less), *self._less_kept[:1]]
+        less = self._less_kept.get((goals, unsafe))
+        if less is None:
+            less = goals & ~unsafe
+            less.setflags(write=False)
+            self._less_kept.put((goals, unsafe), less)
         return less
 
     def _sequenced_goals(self, i: NavInputs) -> tuple[np.ndarray, np.ndarray]:
@@ -975,6 +972,24 @@ class Brain:
         k = int(np.argmin(np.where(readings >= 0, readings, np.inf)))
         angle = (k + 0.5) * 2 * math.pi / len(readings)
         return readings[k] * math.cos(angle), readings[k] * math.sin(angle)
+
+
+class _KeptForTwo:
+    """A value kept for each of the last two sets of inputs, known by identity (a step that
+    falls back to the plain goals asks for two in turn, and one kept would miss on both)."""
+
+    def __init__(self) -> None:
+        self._kept: list[tuple[tuple, object]] = []
+
+    def get(self, inputs: tuple):
+        """The value kept for these very objects, or None."""
+        for known, value in self._kept:
+            if _same_objects(known, inputs):
+                return value
+        return None
+
+    def put(self, inputs: tuple, value) -> None:
+        self._kept = [(inputs, value), *self._kept[:1]]
 
 
 def _same_objects(a: tuple, b: tuple) -> bool:

@@ -67,7 +67,7 @@ class FieldCache:
         if goals.shape != obstacles.shape:  # let the kernel's own check say what is wrong
             return distance_field(goals, obstacles)
         if not np.count_nonzero(goals):
-            return self._all_inf(goals.shape)
+            return self.no_way(goals.shape)
         key = b"".join((_prefix(b"d", goals.shape), goals.tobytes(), obstacles.tobytes()))
         return self._lookup(key, lambda: distance_field(goals, obstacles, self._work_for(goals.shape)), slot, asked,
                             lambda before, field, moved: _repaired(before, field, key, moved))
@@ -131,9 +131,6 @@ class FieldCache:
 
     def no_way(self, shape: tuple[int, ...]) -> np.ndarray:
         """The field of no goal, all inf (read-only): what `distance` gives for no goal."""
-        return self._all_inf(shape)
-
-    def _all_inf(self, shape: tuple[int, ...]) -> np.ndarray:
         field = self._nowhere.get(shape)
         if field is None:
             field = self._nowhere[shape] = np.full(shape, np.inf)
