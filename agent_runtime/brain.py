@@ -669,7 +669,10 @@ class Brain:
             return speed, turn
         dx, dy = self._dropped_at - self._odo
         # Half a cell of slack: the brick settles on its site's centre, not where the body was.
-        if math.hypot(dx, dy) >= self._release + 0.5:
+        # And once no brick overlaps the body, the world has made this one solid again: the
+        # body cannot go back through it, and heading for its far side would press into it
+        # for good (a body that stepped off, then came back against it from the pocket).
+        if math.hypot(dx, dy) >= self._release + 0.5 or _nearest_reading(bricks) >= self._release:
             self._dropped_at = None
             return speed, turn
         cell = self.maps.cell_of(dx, dy)

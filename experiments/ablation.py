@@ -7,6 +7,7 @@
     python3 -m experiments.ablation --sample 60 --status  # how far its journal is, and its table so far
     python3 -m experiments.ablation --quick --report-only # the table again from ablation_quick.json, running nothing
     python3 -m experiments.ablation --files tests/layouts/spiral.toml --seeds 3 --agents default,-unstick
+    python3 -m experiments.ablation --files scenarios/nested_squares.toml --restart-at-drop 1 --out DIR
 
 Each layout of a sample of the generated suite (`--sample` files evenly spaced in name
 order, so every family and size comes in), or of the `--files` given, is built in process
@@ -22,6 +23,10 @@ Per agent the table gives the layouts completed, the median ticks of the complet
 and the median distance over the lower bound (`experiments.replay.lower_bound`, as in the
 generalisation table). A run stops as stalled after `--stall` ticks with no site filled
 (or the cells per agent on a large world), as in `experiments.generalisation`.
+
+With `--restart-at-drop P` each agent's brain is started again, with chance P, on the tick
+its body drops a brick (`conag.sim.restarts`): the moment a restarted process is most
+likely to shut itself in, which chaos runs meet only by chance.
 
 Each finished run is appended to a journal next to the results (`ablation.partial.jsonl`,
 `experiments/journal.py`), removed when the table is written. `--resume` keeps the runs an
@@ -61,6 +66,7 @@ class Job:
     stall: int
     text: str = field(default="", repr=False)   # the layout file's text: a task needs no file of the suite
     seed: int = 0      # added to the layout's seed (`--seeds`)
+    restart_at_drop: float = 0.0   # the share of drops after which the brain starts again (`conag.sim.restarts`)
 
 
 @dataclass(frozen=True)
@@ -74,6 +80,7 @@ class Run:
     bound: float
     seconds: float = 0.0   # the run's wall time on its worker (absent from runs made before it was kept)
     seed: int = 0          # added to the layout's seed (absent from runs made before `--seeds`)
+    restarts: int = 0      # brains started again (`--restart-at-drop`)
 
 
 def variants() -> dict[str, AgentConfig]:
@@ -119,18 +126,22 @@ def sample(n: int) -> list[Path]:
     return paths[::max(len(paths) // n, 1)][:n]
 
 
-def job_of(path: Path, agent: str, stall: int, seed: int = 0) -> Job:
+def job_of(path: Path, agent: str, stall: int, seed: int = 0, restart_at_drop: float = 0.0) -> Job:
     """The job of one run of the layout file `path`, its text read here (a cluster's workers
     have no suite files)."""
-    return Job(path.name, agent, stall, path.read_text(encoding="utf-8"), seed)
+    return Job(path.name, agent, stall, path.read_text(encoding="utf-8"), seed, restart_at_drop)
 
 
 def start_job(job: Job) -> tuple[Scenario, SimRun]:
     """The job's scenario and its run, started (its agent, seed and layout), not yet stepped."""
     from conag import sim
+    from conag.sim.restarts import RestartAtDrop
 
     sc = parse_scenario(job.text, job.layout)
-    return sc, sim.start(sc, cfg=agent_of(job.agent), seed=sc.seed + job.seed)
+    run = sim.start(sc, cfg=agent_of(job.agent), seed=sc.seed + job.seed)
+    if job.restart_at_drop:
+        run.before_step = RestartAtDrop(job.restart_at_drop, sc.seed + job.seed)
+    return sc, run
 
 
 def run_one(job: Job) -> Run:
@@ -141,12 +152,14 @@ def run_one(job: Job) -> Run:
     status = run.world.status()
     return Run(layout=job.layout, family=family_of(sc), agent=job.agent, completed=result.completed,
                ticks=result.ticks, distance=float(sum(status.agent_distance)), bound=distance_bound(sc, starts),
-               seconds=time.perf_counter() - began, seed=job.seed)
+               seconds=time.perf_counter() - began, seed=job.seed,
+               restarts=getattr(run.before_step, "restarts", 0))
 
 
 def job_key(job: Job, code: str) -> list:
     """A run's journal key: which run, under which settings and code."""
-    return [job.layout, job.agent, job.stall, code] + ([job.seed] if job.seed else [])
+    return ([job.layout, job.agent, job.stall, code] + ([job.seed] if job.seed else [])
+            + ([job.restart_at_drop] if job.restart_at_drop else []))
 
 
 def resumed(journal: Journal, jobs: list[Job], code: str) -> tuple[dict[Job, Run], list[Job]]:
@@ -268,6 +281,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="these layout files instead of the suite's (results: ablation_files.*)")
     ap.add_argument("--seeds", type=int, default=1,
                     help="runs per layout and agent, with the layout's seed plus 0, 1, ... (default 1)")
+    ap.add_argument("--restart-at-drop", type=float, default=0.0, metavar="P",
+                    help="start an agent's brain again, with chance P, on the tick its body drops a brick, "
+                         "as a process restarted then is (conag.sim.restarts; default 0: never)")
     ap.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     runner.add_cluster_argument(ap)
     ap.add_argument("--stall", type=int, default=DEFAULT_STALL, help="ticks with no site filled that stop a run")
@@ -291,9 +307,12 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"no such layout file: {', '.join(missing)}")
     if args.seeds < 1:
         ap.error("--seeds must be at least 1")
+    if not 0.0 <= args.restart_at_drop <= 1.0:
+        ap.error("--restart-at-drop must be in [0, 1]")
     layouts = [LAYOUTS / n for n in QUICK] if args.quick else args.files or sample(args.sample)
     agents = agents_arg(ap, args.agents)
-    jobs = [job_of(path, agent, args.stall, seed) for path in layouts for seed in range(args.seeds) for agent in agents]
+    jobs = [job_of(path, agent, args.stall, seed, args.restart_at_drop)
+            for path in layouts for seed in range(args.seeds) for agent in agents]
     stem = "ablation_quick" if args.quick else "ablation_files" if args.files else "ablation"
     if args.report_only:
         return report_only(args.out / f"{stem}.json")

@@ -77,6 +77,7 @@ class ChaosOptions:
     kill_world_every: float = 0.0  # mean wall seconds between SIGKILLs of the world (0: never)
     world_min_life: int = 0        # world ticks past where it (re)started before it may be killed
     checkpoint_every: int | None = None  # `conag run --checkpoint-every` (default: its own)
+    without: str = ""              # `conag run --without`: additions switched off, comma separated
 
     def __post_init__(self) -> None:
         if self.runs < 1:
@@ -224,6 +225,8 @@ def chaos_run(opts: ChaosOptions, index: int, stop: threading.Event, log=print) 
             cmd += ["--seed", str(opts.world_seed)]
         if opts.checkpoint_every is not None:
             cmd += ["--checkpoint-every", str(opts.checkpoint_every)]
+        if opts.without:
+            cmd += ["--without", opts.without]
         # Its output is kept: a run that does not complete says why (a stall's report).
         output = (Path(tmp) / "run.out").open("w", encoding="utf-8")
         proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=output)
@@ -389,6 +392,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="a run stops as stalled after N ticks without a site filled (default 3000)")
     c.add_argument("--run-timeout", type=float, default=600.0, metavar="S",
                    help="stop a run after S wall seconds (default 600)")
+    c.add_argument("--without", default="", metavar="NAMES",
+                   help="switch these additions off in every agent, restarted ones too (conag run --without)")
     c.add_argument("--json", metavar="PATH", help="write every run's figures as JSON")
     return c
 
@@ -400,7 +405,7 @@ def _run(args) -> int:
                         min_alive=args.min_alive, seed=args.seed, agents=args.agents, max_ticks=args.max_ticks,
                         stall_ticks=args.stall_ticks, run_timeout=args.run_timeout, world_seed=args.world_seed,
                         kill_world_every=args.kill_world_every, world_min_life=args.world_min_life,
-                        checkpoint_every=args.checkpoint_every)
+                        checkpoint_every=args.checkpoint_every, without=args.without)
     with stop_on_signals() as stop:
         results = chaos(opts, stop, log=lambda line: print(line, flush=True))
     out = report(opts, results)

@@ -340,20 +340,21 @@ def test_an_agent_leaves_a_brick_it_dropped_on_the_side_away_from_the_pocket_it_
     # south. Whatever its behaviour asks (here: due south, into the ring), it heads north:
     # once off the brick, the brick holds, and inside it would be shut in for good
     # (nested_squares, its world killed and restored, stalled at 31/32 in CI).
-    brain = Brain(_welcome(([60.5], [50.5])), AgentConfig(), np.random.default_rng(0))
+    welcome = replace(_welcome(([60.5], [50.5])), agent_radius=0.3, disc_radius=0.5)
+    brain = Brain(welcome, AgentConfig(), np.random.default_rng(0))
     brain.step(_frame(1))
     south = (1.0, -math.pi / 2)          # (speed, turn) as steering gives them: heading east, turn right
     _ring_pocket_south(brain)
-    dropped = SensorFrame(**{**_frame(2).__dict__, "dropped": True})
+    dropped = SensorFrame(**{**_brick_north(2, 0.1).__dict__, "dropped": True})   # on its brick
     speed, turn = brain._off_own_brick(dropped, _bricks(dropped), *south)
     assert turn > 0 and speed >= 0         # turns left, to the north
     # With a second way into the ring there is no pocket: the behaviour's move stands.
-    brain = Brain(_welcome(([60.5], [50.5])), AgentConfig(), np.random.default_rng(0))
+    brain = Brain(welcome, AgentConfig(), np.random.default_rng(0))
     brain.step(_frame(1))
     _ring_pocket_south(brain, closed=False)
     assert brain._off_own_brick(dropped, _bricks(dropped), *south) == south
     # Off the brick (more than a body and a brick's radius away), nothing is overridden.
-    brain = Brain(_welcome(([60.5], [50.5])), AgentConfig(), np.random.default_rng(0))
+    brain = Brain(welcome, AgentConfig(), np.random.default_rng(0))
     brain.step(_frame(1))
     brain._dropped_at = np.array([0.0, 3.0]) + brain._odo
     _ring_pocket_south(brain)
@@ -386,6 +387,26 @@ def test_a_brain_started_on_a_brick_its_body_dropped_leaves_it_away_from_the_poc
     _ring_pocket_south(brain)
     touching = _brick_north(2, 0.8)
     assert brain._off_own_brick(touching, _bricks(touching), *south) == south and brain._dropped_at is None
+
+
+def test_a_body_off_its_dropped_brick_is_not_steered_back_through_it():
+    # It dropped a brick in a ring's last gap and stepped into the ring, 1.1 cells past the
+    # brick: no brick overlaps the body, so the world has made that brick solid again, and
+    # heading out through it would press into it for good (with brains restarted at every
+    # drop, a lone agent in nested_squares did that from tick 380 on, at 6/32). The
+    # behaviour's move stands, there and when the body comes back against the brick.
+    south = (1.0, -math.pi / 2)
+    welcome = replace(_welcome(([60.5], [50.5])), agent_radius=0.3, disc_radius=0.5)  # off it: 0.8 apart
+    brain = Brain(welcome, AgentConfig(), np.random.default_rng(0))
+    brain.step(_frame(1))
+    _ring_pocket_south(brain)
+    dropped = SensorFrame(**{**_brick_north(2, 0.1).__dict__, "dropped": True})
+    speed, turn = brain._off_own_brick(dropped, _bricks(dropped), *south)
+    assert turn > 0 and speed >= 0 and brain._dropped_at is not None     # still on it: out of the ring, north
+    off = _brick_north(3, 1.1)
+    assert brain._off_own_brick(off, _bricks(off), *south) == south and brain._dropped_at is None
+    pressing = _brick_north(4, 0.79)
+    assert brain._off_own_brick(pressing, _bricks(pressing), *south) == south and brain._dropped_at is None
 
 
 RING_GAP = """

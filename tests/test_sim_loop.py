@@ -5,10 +5,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
 from agent_runtime.network import engineered
 from conag import sim
+from conag.sim.restarts import RestartAtDrop
 from conag.sim.trials import run_trial
-from protocol.messages import WorldStatus
+from protocol.messages import SensorFrame, WorldStatus
 from teacher.core import Teacher
 from world_server.scenario import load_scenario
 from world_server.stall import StallWatch
@@ -66,3 +69,29 @@ def test_the_stall_watch_keeps_the_report_once_no_site_was_filled_for_its_limit(
 def test_a_stall_watch_with_limit_zero_never_stalls():
     watch = StallWatch(0)
     assert not any(watch.observe(_status(t, 0)) for t in range(0, 100000, 5000))
+
+
+def test_a_brain_started_again_at_a_drop_never_hears_of_it_and_the_build_goes_on():
+    run = sim.start(load_scenario(QUICK_WALL))
+    restart = RestartAtDrop(1.0, seed=3)
+    handed: list[bool] = []   # the dropped flag of each frame a new brain first steps on
+
+    def watched(r: sim.SimRun, frame: SensorFrame) -> SensorFrame:
+        before = r.brains[frame.agent_id]
+        out = restart(r, frame)
+        if r.brains[frame.agent_id] is not before:
+            handed.append(out.dropped)
+        return out
+
+    run.before_step = watched
+    assert run.run(run.world.scenario.max_ticks).completed
+    drops = int(run.world.sites_filled().sum())
+    # every drop started its brain again but the last, which completed the run before any frame
+    assert len(handed) == restart.restarts >= drops - 1 > 0
+    assert not any(handed)
+    assert sum(r.restarts for r in run.world.agents.values()) == restart.restarts   # the world counts them too
+
+
+def test_a_restart_share_outside_zero_to_one_is_refused():
+    with pytest.raises(ValueError, match=r"in \[0, 1\]"):
+        RestartAtDrop(1.5, seed=0)

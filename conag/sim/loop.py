@@ -5,7 +5,9 @@ answers its frame, then the world steps); `SimRun.run` steps until the structure
 complete, `max_ticks` pass, no site has been filled for `stall_ticks` ticks (as `conag
 run --stall-ticks N` gives up; `stall_report()` then says what each agent was at) or one
 of its `stop` conditions holds, calling its `observers` after every tick, and returns a
-`SimResult`. `on_step` sees every decision (the teacher's view). `SimRun.perturb`
+`SimResult`. `on_step` sees every decision (the teacher's view); `before_step` sees each
+frame before its brain does, and may start that brain again (`SimRun.restart`, as
+`conag.sim.restarts` does at the worst moment). `SimRun.perturb`
 changes the world as `conag perturb` does, handing a changed blueprint to every brain as
 the Blueprint message does on the bus. `start(..., cfg="paper")` runs the agent of a
 preset as `conag run --agent paper` does; `SimRun.agent` and `SimResult.agent` record
@@ -22,7 +24,7 @@ import numpy as np
 
 from agent_runtime.brain import Brain, Step
 from agent_runtime.config import AgentConfig
-from protocol.messages import SITE_OPS, Perturbation, PerturbResult
+from protocol.messages import SITE_OPS, Perturbation, PerturbResult, SensorFrame
 from world_server.buildability import check_layout
 from world_server.noise import NoiseSettings
 from world_server.scenario import Scenario
@@ -59,6 +61,8 @@ class SimRun:
     behaviour_ticks: dict[str, Counter] = field(default_factory=dict)  # agent -> behaviour -> ticks
     filled_at: np.ndarray | None = None  # per site (world order), the tick it was last filled; -1: empty
     on_step: Callable[[str, Step], None] | None = None  # sees every decision (the teacher's view)
+    # sees each frame before its brain steps on it, and returns the frame the brain gets
+    before_step: Callable[[SimRun, SensorFrame], SensorFrame] | None = None
     stall: StallClock | None = None  # the last run's, when it watched for stalls
     agent: dict = field(default_factory=dict)  # which agent runs (`AgentConfig.describe`), for SimResult
     # The brains that tell and hear brick news, kept per number of brains (`_pass_news`).
@@ -67,6 +71,8 @@ class SimRun:
     def step(self) -> None:
         """One lockstep tick: every brain answers its frame, then the world steps."""
         for frame in self.world.frames():
+            if self.before_step is not None:
+                frame = self.before_step(self, frame)
             s = self.brains[frame.agent_id].step(frame)
             self.behaviours[frame.agent_id] = s.behaviour
             self.behaviour_ticks.setdefault(frame.agent_id, Counter())[s.behaviour] += 1
@@ -76,6 +82,13 @@ class SimRun:
         self._pass_news()
         self.world.step()
         self._record_fills()
+
+    def restart(self, agent_id: str, rng: np.random.Generator) -> None:
+        """Start `agent_id`'s brain again, as a restarted agent process is: the world attaches
+        it again (its body stays where it stands) and a new Brain of the same agent knows
+        only what the Welcome tells it."""
+        old = self.brains[agent_id]
+        self.brains[agent_id] = Brain(self.world.attach(agent_id), old.cfg, rng, network=old.network)
 
     def _pass_news(self) -> None:
         """Each brain's brick news (`AgentConfig.share_bricks`) to every other brain: the
