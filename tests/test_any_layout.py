@@ -302,6 +302,12 @@ def _bricks(frame: SensorFrame) -> np.ndarray:
     return np.asarray(frame.ranges).reshape(len(CHANNELS), frame.sectors)[CHANNELS.index("brick")]
 
 
+def _ring_gap_welcome() -> Welcome:
+    """An agent of radius 0.3 among discs of radius 0.5 (a body and a brick touch 0.8 apart),
+    one site 10 cells east: the agent of the ring's-last-gap tests."""
+    return replace(_welcome(([60.5], [50.5])), agent_radius=0.3, disc_radius=0.5)
+
+
 def _ring_pocket_south(brain: Brain, closed: bool = True) -> tuple[int, int]:
     """Bricks on the brain's map round the cell south of it, open only through the agent's
     own cell (the centre of a ring whose last gap the agent stands in); `closed=False`
@@ -340,7 +346,7 @@ def test_an_agent_leaves_a_brick_it_dropped_on_the_side_away_from_the_pocket_it_
     # south. Whatever its behaviour asks (here: due south, into the ring), it heads north:
     # once off the brick, the brick holds, and inside it would be shut in for good
     # (nested_squares, its world killed and restored, stalled at 31/32 in CI).
-    welcome = replace(_welcome(([60.5], [50.5])), agent_radius=0.3, disc_radius=0.5)
+    welcome = _ring_gap_welcome()
     brain = Brain(welcome, AgentConfig(), np.random.default_rng(0))
     brain.step(_frame(1))
     south = (1.0, -math.pi / 2)          # (speed, turn) as steering gives them: heading east, turn right
@@ -374,7 +380,7 @@ def test_a_brain_started_on_a_brick_its_body_dropped_leaves_it_away_from_the_poc
     # than touching can only be that one, so it heads north, out of the ring, all the same
     # (a lone agent restarted in that moment under `python3 -m faults.chaos` was shut in at 30/32).
     south = (1.0, -math.pi / 2)
-    welcome = replace(_welcome(([60.5], [50.5])), agent_radius=0.3, disc_radius=0.5)  # touching: 0.8 apart
+    welcome = _ring_gap_welcome()   # touching: 0.8 apart
     brain = Brain(welcome, AgentConfig(), np.random.default_rng(0))
     brain.step(_frame(1))
     _ring_pocket_south(brain)
@@ -396,7 +402,7 @@ def test_a_body_off_its_dropped_brick_is_not_steered_back_through_it():
     # drop, a lone agent in nested_squares did that from tick 380 on, at 6/32). The
     # behaviour's move stands, there and when the body comes back against the brick.
     south = (1.0, -math.pi / 2)
-    welcome = replace(_welcome(([60.5], [50.5])), agent_radius=0.3, disc_radius=0.5)  # off it: 0.8 apart
+    welcome = _ring_gap_welcome()   # off it: 0.8 apart
     brain = Brain(welcome, AgentConfig(), np.random.default_rng(0))
     brain.step(_frame(1))
     _ring_pocket_south(brain)
