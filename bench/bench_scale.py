@@ -258,14 +258,16 @@ def processes_command(scenario: str, agents: int, ticks: int, port: int, per_pro
     return cmd
 
 
-def as_processes(tree: Path, scenario: str, agents: int, ticks: int, per_process: int) -> dict:
-    """The processes row on `tree`'s code, on a free port of its own."""
+def as_processes(tree: Path, scenario: str, agents: int, ticks: int, per_process: int,
+                 extra_env: dict[str, str] | None = None) -> dict:
+    """The processes row on `tree`'s code, on a free port of its own (`extra_env` over its
+    environment)."""
     with tempfile.TemporaryDirectory() as tmp:
         profile = Path(tmp) / "world.json"
         cmd = processes_command(scenario, agents, ticks, free_port(), per_process, profile)
         launched = time.monotonic()
-        proc = subprocess.Popen(cmd, cwd=tree, env=tree_env(tree), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                text=True)
+        proc = subprocess.Popen(cmd, cwd=tree, env={**tree_env(tree), **(extra_env or {})}, stdout=subprocess.PIPE,
+                                stderr=subprocess.STDOUT, text=True)
         last = [""]
         samples = _MemorySampler(proc.pid)
         assert proc.stdout is not None

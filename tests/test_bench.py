@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 
@@ -89,3 +90,15 @@ def test_step_contention_replays_the_recorded_decisions_in_every_arrangement():
     assert set(rows) == {"one process", "processes, lockstep", "processes, free", "two hosts, lockstep"}
     assert all(cells[-2].strip() == "yes" and float(cells[0]) > 0 for cells in rows.values())
     assert rows["one process"][2].strip() == "1.00x"
+
+
+def test_floor_bench_runs_null_agents_and_prints_the_floor():
+    r = subprocess.run([sys.executable, "-m", "bench.bench_floor", "--quick"], cwd=ROOT, capture_output=True,
+                       text=True, timeout=300)
+    assert r.returncode == 0, r.stderr   # non-zero when a replay decided otherwise than the recording
+    figures = json.loads(r.stderr.strip().splitlines()[-1])
+    # The null agents answered every frame and moved nobody; the real ones moved.
+    assert all(n["last_line"].endswith("total distance 0.0") for n in figures["null"])
+    assert not figures["processes"]["last_line"].endswith("total distance 0.0")
+    row = next(line for line in r.stdout.splitlines() if line.startswith("| ") and line[2].isdigit())
+    assert row.rstrip().endswith("| yes |") and figures["floor"] > 0
