@@ -32,6 +32,14 @@ tell which). A reading much nearer than every landmark is something else (a free
 wall inside the world) and says nothing; so is one farther (the landmark may be hidden,
 or the site's brick gone).
 
+A whole cell off, the filter cannot tell: along a straight run of structure bricks a
+belief a cell off fits the ranges about as well, and matched readings can pull it there a
+little at a time. `Relocaliser` weighs the belief against its eight neighbours a cell off
+on what each predicts the sectors see: a landmark it puts well inside a sector and in reach
+that the sector did not see (nothing there, or nothing as near), and a reading no landmark
+it puts there explains. A neighbour that has had clearly fewer such misses for a while
+(decayed counts, `AnchorConfig.jump` fewer, and no other neighbour as good) takes over.
+
 Pure numpy, no bus; the brain supplies the readings (cells), the landmarks and how far it
 moved.
 """
@@ -63,6 +71,10 @@ class AnchorConfig:
                                     # that slips through moves the maps a little, not a cell
     assumed_std: float = 0.2        # matching assumes the belief is at most about this far off (cells)
     max_std: float = 1.0            # the belief's std (cells) is never taken as larger than this
+    relocalise: bool = True         # weigh the belief against the same belief a whole cell off (`Relocaliser`)
+    decay: float = 0.97             # per tick: how long a contradiction counts against an offset
+    jump: float = 6.0               # move the belief a whole cell when the neighbour has this many fewer
+    inside: float = 0.2             # a landmark counts as in a sector only this fraction of its width inside
 
 
 @dataclass(frozen=True)
@@ -182,3 +194,87 @@ class Anchor:
         left = step - applied
         self.cov += np.diag(left ** 2)
         return applied
+
+
+OFFSETS = np.array([(dx, dy) for dx in (-1, 0, 1) for dy in (-1, 0, 1)], np.float64)   # (0, 0) is index 4
+HERE = 4
+
+
+def _slack(dist):
+    """How much farther than a landmark a reading may lie and still be of it (cells): the
+    matching gate, widened by the sensor's noise, which grows with the distance."""
+    return 0.45 + 0.1 * dist
+
+
+class Relocaliser:
+    """The belief against the same belief a whole cell off (see the module).
+
+    Each tick, for the belief moved by each of OFFSETS, it counts the sectors of the frame
+    that speak against it (`contradictions`), and keeps the counts with a decay. A reading
+    of something nobody knows of (a free brick, a wall inside the world) counts against
+    every offset alike and so moves none. When one neighbour alone has had `jump` fewer than
+    the belief, the belief moves to it (`update`): two neighbours alike, as along a wall seen
+    from its middle, say nothing.
+    """
+
+    def __init__(self, cfg: AnchorConfig, sectors: int, reach: float, occluding: bool):
+        self.cfg, self.sectors, self.reach, self.occluding = cfg, sectors, reach, occluding
+        self.counts = np.zeros(len(OFFSETS))
+        self.jumps = 0
+
+    def contradictions(self, ranges: np.ndarray, position: np.ndarray, landmarks: Landmarks) -> np.ndarray:
+        """(9,): for the belief moved by each of OFFSETS, the sectors of this frame that speak
+        against it: a landmark (a believed-filled site on the brick channel, the world's edge on
+        the obstacle channel) well inside a sector and in reach that the sector did not see as
+        near (unless, with occlusion, something of any colour stood before it), and a reading
+        that no landmark in or beside its sector explains. `ranges`: (channels, sectors) in
+        cells, negative for none."""
+        out = np.zeros(len(OFFSETS))
+        width = 2 * math.pi / self.sectors
+        seen = np.where(ranges >= 0, ranges, np.inf)
+        nearest = seen.min(axis=0)            # the nearest thing of any colour, per sector
+        edge = np.asarray(landmarks.edge, np.float64).reshape(-1, 2)
+        sites = np.asarray(landmarks.sites, np.float64).reshape(-1, 2)[np.asarray(landmarks.filled, bool)]
+        for channel, points in ((BRICK_CHANNEL, sites), (OBSTACLE_CHANNEL, edge)):
+            if not len(points):
+                continue
+            rel = points[None, :, :] - (position[None, None, :] + OFFSETS[:, None, :])     # (9, k, 2)
+            dist = np.hypot(rel[..., 0], rel[..., 1])
+            turn = np.mod(np.arctan2(rel[..., 1], rel[..., 0]), 2 * math.pi) / width
+            sector = np.minimum(turn.astype(np.int64), self.sectors - 1)
+            frac = turn - sector
+            # Sure to be in its sector and in reach: away from the sector's edges and not a body's width off.
+            inside = (frac > self.cfg.inside) & (frac < 1 - self.cfg.inside)
+            sure = inside & (dist > 0.5) & (dist + _slack(dist) < self.reach)
+            expect = np.full((len(OFFSETS), self.sectors), np.inf)
+            o, k = np.nonzero(sure)
+            np.minimum.at(expect, (o, sector[o, k]), dist[o, k])
+            limit = expect + _slack(expect)
+            missed = np.isfinite(expect) & (seen[channel][None, :] > limit)
+            if self.occluding:      # the sector stopped at something nearer, of any colour
+                missed &= ~(nearest[None, :] < limit)
+            out += np.count_nonzero(missed, axis=1)
+            # A reading no landmark of the belief can have given (one in the sector, or near
+            # its edges, at that distance) counts too: a free brick or an inner wall counts
+            # against every offset alike, the structure seen a cell off against one.
+            near = dist > 0.5
+            fits = np.zeros((len(OFFSETS), self.sectors), bool)
+            sides = ((0, near), (-1, near & (frac < self.cfg.inside)), (1, near & (frac > 1 - self.cfg.inside)))
+            for side, could in sides:      # its own sector, and the next one when near that edge
+                where = (sector + side) % self.sectors
+                o, k = np.nonzero(could & (np.abs(seen[channel][where] - dist) < _slack(dist)))
+                fits[o, where[o, k]] = True
+            out += np.count_nonzero(np.isfinite(seen[channel])[None, :] & ~fits, axis=1)
+        return out
+
+    def update(self, ranges: np.ndarray, position: np.ndarray, landmarks: Landmarks) -> np.ndarray:
+        """Count this frame; returns the whole-cell move (dx, dy) of the belief, or zeros."""
+        self.counts = self.counts * self.cfg.decay + self.contradictions(ranges, position, landmarks)
+        order = np.argsort(self.counts, kind="stable")
+        best, low, second = int(order[0]), float(self.counts[order[0]]), float(self.counts[order[1]])
+        # Only to one neighbour that is clearly best: two alike (along a wall) say nothing.
+        if best != HERE and self.counts[HERE] - low >= self.cfg.jump and second - low >= 1.0:
+            self.counts[:] = 0.0
+            self.jumps += 1
+            return OFFSETS[best].copy()
+        return np.zeros(2)

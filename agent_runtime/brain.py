@@ -37,7 +37,7 @@ import numpy as np
 from numba import njit
 
 from agent_runtime import steering
-from agent_runtime.anchoring import Anchor, Landmarks, edge_ring
+from agent_runtime.anchoring import Anchor, Landmarks, Relocaliser, edge_ring
 from agent_runtime.brick_news import NEWS_EVERY, gone_cells, report, seen_cells
 from agent_runtime.brick_news import cells as news_cells
 from agent_runtime.claims import claimed_by_others
@@ -194,6 +194,8 @@ class Brain:
         self._release = (welcome.agent_radius + welcome.disc_radius) / welcome.cell_size
         # `anchor_maps`: the belief of where the agent is, kept true by landmarks it sees.
         self.anchor = Anchor() if self.cfg.anchor_maps else None
+        self.relocaliser = (Relocaliser(self.anchor.cfg, welcome.sectors, self.sensor_range, welcome.occlusion)
+                            if self.anchor is not None and self.anchor.cfg.relocalise else None)
         self._edge = edge_ring(self.far.bounds)
 
     @property
@@ -275,7 +277,13 @@ class Brain:
         readings land where the blueprint's sites are drawn."""
         assert self.anchor is not None
         position = self.far.pos.astype(np.float64) + self.maps.frac
-        fix = self.anchor.correct(ranges, position, Landmarks(self.far.sites, ~self.far.site_open, self._edge))
+        landmarks = Landmarks(self.far.sites, ~self.far.site_open, self._edge)
+        if self.relocaliser is not None:
+            jump = self.relocaliser.update(ranges, position, landmarks)
+            if jump.any():
+                self._shift_belief(float(jump[0]) * self.cell, float(jump[1]) * self.cell)
+                position = self.far.pos.astype(np.float64) + self.maps.frac
+        fix = self.anchor.correct(ranges, position, landmarks)
         if fix.any():
             self._shift_belief(float(fix[0]) * self.cell, float(fix[1]) * self.cell)
 

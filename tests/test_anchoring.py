@@ -9,7 +9,15 @@ import math
 import numpy as np
 import pytest
 
-from agent_runtime.anchoring import BRICK_CHANNEL, OBSTACLE_CHANNEL, Anchor, Landmarks, edge_ring
+from agent_runtime.anchoring import (
+    BRICK_CHANNEL,
+    OBSTACLE_CHANNEL,
+    Anchor,
+    AnchorConfig,
+    Landmarks,
+    Relocaliser,
+    edge_ring,
+)
 from agent_runtime.config import ADDITIONS, CORRECTIONS, AgentConfig
 from conag import sim
 from protocol.messages import CHANNELS
@@ -163,3 +171,38 @@ def test_a_reading_that_fits_an_open_site_as_well_as_a_filled_one_is_not_used():
     anchor.predict(1.0)
     assert len(anchor.equations(seen, np.zeros(2), Landmarks(sites, np.array([False, True]), NONE))[0]) == 0
     assert len(anchor.equations(seen, np.zeros(2), Landmarks(sites[1:], ONE, NONE))[0]) == 1
+
+
+# A straight wall of structure bricks two cells east of the agent, ending two cells north
+# of it: seen from its side, the readings fit a belief a cell off along it about as well.
+WALL = np.array([(2.0, float(y)) for y in range(-8, 3)])
+
+
+def relocalised(truth, believed, ticks: int = 40, noise: float = 0.0, seed: int = 0) -> tuple[np.ndarray, int]:
+    """The belief after `ticks` frames from `truth` (each reading off by a uniform error of
+    std `noise` per cell of its distance), moved by every jump; and how many jumps."""
+    rng = np.random.default_rng(seed)
+    relocaliser = Relocaliser(AnchorConfig(), SECTORS, RANGE, occluding=False)
+    believed = np.array(believed, float)
+    marks = Landmarks(WALL, np.ones(len(WALL), bool), NONE)
+    for _ in range(ticks):
+        r = readings(truth, {BRICK_CHANNEL: WALL})
+        r = np.where(r >= 0, r * (1 + noise * math.sqrt(3) * rng.uniform(-1, 1, r.shape)), r)
+        believed += relocaliser.update(r, believed, marks)
+    return believed, relocaliser.jumps
+
+
+@pytest.mark.parametrize("off", [(0.0, 1.0), (0.0, -1.0)])
+def test_a_belief_a_cell_off_along_a_wall_comes_back_where_the_wall_ends(off):
+    # Beside the wall's end: a cell north, the belief puts a brick where the sensors see
+    # none and misses the last one they see; a cell south, the same the other way round.
+    truth = np.array([0.3, 2.5])
+    believed, jumps = relocalised(truth, truth + off)
+    assert jumps == 1 and np.allclose(believed, truth)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_a_true_belief_is_never_moved_a_cell(seed):
+    truth = np.array([0.1, -0.2])
+    believed, jumps = relocalised(truth, truth, ticks=200, noise=0.04, seed=seed)
+    assert jumps == 0 and np.allclose(believed, truth)
