@@ -243,7 +243,7 @@ class Relocaliser:
             turn = np.mod(np.arctan2(rel[..., 1], rel[..., 0]), 2 * math.pi) / width
             sector = np.minimum(turn.astype(np.int64), self.sectors - 1)
             frac = turn - sector
-            # Sure to be in its sector and in reach: away from the sector's edges and not a body's width off.
+            # Sure to be in its sector and in reach: away from the sector's edges, not under the body.
             inside = (frac > self.cfg.inside) & (frac < 1 - self.cfg.inside)
             sure = inside & (dist > 0.5) & (dist + _slack(dist) < self.reach)
             expect = np.full((len(OFFSETS), self.sectors), np.inf)

@@ -206,3 +206,15 @@ def test_a_true_belief_is_never_moved_a_cell(seed):
     truth = np.array([0.1, -0.2])
     believed, jumps = relocalised(truth, truth, ticks=200, noise=0.04, seed=seed)
     assert jumps == 0 and np.allclose(believed, truth)
+
+
+@pytest.mark.parametrize("counts, moved", [
+    ([9, 9, 9, 9, 9, 9, 2, 9, 9], (1.0, -1.0)),    # one neighbour clearly best: the belief moves there
+    ([9, 9, 9, 2, 9, 2, 9, 9, 9], (0.0, 0.0)),     # two alike (a wall seen from its middle): it stays
+    ([9, 9, 9, 9, 7, 9, 2, 9, 9], (0.0, 0.0)),     # the belief only 5 worse: not enough
+])
+def test_the_belief_moves_a_cell_only_to_one_neighbour_clearly_better(counts, moved, monkeypatch):
+    relocaliser = Relocaliser(AnchorConfig(decay=0.0), SECTORS, RANGE, occluding=False)
+    monkeypatch.setattr(relocaliser, "contradictions", lambda *_: np.asarray(counts, float))
+    step = relocaliser.update(np.full((len(CHANNELS), SECTORS), -1.0), np.zeros(2), Landmarks(NONE, NOTHING, NONE))
+    assert tuple(step) == moved and relocaliser.jumps == (1 if any(moved) else 0)
