@@ -200,12 +200,6 @@ OFFSETS = np.array([(dx, dy) for dx in (-1, 0, 1) for dy in (-1, 0, 1)], np.floa
 HERE = 4
 
 
-def _slack(dist):
-    """How much farther than a landmark a reading may lie and still be of it (cells): the
-    matching gate, widened by the sensor's noise, which grows with the distance."""
-    return 0.45 + 0.1 * dist
-
-
 class Relocaliser:
     """The belief against the same belief a whole cell off (see the module).
 
@@ -221,6 +215,11 @@ class Relocaliser:
         self.cfg, self.sectors, self.reach, self.occluding = cfg, sectors, reach, occluding
         self.counts = np.zeros(len(OFFSETS))
         self.jumps = 0
+
+    def _slack(self, dist):
+        """How much farther than a landmark a reading may lie and still be of it (cells): the
+        matching gate, widened by the sensor's noise, which grows with the distance."""
+        return self.cfg.gate + 0.1 * dist
 
     def contradictions(self, ranges: np.ndarray, position: np.ndarray, landmarks: Landmarks) -> np.ndarray:
         """(9,): for the belief moved by each of OFFSETS, the sectors of this frame that speak
@@ -245,11 +244,11 @@ class Relocaliser:
             frac = turn - sector
             # Sure to be in its sector and in reach: away from the sector's edges, not under the body.
             inside = (frac > self.cfg.inside) & (frac < 1 - self.cfg.inside)
-            sure = inside & (dist > 0.5) & (dist + _slack(dist) < self.reach)
+            sure = inside & (dist > 0.5) & (dist + self._slack(dist) < self.reach)
             expect = np.full((len(OFFSETS), self.sectors), np.inf)
             o, k = np.nonzero(sure)
             np.minimum.at(expect, (o, sector[o, k]), dist[o, k])
-            limit = expect + _slack(expect)
+            limit = expect + self._slack(expect)
             missed = np.isfinite(expect) & (seen[channel][None, :] > limit)
             if self.occluding:      # the sector stopped at something nearer, of any colour
                 missed &= ~(nearest[None, :] < limit)
@@ -262,7 +261,7 @@ class Relocaliser:
             sides = ((0, near), (-1, near & (frac < self.cfg.inside)), (1, near & (frac > 1 - self.cfg.inside)))
             for side, could in sides:      # its own sector, and the next one when near that edge
                 where = (sector + side) % self.sectors
-                o, k = np.nonzero(could & (np.abs(seen[channel][where] - dist) < _slack(dist)))
+                o, k = np.nonzero(could & (np.abs(seen[channel][where] - dist) < self._slack(dist)))
                 fits[o, where[o, k]] = True
             out += np.count_nonzero(np.isfinite(seen[channel])[None, :] & ~fits, axis=1)
         return out

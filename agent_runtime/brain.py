@@ -276,16 +276,18 @@ class Brain:
         sees say (`anchoring`), before this frame is written into the maps, so that its
         readings land where the blueprint's sites are drawn."""
         assert self.anchor is not None
-        position = self.far.pos.astype(np.float64) + self.maps.frac
         landmarks = Landmarks(self.far.sites, ~self.far.site_open, self._edge)
         if self.relocaliser is not None:
-            jump = self.relocaliser.update(ranges, position, landmarks)
+            jump = self.relocaliser.update(ranges, self.believed_cells(), landmarks)
             if jump.any():
                 self._shift_belief(float(jump[0]) * self.cell, float(jump[1]) * self.cell)
-                position = self.far.pos.astype(np.float64) + self.maps.frac
-        fix = self.anchor.correct(ranges, position, landmarks)
+        fix = self.anchor.correct(ranges, self.believed_cells(), landmarks)
         if fix.any():
             self._shift_belief(float(fix[0]) * self.cell, float(fix[1]) * self.cell)
+
+    def believed_cells(self) -> np.ndarray:
+        """Where the agent believes it is: cells from its attach cell's centre (a new array)."""
+        return self.far.pos.astype(np.float64) + self.maps.frac
 
     def layers(self) -> np.ndarray:
         """The maps as marks (> 0.5), one bool grid per layer: within `step`, worked out once

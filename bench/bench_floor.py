@@ -129,8 +129,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{Path(args.scenario).name}, {args.agents} agents in hosts of {args.per_process}, {args.ticks} ticks "
           f"({args.warmup} left out of the replays), {os.cpu_count()} cores\n")
     print("| in-process ticks/s | processes ticks/s | processes / in-process | null processes: ms a tick "
-          "(step / publish / wait) | replayed steps, one process: ms a tick | in hosts | floor / in-process | "
-          "same decisions |")
+          "(the first run's step / publish / wait) | replayed steps, one process: ms a tick | in hosts | "
+          "floor / in-process | same decisions |")
     print("|---:|---:|---:|---|---:|---:|---:|---|")
     per = nulls[0]
     print(f"| {sim['rate']:.1f} | {real['rate']:.1f} | {real['rate'] / sim['rate']:.2f}x | {1e3 / null_rate:.2f} "

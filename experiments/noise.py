@@ -143,8 +143,7 @@ class MapError:
 
     @staticmethod
     def _believed(run: sim.SimRun, agent: str) -> np.ndarray:
-        brain = run.brains[agent]
-        return brain.far.pos.astype(np.float64) + brain.maps.frac
+        return run.brains[agent].believed_cells()
 
     def error(self, run: sim.SimRun, agent: str) -> float:
         """The agent's map error as of the last frame it read, in cells (call after a tick)."""
