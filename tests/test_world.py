@@ -938,6 +938,47 @@ def test_a_different_seed_gives_different_noisy_frames():
     assert _run(11, 30) != _run(12, 30)
 
 
+def _encoded_frames_match(w: World) -> None:
+    assert w.encoded_frames() == [(f.agent_id, encode(f)) for f in w.frames()]
+
+
+@pytest.mark.parametrize("cue_reach", [0.0, 6.0])
+def test_the_frames_the_server_sends_are_the_encoded_frames_byte_for_byte(cue_reach):
+    # The world server publishes World.encoded_frames, built from the arrays without a
+    # SensorFrame each: an agent must get the bytes encode(frame) gives, through grabs,
+    # drops, eating, noise, cues marked, and an agent that left (no frame of its own).
+    w = make(DET_LAYOUT, seed=5, agents=3, sensor_noise=0.05, odometry_noise=0.05, cue_reach=cue_reach)
+    for a in ("a", "b", "c"):
+        w.attach(a)
+    cmd = np.random.default_rng(78)
+    actions = ("none", "none", "grab", "drop", "eat", "drink", "mark", "unmark")
+    for tick in range(150):
+        if tick == 60:
+            w.detach("b")
+        for a in w.live_agents():
+            w.set_command(a, float(cmd.uniform(0, 3)), float(cmd.uniform(-0.8, 0.8)),
+                          actions[int(cmd.integers(len(actions)))], (float(cmd.uniform(-2, 2)), 0.5, "site"))
+        w.step()
+        _encoded_frames_match(w)
+    assert [a for a, _ in w.encoded_frames()] == ["a", "c"]
+
+
+def test_a_world_reading_no_frame_may_carry_is_refused_as_a_sensor_frame_refuses_it():
+    # The one check of the arrays stands for SensorFrame's own: a NaN or a negative range
+    # other than NO_READING gets SensorFrame's error, not bytes that every agent would drop.
+    w = make(DET_LAYOUT, agents=2)
+    w.attach("a")
+    w.attach("b")
+    for bad in (np.nan, -0.5):
+        w._ranges[1, 0, 3] = bad
+        with pytest.raises(ValueError, match="SensorFrame"):
+            w.encoded_frames()
+    w._ranges[1, 0, 3] = 1.0
+    w.heading[0] = np.inf
+    with pytest.raises(ValueError, match="not finite"):
+        w.encoded_frames()
+
+
 # ---------------------------------------------------------------- what the Welcome tells an agent
 
 

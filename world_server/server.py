@@ -586,7 +586,7 @@ class WorldServer:
                          congestion_control=zenoh.CongestionControl.BLOCK)
         log.info("agent %s (pid %d) attached to body %d%s", hello.agent_id, hello.pid, welcome.body,
                  f", restart {welcome.restarts}" if welcome.restarts else "")
-        self._publish_frame(self.world.frame(hello.agent_id))
+        self._publish_frame(hello.agent_id, encode(self.world.frame(hello.agent_id)))
 
     def _awaiting_recorder(self) -> bool:
         """Whether a recorded world still waits for its recorder's link (see `RECORDER_WAIT`)."""
@@ -645,8 +645,8 @@ class WorldServer:
             query.reply(query.key_expr, data)
         query.drop()
 
-    def _publish_frame(self, frame) -> None:
-        pub = self._publishers.get(frame.agent_id)
+    def _publish_frame(self, agent_id: str, data: bytes) -> None:
+        pub = self._publishers.get(agent_id)
         if pub is None:
             # Sensor frames are "latest wins": drop rather than queue behind a slow agent. Not
             # express: the frames of one tick go out back to back, and zenoh then writes those to
@@ -654,14 +654,14 @@ class WorldServer:
             # them, not one each); a lone frame still leaves at once (bench/bench_scale.py:
             # publishing 30 frames took 2.9 ms a tick express, 1.0 ms not, at the same rate).
             pub = self._declared.add(self.session.declare_publisher(
-                keys.sensors(self.world.world_id, frame.agent_id), congestion_control=self._frame_congestion))
-            self._publishers[frame.agent_id] = pub
-        pub.put(encode(frame))
+                keys.sensors(self.world.world_id, agent_id), congestion_control=self._frame_congestion))
+            self._publishers[agent_id] = pub
+        pub.put(data)
 
     def _publish_frames(self) -> None:
-        for frame in self.world.frames():
-            if frame.agent_id in self._tokens:
-                self._publish_frame(frame)
+        for agent_id, data in self.world.encoded_frames():
+            if agent_id in self._tokens:
+                self._publish_frame(agent_id, data)
 
     def _publish_status_if_due(self) -> None:
         if self.clock() - self._last_status >= self.cfg.status_period:
