@@ -39,12 +39,13 @@ def _field_types(cls: type) -> tuple[tuple[str, Any], ...]:
 
 
 @functools.cache
-def _wire_spec(cls: type) -> tuple[tuple[str, type, bool], ...]:
-    """(name, scalar type, is a tuple of them) per field, worked out once per class."""
-    spec: list[tuple[str, type, bool]] = []
+def _wire_spec(cls: type) -> tuple[tuple[str, type, bool, str], ...]:
+    """(name, scalar type, is a tuple of them, "Class.name" for errors) per field, worked
+    out once per class."""
+    spec: list[tuple[str, type, bool, str]] = []
     for name, hint in _field_types(cls):
         is_tuple = typing.get_origin(hint) is tuple
-        spec.append((name, typing.get_args(hint)[0] if is_tuple else hint, is_tuple))
+        spec.append((name, typing.get_args(hint)[0] if is_tuple else hint, is_tuple, f"{cls.__name__}.{name}"))
     return tuple(spec)
 
 
@@ -55,7 +56,7 @@ def encode(msg: object) -> bytes:
     if _BY_NAME.get(name) is not cls:
         raise TypeError(f"not a protocol message: {cls!r}")
     values = [_pack_floats(v) if is_tuple and kind is float else list(v) if is_tuple else v
-              for v, (_, kind, is_tuple) in zip((getattr(msg, n) for n, _ in _field_types(cls)), _wire_spec(cls))]
+              for v, (_, kind, is_tuple, _) in zip((getattr(msg, n) for n, _ in _field_types(cls)), _wire_spec(cls))]
     return encode_checked_fields(cls, values)
 
 
@@ -138,8 +139,7 @@ def decode(data: bytes, expected: type | tuple[type, ...] | None = None) -> obje
     values = raw["f"]
     if not isinstance(values, list) or len(values) != len(spec):
         raise ProtocolError(f"{cls.__name__}: expected {len(spec)} fields")
-    kwargs = {name: _check_field(v, kind, is_tuple, f"{cls.__name__}.{name}")
-              for (name, kind, is_tuple), v in zip(spec, values)}
+    kwargs = {name: _check_field(v, kind, is_tuple, where) for (name, kind, is_tuple, where), v in zip(spec, values)}
     try:
         return cls(**kwargs)
     except (TypeError, ValueError) as exc:
