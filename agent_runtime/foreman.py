@@ -92,9 +92,16 @@ def marking_is_safe(view: MapView, marked: np.ndarray) -> bool:
     foreman may stand in a pocket itself. Cells never seen count as open (the maps' reading
     of them)."""
     passable = ~view.blocked
-    reference = _outside(passable)
-    now = connected(reference, passable)
-    after = connected(reference & ~marked, passable & ~marked)
+    outside = border(passable) & passable
+    if outside.any():
+        now = connected(outside, passable)
+        after = connected(outside & ~marked, passable & ~marked)
+    else:
+        # The whole world is on the map: the largest open region stands for the outside,
+        # and after the filling, the largest piece left of it. (The region itself is no
+        # reference to reach: every cell of it reaches it, cut off or not.)
+        now = largest_region(passable, passable)
+        after = largest_region(now & ~marked, passable & ~marked)
     if (now & ~marked & ~after).any():
         return False
     return bool(np.all(_beside(after)[marked]))
@@ -159,14 +166,13 @@ class Foreman:
         done = self._finished(view, mine, odometry)
         if done is not None:
             return done
-        cued = np.zeros_like(view.open_sites)
-        for (r, c), kind in mine:
-            if kind == "site" and 0 <= r < cued.shape[0] and 0 <= c < cued.shape[1]:
-                cued[r, c] = True
-        if not any(kind == "supply" for _, _, kind in self.cues):
-            cell = supply_cell(view, self.cfg.reach, self.cfg.supply_clearance)
-            if cell is not None:
-                return self._put(cell, "supply", odometry, offset_of)
+        cued = self._cued(view, mine)
+        unsafe = self._unsafe_cue(view, mine, cued, odometry)
+        if unsafe is not None:
+            return unsafe
+        supply = self._supply(view, mine, odometry, offset_of)
+        if supply is not None:
+            return supply
         if sum(kind == "site" for _, _, kind in self.cues) >= self.cfg.max_site_cues:
             return None
         for cell in site_candidates(view, cued, self.cfg.reach):
@@ -184,27 +190,92 @@ class Foreman:
             dx, dy = x - odometry[0], y - odometry[1]
             if not (0 <= r < n and 0 <= c < n) or math.hypot(dx, dy) > self.cfg.reach:
                 continue
-            if kind == "site":
-                done = not view.open_sites[r, c]
-            else:
-                done = not view.free_bricks[max(r - 1, 0):r + 2, max(c - 1, 0):c + 2].any()
+            # A dry supply stays while sites are open: it is where workers bring back the
+            # bricks no site wants (agent_runtime/worker.py), which would otherwise ride round
+            # the world with them while the build waits for bricks.
+            done = not view.open_sites[r, c] if kind == "site" else _dry(view, r, c) and not view.open_sites.any()
             if done:
                 del self.cues[k]
                 self.unmarks += 1
                 return Mark("unmark", dx, dy, kind)
         return None
 
+    def before_drop(self, marks: np.ndarray, clear_age: np.ndarray, odometry: np.ndarray, cell_of) -> Mark | None:
+        """The foreman builds too, knowing nothing of its cues: before its brick goes down
+        (under its body, on the map's centre), a cue to take off first if that fill would
+        leave the marked set unsafe (an open site reachable only through marked ones), else
+        None. The brain drops on a later step, once the set is safe with the fill."""
+        view = MapView.of(marks, clear_age, self.cfg.fresh)
+        mine = [(cell_of(x - odometry[0], y - odometry[1]), kind) for x, y, kind in self.cues]
+        r, c = view.centre
+        filled = view.blocked.copy()
+        filled[r, c] = True
+        open_sites = view.open_sites.copy()
+        open_sites[r, c] = False
+        after = MapView(open_sites, view.fresh_sites & open_sites, view.filled_sites, filled, view.free_bricks,
+                        view.centre)
+        return self._unsafe_cue(after, mine, self._cued(after, mine), odometry)
+
+    def _supply(self, view: MapView, mine, odometry: np.ndarray, offset_of) -> Mark | None:
+        """A supply cue where free bricks lie, if it has none out; if the one it has is dry
+        (no free brick beside it on the map) and bricks lie elsewhere, the dry one comes off
+        first (if within reach), so that the supply moves to them."""
+        n = view.open_sites.shape[0]
+        out = [k for k, (_, kind) in enumerate(mine) if kind == "supply"]
+        cell = supply_cell(view, self.cfg.reach, self.cfg.supply_clearance)
+        if not out:
+            return None if cell is None else self._put(cell, "supply", odometry, offset_of)
+        k = out[0]
+        (r, c), _ = mine[k]
+        if cell is None or cell == (r, c) or not (0 <= r < n and 0 <= c < n) or not _dry(view, r, c):
+            return None
+        x, y, kind = self.cues[k]
+        if math.hypot(x - odometry[0], y - odometry[1]) > self.cfg.reach:
+            return None
+        del self.cues[k]
+        self.unmarks += 1
+        return Mark("unmark", x - odometry[0], y - odometry[1], kind)
+
+    @staticmethod
+    def _cued(view: MapView, mine) -> np.ndarray:
+        """Its site cues on the map, as a grid."""
+        cued = np.zeros_like(view.open_sites)
+        for (r, c), kind in mine:
+            if kind == "site" and 0 <= r < cued.shape[0] and 0 <= c < cued.shape[1]:
+                cued[r, c] = True
+        return cued
+
+    def _unsafe_cue(self, view: MapView, mine, cued: np.ndarray, odometry: np.ndarray) -> Mark | None:
+        """Take off a site cue if the marked set is no longer safe as a whole. It was when each
+        cue went out, but sites filled since (by this foreman's own building, which knows
+        nothing of the cues, or by anyone) can leave an open site reachable only through
+        marked ones, which workers may fill first. The cue taken is the latest whose going
+        makes the set safe again, else the latest: the next decisions go on until it is.
+        Only a cue within reach can be taken (the world ignores a farther one): with none,
+        nothing is done now."""
+        if not cued.any() or marking_is_safe(view, cued):
+            return None
+        n = cued.shape[0]
+        sites = [k for k, ((r, c), kind) in enumerate(mine) if kind == "site" and 0 <= r < n and 0 <= c < n
+                 and math.hypot(self.cues[k][0] - odometry[0], self.cues[k][1] - odometry[1]) <= self.cfg.reach]
+        if not sites:
+            return None
+        chosen = sites[-1]
+        for k in reversed(sites):
+            trial = cued.copy()
+            trial[mine[k][0]] = False
+            if marking_is_safe(view, trial):
+                chosen = k
+                break
+        x, y, kind = self.cues.pop(chosen)
+        self.unmarks += 1
+        return Mark("unmark", x - odometry[0], y - odometry[1], kind)
+
     def _put(self, cell: tuple[int, int], kind: str, odometry: np.ndarray, offset_of) -> Mark:
         dx, dy = offset_of(*cell)
         self.cues.append((float(odometry[0] + dx), float(odometry[1] + dy), kind))
         self.marks += 1
         return Mark("mark", float(dx), float(dy), kind)
-
-
-def _outside(passable: np.ndarray) -> np.ndarray:
-    """The map's open border cells, else (a world inside the map) the largest open region."""
-    ref = border(passable) & passable
-    return ref if ref.any() else largest_region(passable, passable)
 
 
 def _beside(cells: np.ndarray) -> np.ndarray:
@@ -215,3 +286,8 @@ def _beside(cells: np.ndarray) -> np.ndarray:
     out[:, 1:] |= cells[:, :-1]
     out[:, :-1] |= cells[:, 1:]
     return out
+
+
+def _dry(view: MapView, r: int, c: int) -> bool:
+    """No free brick in the 8 cells round (r, c) (a supply cue's cell) on the map."""
+    return not view.free_bricks[max(r - 1, 0):r + 2, max(c - 1, 0):c + 2].any()

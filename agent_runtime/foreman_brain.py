@@ -34,7 +34,14 @@ class ForemanBrain(Brain):
     def step(self, frame: SensorFrame) -> Step:
         """The Brain's step; with no action of its own, maybe a cue put or taken."""
         s = super().step(frame)
-        if self.foreman is None or not self.foreman.due() or s.action != "none":
+        if self.foreman is None:
+            return s
+        if s.action == "drop" and self.foreman.cues:
+            first = self.foreman.before_drop(self.layers(), self.maps.clear_age, self.odometry, self.maps.cell_of)
+            if first is not None:
+                return dataclasses.replace(s, action=first.action,
+                                           mark=(first.dx * self.cell, first.dy * self.cell, first.kind))
+        if not self.foreman.due() or s.action != "none":
             return s
         mark = self.foreman.decide(self.layers(), self.maps.clear_age, self.odometry, self.maps.offset_of,
                                    self.maps.cell_of)

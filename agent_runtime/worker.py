@@ -12,8 +12,14 @@ It builds what foremen mark (docs/society.md). The rules, first that applies win
    `take_radius` of a `supply` cue (a worker cannot tell a free brick from a structure
    brick: it takes bricks only where a foreman says bricks are to be taken);
 4. to a site: holding, head for the nearest `site` cue in sight;
-5. to the supply: not holding, head for the nearest brick by a `supply` cue, else the cue;
-6. wander: straight legs of random heading and length.
+5. take it back: holding, no site cue seen for `return_ticks`: drop the brick beside a
+   `supply` cue in sight (else wander), so bricks nobody places return to where they are
+   taken instead of riding round the world with idle workers;
+6. to the supply: not holding, a site cue seen within `demand_ticks`, head for the nearest
+   brick by a `supply` cue, else the cue (a worker that knows of no site wanting a brick
+   takes none: thirty idle workers would otherwise hold thirty of the bricks the build
+   needs);
+7. wander: straight legs of random heading and length.
 
 Heading for something avoids obstacles reactively: of the sectors whose nearest reading
 (disc, wall, agent) is clear of the way, the one nearest the goal's bearing; the last cell
@@ -49,11 +55,17 @@ class WorkerConfig:
     stuck_distance: float = 0.6   # ... (net cells moved) makes it leave at a random heading
     leg: tuple[int, int] = (20, 60)  # wander: ticks per straight leg, at least and at most
     crowded_drop: float = 0.2     # with another body this near, drop with this probability per tick
+    demand_ticks: int = 300       # it takes a brick only this soon after it last saw a site cue
+    return_ticks: int = 200       # loaded, with no site cue seen for this long, it takes the brick back
+    return_at: tuple[float, float] = (0.8, 1.3)  # ... and drops it this near a supply cue, off it
 
     def __post_init__(self) -> None:
         if not (self.cruise_speed > 0 and self.clearance > 0 and self.take_radius > 0 and self.leave_ticks >= 1
-                and self.stuck_ticks >= 1 and 1 <= self.leg[0] <= self.leg[1] and 0 < self.crowded_drop <= 1):
-            raise ValueError("worker settings must be positive (leg: 1 <= least <= most)")
+                and self.stuck_ticks >= 1 and 1 <= self.leg[0] <= self.leg[1] and 0 < self.crowded_drop <= 1
+                and self.demand_ticks >= 1 and self.return_ticks >= 1
+                and 0.71 < self.return_at[0] < self.return_at[1] <= min(1.5, self.take_radius)):
+            raise ValueError("worker settings must be positive (leg: 1 <= least <= most; return_at: beside "
+                             "the supply cue's cell, not in it, within take_radius)")
 
 
 @dataclass(frozen=True)
@@ -91,6 +103,8 @@ class Worker:
         self.behaviour_ticks: Counter[str] = Counter()
         self.searched = 0  # (the stall clock's count of squares searched: a worker keeps no map)
         self.drops = 0
+        self.returns = 0   # bricks taken back to a supply
+        self._since_site = self.cfg.demand_ticks  # steps since a site cue was last in sight
 
     # the step ------------------------------------------------------------------------------
     def step(self, frame: SensorFrame) -> WorkerStep:
@@ -100,6 +114,7 @@ class Worker:
                 else np.full((len(CUE_KINDS), frame.sectors), NO_READING))
         self._pos += (frame.odom_dx / self.cell, frame.odom_dy / self.cell)
         self._trail.append(self._pos.copy())
+        self._since_site = 0 if (cues[_SITE] >= 0).any() else self._since_site + 1
         s = self._rules(frame, ranges, cues)
         if s.speed > 0 and self._stuck():
             self._leave_at(float(self.rng.uniform(-math.pi, math.pi)), self.cfg.stuck_ticks // 2)
@@ -122,7 +137,11 @@ class Worker:
             site = _nearest(cues[_SITE])
             if site is not None:
                 return self._head(frame, ranges, self.bearings[site], cues[_SITE, site], "config_nav")
+            if self._since_site >= self.cfg.return_ticks:
+                return self._take_back(frame, ranges, cues[_SUPPLY])
             return self._wander(frame, ranges)
+        if self._since_site >= self.cfg.demand_ticks:
+            return self._wander(frame, ranges)  # no site wants a brick that it knows of: take none
         brick = self._brick_by_supply(ranges[_BRICK], cues[_SUPPLY])
         if brick is not None:
             d, bearing = ranges[_BRICK, brick], self.bearings[brick]
@@ -138,6 +157,23 @@ class Worker:
         return self._wander(frame, ranges)
 
     # the rules' parts ----------------------------------------------------------------------
+    def _take_back(self, frame: SensorFrame, ranges: np.ndarray, supply: np.ndarray) -> WorkerStep:
+        """A brick no site it knows of wants goes back where bricks are taken: dropped in a
+        cell beside a supply cue, not on it (the brick lands under the body, and a covered
+        cue is seen by nobody). A foreman keeps a supply cue 3 cells from every site, so the
+        brick lies 2 cells from the structure at least, within reach of the next taker."""
+        cue = _nearest(supply)
+        if cue is None:
+            return self._wander(frame, ranges)
+        near, far = self.cfg.return_at
+        if near <= supply[cue] <= far:
+            self.returns += 1
+            self._leave_at(frame.heading + math.pi, self.cfg.leave_ticks)
+            return WorkerStep(0.0, 0.0, "drop", "drop")
+        if supply[cue] < near:  # on the cue: step off it first
+            return self._head(frame, ranges, self.bearings[cue] + math.pi, math.inf, "config_nav")
+        return self._head(frame, ranges, self.bearings[cue], supply[cue], "config_nav", stop_at=near)
+
     @staticmethod
     def _crowded(ranges: np.ndarray) -> bool:
         """Another body within a cell: it may stand on the same cue and drop on the same tick

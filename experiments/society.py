@@ -69,7 +69,7 @@ class Outcome:
     sites_total: int
     distance: float
     misplaced: int
-    worker_drops: int     # bricks the workers laid (society only)
+    worker_drops: int     # bricks the workers laid on sites (society only; not those taken back)
     agent_ms: float       # the members' decision steps per tick, CPU ms
     world_ms: float       # the world's step per tick, CPU ms
 
@@ -109,7 +109,9 @@ def run_one(job: Job) -> Outcome:
     result = run.run(sc.max_ticks, stall_ticks=stall_limit(sc, job.stall))
     st = run.world.status()
     ticks = max(result.ticks, 1)
-    workers = sum(d for a, d in zip(st.agent_ids, st.agent_drops) if a.startswith("w"))
+    # Bricks the workers laid: their drops less those that took a brick back to a supply.
+    workers = sum(d for a, d in zip(st.agent_ids, st.agent_drops) if a.startswith("w")) - sum(
+        getattr(run.brains[a], "returns", 0) for a in st.agent_ids if a.startswith("w"))
     return Outcome(job.layout, family_of(sc), job.team, True, result.completed, result.ticks, st.sites_filled,
                    st.sites_total, round(float(sum(st.agent_distance)), 1), misplaced_bricks(run, start_cells),
                    workers, round(1e3 * spent["agents"] / ticks, 3), round(1e3 * spent["world"] / ticks, 3))
@@ -177,6 +179,8 @@ machine's load moves them). See [Cues, foremen and workers](../docs/society.md).
 - *ticks / {order[0]}*: over the layouts completed by both, the median ratio of the ticks.
 - *misplaced bricks*: bricks left in one of the 8 cells around a site but on no site, moved
   there by an agent (`experiments.noise.misplaced_bricks`), summed over the runs.
+- *bricks laid by workers*: the workers' drops, less the bricks they took back beside a
+  supply cue (bricks no site cue in sight wanted), summed over the runs.
 - *CPU ms per tick*: thread CPU time, per tick, of every member's decision step summed
   (*decisions*), and of the world's step; the median over the runs.
 

@@ -14,8 +14,9 @@ from world_server.scenario import load_scenario
 
 
 def _built_by(run) -> dict[str, int]:
+    """Bricks each member laid: its drops, less a worker's bricks taken back to a supply."""
     st = run.world.status()
-    return dict(zip(st.agent_ids, st.agent_drops))
+    return {a: n - getattr(run.brains[a], "returns", 0) for a, n in zip(st.agent_ids, st.agent_drops)}
 
 
 def test_a_society_in_process_builds_with_its_workers_filling_marked_sites():
@@ -40,6 +41,22 @@ def test_society_flags_do_not_go_with_agents_or_learning():
     r = conag("run", "scenarios/quick_wall.toml", "--foremen", "1", "--workers", "2", "--agents", "3",
               "--listen", f"tcp/127.0.0.1:{free_port()}")
     assert r.returncode == 2 and "--foremen and --workers" in r.stderr
+
+
+@pytest.mark.parametrize("foremen", [1, 2])
+def test_a_society_completes_a_wall_of_sites_along_the_worlds_edge(foremen):
+    # gen-wall 20: a wall two sites thick against the world's east edge. The foreman's
+    # safety check took the whole open region for the outside (every marking passed) and
+    # knew nothing of the sites its own building filled; workers sealed the edge column's
+    # last sites in (14-16 of 18). Two foremen also mark side by side.
+    from experiments.generalisation import LAYOUTS
+    from world_server.scenario import parse_scenario
+    name = "020-gen-wall-20260020.toml"
+    run = start_society(parse_scenario((LAYOUTS / name).read_text(encoding="utf-8"), name), foremen, 4)
+    assert run.run(20000, stall_ticks=3000).completed
+    laid = _built_by(run)
+    assert sum(laid.values()) == run.world.status().sites_total   # every brick laid went on a site
+    assert sum(n for a, n in laid.items() if a.startswith("w")) >= 2
 
 
 @pytest.mark.slow

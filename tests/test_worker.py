@@ -44,14 +44,46 @@ def test_it_drops_a_held_brick_on_a_site_cue_and_then_backs_off():
     assert w.step(frame(holding=True, under="supply")).action != "drop"
 
 
+WANTED = [(math.pi, 5.0)]   # a site cue in sight, behind: some site wants a brick
+
+
 def test_it_grabs_only_a_brick_by_a_supply_cue():
     w = worker()
-    near_supply = frame(bricks=[(0.1, 1.0)], supplies=[(0.1, 2.0)])
+    near_supply = frame(bricks=[(0.1, 1.0)], supplies=[(0.1, 2.0)], sites=WANTED)
     assert w.step(near_supply).action == "grab"
-    nowhere = frame(bricks=[(0.1, 1.0)])
-    far_from_supply = frame(bricks=[(0.1, 1.0)], supplies=[(math.pi, 4.0)])
+    nowhere = frame(bricks=[(0.1, 1.0)], sites=WANTED)
+    far_from_supply = frame(bricks=[(0.1, 1.0)], supplies=[(math.pi, 4.0)], sites=WANTED)
     for f in (nowhere, far_from_supply):
         assert worker().step(f).action != "grab"
+
+
+def test_it_takes_no_brick_unless_it_saw_a_site_cue_lately():
+    # Thirty idle workers each holding a brick can hold every brick the foremen need.
+    w = worker()
+    by_supply = frame(bricks=[(0.1, 1.0)], supplies=[(0.1, 2.0)])
+    assert w.step(by_supply).action != "grab"                  # it has seen no site cue yet
+    w.step(frame(sites=WANTED))
+    assert w.step(by_supply).action == "grab"                  # one was in sight a step ago
+    w = worker()
+    w.step(frame(sites=WANTED))
+    for _ in range(w.cfg.demand_ticks):
+        w.step(frame())
+    assert w.step(by_supply).action != "grab"                  # too long ago
+
+
+def test_a_brick_no_site_wants_goes_back_beside_a_supply_cue_not_on_it():
+    w = worker()
+    for _ in range(w.cfg.return_ticks - 1):
+        assert w.step(frame(holding=True)).action != "drop"      # wanders with it a while
+    far = w.step(frame(holding=True, supplies=[(0.1, 3.0)]))
+    assert far.action == "none" and far.behaviour == "config_nav" and far.speed > 0
+    assert w.step(frame(holding=True, supplies=[(0.1, 0.3)])).action != "drop"   # on the cue
+    assert w.step(frame(holding=True, supplies=[(0.1, 1.0)])).action == "drop"  # beside it
+    assert w.returns == 1 and w.drops == 0
+    loaded = worker()
+    loaded.step(frame(holding=True, sites=WANTED))
+    for _ in range(50):   # a site cue seen lately: it keeps the brick and looks for the site
+        assert loaded.step(frame(holding=True, supplies=[(0.1, 1.0)])).action != "drop"
 
 
 def test_holding_it_heads_for_the_nearest_site_cue():
@@ -82,3 +114,33 @@ def test_in_a_world_a_worker_fills_the_marked_site_from_the_supply():
         w.step()
     assert w.completed()
     assert w.status().agent_grabs == (1,)   # one brick taken, the one that filled the site
+
+
+def test_in_a_world_a_worker_brings_a_brick_nobody_wants_back_to_the_supply():
+    # No site cue anywhere: the brick it holds must end beside the supply cue, which stays
+    # uncovered (a covered cue is seen by nobody), and not where the worker happened to be.
+    w = make("""
+............
+............
+..Ab........
+............
+............
+............
+""", sensor_noise=0.02, cue_reach=9.0)
+    welcome = w.attach("w1")
+    w.set_command("w1", 0.0, 0.0, "grab")
+    w.step()
+    assert w.agents["w1"].holding >= 0
+    brick = w.agents["w1"].holding
+    mind = Worker(welcome, rng=np.random.default_rng(5))
+    w.cues.place((8, 3), "supply")
+    for _ in range(2000):
+        if w.agents["w1"].holding < 0:
+            break
+        s = mind.step(w.frame("w1"))
+        w.set_command("w1", s.speed, s.turn, s.action)
+        w.step()
+    assert w.agents["w1"].holding < 0 and mind.returns == 1
+    cell = np.floor(w.discs.xy[brick]).astype(int)
+    assert max(abs(cell[0] - 8), abs(cell[1] - 3)) == 1        # in a cell beside the cue's
+    assert w.frame("w1").cues[SUPPLY * S:(SUPPLY + 1) * S] != (NO_READING,) * S   # still seen
