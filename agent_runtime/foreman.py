@@ -10,12 +10,15 @@ tick its brain asks for no action, one cue at a time (docs/society.md):
   only round a supply cue);
 * `site` cues on open sites it has just seen open, nearest first, while it has fewer than
   `max_site_cues` out: only a site whose filling, together with every other site marked,
-  in any order, cuts no open ground off from the outside and leaves every marked site
-  enterable. Workers fill marked sites in whatever order they reach them, so the marked set
-  must be safe as a whole: filling fewer cells never disconnects more, so checking the
-  whole set covers every order (one flood for the ground, one per marked site);
+  in any order, cuts no open site, free brick or the foreman itself off from the outside
+  and leaves every marked site enterable. Workers fill marked sites in whatever order they
+  reach them, so the marked set must be safe as a whole: filling fewer cells never
+  disconnects more, so checking the whole set covers every order;
+* it keeps the set safe as sites fill (by anyone, or by its own Brain, which knows nothing
+  of its cues): a cue a fill made unsafe comes off, checked again before its own drops;
 * it takes a cue off once its site is seen filled (a brick there), or a supply cue once no
-  free brick is left beside it.
+  free brick is left beside it and no site is open on its map (a dry supply is where
+  workers bring back bricks no site wants); a dry supply moves to bricks seen elsewhere.
 
 The cues it put out are kept as points in its odometry frame (cells from where it
 attached), so they stay put as the maps shift. Pure numpy over the Brain's maps; the shell
@@ -84,8 +87,9 @@ class MapView:
 
 def marking_is_safe(view: MapView, marked: np.ndarray) -> bool:
     """Whether workers may fill every cell of `marked` in any order: with all of them filled,
-    the open ground that reaches the outside now still reaches it, and each marked cell
-    still has a neighbour that does (so it can be entered while the others are filled).
+    what the build needs of the open ground that reaches the outside now (the open sites,
+    the cells beside free bricks, the foreman's own cell) still reaches it, and each marked
+    cell still has a neighbour that does (so it can be entered while the others are filled).
 
     The outside is the map's open border (the world goes on beyond it); on a map that holds
     the whole world (its border is the world's edge), the largest open region, since the
@@ -102,7 +106,12 @@ def marking_is_safe(view: MapView, marked: np.ndarray) -> bool:
         # reference to reach: every cell of it reaches it, cut off or not.)
         now = largest_region(passable, passable)
         after = largest_region(now & ~marked, passable & ~marked)
-    if (now & ~marked & ~after).any():
+    # Ground cut off with nothing on it the build needs is no loss (a ring's inside, once
+    # its sites are in): what must stay reachable are the open sites, the foreman's own cell
+    # and the free bricks.
+    needed = view.open_sites | _beside(view.free_bricks)
+    needed[view.centre] = True
+    if (now & needed & ~marked & ~after).any():
         return False
     return bool(np.all(_beside(after)[marked]))
 

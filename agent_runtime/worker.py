@@ -15,10 +15,10 @@ It builds what foremen mark (docs/society.md). The rules, first that applies win
 5. take it back: holding, no site cue seen for `return_ticks`: drop the brick beside a
    `supply` cue in sight (else wander), so bricks nobody places return to where they are
    taken instead of riding round the world with idle workers;
-6. to the supply: not holding, a site cue seen within `demand_ticks`, head for the nearest
-   brick by a `supply` cue, else the cue (a worker that knows of no site wanting a brick
-   takes none: thirty idle workers would otherwise hold thirty of the bricks the build
-   needs);
+6. to the supply: not holding, a site cue seen within `demand_ticks` (a new worker counts
+   as having seen one), head for the nearest brick by a `supply` cue, else the cue (a
+   worker that knows of no site wanting a brick takes none: thirty idle workers would
+   otherwise hold thirty of the bricks the build needs);
 7. wander: straight legs of random heading and length.
 
 Heading for something avoids obstacles reactively: of the sectors whose nearest reading
@@ -104,7 +104,7 @@ class Worker:
         self.searched = 0  # (the stall clock's count of squares searched: a worker keeps no map)
         self.drops = 0
         self.returns = 0   # bricks taken back to a supply
-        self._since_site = self.cfg.demand_ticks  # steps since a site cue was last in sight
+        self._since_site = 0  # steps since a site cue was last in sight (a new worker takes a brick)
 
     # the step ------------------------------------------------------------------------------
     def step(self, frame: SensorFrame) -> WorkerStep:

@@ -265,3 +265,31 @@ def test_a_dry_supply_stays_while_sites_are_open_and_moves_to_bricks_seen_elsewh
     assert move is not None and move.action == "unmark" and (move.dx, move.dy) == pytest.approx(offset_of(4, 2))
     new = f.decide(bricks_east, age, odo, offset_of, cell_of)
     assert new is not None and new.action == "mark" and new.kind == "supply" and new.dx > 0
+
+
+RING = """
+.........
+.BBB+BBB.
+.B.....B.
+.BBBBBBB.
+.........
+.........
+.........
+.........
+.........
+"""
+
+
+def test_closing_a_ring_on_empty_ground_is_safe_but_not_on_a_site_or_a_brick_inside():
+    # Ground cut off with nothing the build needs on it is no loss: a ring's last site may
+    # go to the workers. Not with an open site or a free brick inside, nor with the foreman.
+    v = view(RING)
+    assert marking_is_safe(v, cells(v, (1, 4)))
+    for inside in ("+", "b"):
+        w = view(RING.replace(".B.....B.", f".B.{inside}...B.", 1))
+        assert not marking_is_safe(w, cells(w, (1, 4)))
+    around_foreman = view(RING.replace(".BBB+BBB.\n.B.....B.\n.BBBBBBB.", ".........\n.........\n.BBBBBBB.")
+                          .replace(".........\n.........\n.........\n.........\n.........\n",
+                                   ".B.....B.\n.B.....B.\n.BBB+BBB.\n.........\n.........\n", 1))
+    assert around_foreman.centre == (4, 4) and not around_foreman.blocked[4, 4]
+    assert not marking_is_safe(around_foreman, cells(around_foreman, (5, 4)))

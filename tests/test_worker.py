@@ -59,16 +59,14 @@ def test_it_grabs_only_a_brick_by_a_supply_cue():
 
 def test_it_takes_no_brick_unless_it_saw_a_site_cue_lately():
     # Thirty idle workers each holding a brick can hold every brick the foremen need.
-    w = worker()
     by_supply = frame(bricks=[(0.1, 1.0)], supplies=[(0.1, 2.0)])
-    assert w.step(by_supply).action != "grab"                  # it has seen no site cue yet
-    w.step(frame(sites=WANTED))
-    assert w.step(by_supply).action == "grab"                  # one was in sight a step ago
+    assert worker().step(by_supply).action == "grab"           # a new worker takes one
     w = worker()
-    w.step(frame(sites=WANTED))
     for _ in range(w.cfg.demand_ticks):
         w.step(frame())
-    assert w.step(by_supply).action != "grab"                  # too long ago
+    assert w.step(by_supply).action != "grab"                  # no site cue for too long
+    w.step(frame(sites=WANTED))
+    assert w.step(by_supply).action == "grab"                  # one was in sight a step ago
 
 
 def test_a_brick_no_site_wants_goes_back_beside_a_supply_cue_not_on_it():
@@ -141,6 +139,6 @@ def test_in_a_world_a_worker_brings_a_brick_nobody_wants_back_to_the_supply():
         w.set_command("w1", s.speed, s.turn, s.action)
         w.step()
     assert w.agents["w1"].holding < 0 and mind.returns == 1
-    cell = np.floor(w.discs.xy[brick]).astype(int)
-    assert max(abs(cell[0] - 8), abs(cell[1] - 3)) == 1        # in a cell beside the cue's
+    col, row = w.scenario.to_cell(w.discs.xy[brick][None])[0]   # the cue's cell is (col 8, row 3)
+    assert max(abs(col - 8), abs(row - 3)) == 1                 # in a cell beside the cue's
     assert w.frame("w1").cues[SUPPLY * S:(SUPPLY + 1) * S] != (NO_READING,) * S   # still seen
