@@ -57,7 +57,10 @@ class WorkerConfig:
     crowded_drop: float = 0.2     # with another body this near, drop with this probability per tick
     demand_ticks: int = 300       # it takes a brick only this soon after it last saw a site cue
     return_ticks: int = 200       # loaded, with no site cue seen for this long, it takes the brick back
-    return_at: tuple[float, float] = (0.8, 1.3)  # ... and drops it this near a supply cue, off it
+    # ... and drops it this near a supply cue's centre: beyond the corner of the cue's cell
+    # (0.71), so the brick, which lands under the body, does not cover the cue; in a cell
+    # beside it, within take_radius of it for the next taker.
+    return_at: tuple[float, float] = (0.8, 1.3)
 
     def __post_init__(self) -> None:
         if not (self.cruise_speed > 0 and self.clearance > 0 and self.take_radius > 0 and self.leave_ticks >= 1
