@@ -43,7 +43,7 @@ def test_society_flags_do_not_go_with_agents_or_learning():
     assert r.returncode == 2 and "--foremen and --workers" in r.stderr
 
 
-@pytest.mark.parametrize("foremen", [1, 2])
+@pytest.mark.parametrize("foremen", [1, pytest.param(2, marks=pytest.mark.slow)])  # the fast tier's 60 s
 def test_a_society_completes_a_wall_of_sites_along_the_worlds_edge(foremen):
     # gen-wall 20: a wall two sites thick against the world's east edge. The foreman's
     # safety check took the whole open region for the outside (every marking passed) and
