@@ -142,3 +142,22 @@ def test_in_a_world_a_worker_brings_a_brick_nobody_wants_back_to_the_supply():
     col, row = w.scenario.to_cell(w.discs.xy[brick][None])[0]   # the cue's cell is (col 8, row 3)
     assert max(abs(col - 8), abs(row - 3)) == 1                 # in a cell beside the cue's
     assert w.frame("w1").cues[SUPPLY * S:(SUPPLY + 1) * S] != (NO_READING,) * S   # still seen
+
+
+def test_an_idle_worker_rests_most_of_its_legs():
+    # Thirty bodies wandering a small world stand in the foremen's way: a worker with no
+    # brick and no site cue seen lately walks one leg in idle_rest + 1.
+    def moving_share(w: Worker, steps: int = 3000) -> float:
+        return sum(w.step(frame()).speed > 0 for _ in range(steps)) / steps
+
+    busy = worker()
+    busy_share = 0.0
+    for _ in range(30):                      # a site cue in sight now and then: never idle
+        busy.step(frame(sites=WANTED))
+        busy_share += moving_share(busy, 100) / 30
+    idle = worker()
+    for _ in range(idle.cfg.demand_ticks):
+        idle.step(frame())
+    idle_share = moving_share(idle)
+    assert idle_share < busy_share / 2.5
+    assert idle_share > 0.0                  # it still walks now and then: cues may be elsewhere
