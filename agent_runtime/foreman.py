@@ -171,7 +171,7 @@ class Foreman:
         the sites' ages; `odometry` where the agent is in its odometry frame (cells);
         `offset_of(row, col)` / `cell_of(dx, dy)` the maps' coordinates (EgocentricMaps)."""
         view = MapView.of(marks, clear_age, self.cfg.fresh)
-        mine = [(cell_of(x - odometry[0], y - odometry[1]), kind) for x, y, kind in self.cues]
+        mine = self._mine(odometry, cell_of)
         done = self._finished(view, mine, odometry)
         if done is not None:
             return done
@@ -204,9 +204,7 @@ class Foreman:
             # the world with them while the build waits for bricks.
             done = not view.open_sites[r, c] if kind == "site" else _dry(view, r, c) and not view.open_sites.any()
             if done:
-                del self.cues[k]
-                self.unmarks += 1
-                return Mark("unmark", dx, dy, kind)
+                return self._take_off(k, odometry)
         return None
 
     def before_drop(self, marks: np.ndarray, clear_age: np.ndarray, odometry: np.ndarray, cell_of) -> Mark | None:
@@ -215,7 +213,7 @@ class Foreman:
         leave the marked set unsafe (an open site reachable only through marked ones), else
         None. The brain drops on a later step, once the set is safe with the fill."""
         view = MapView.of(marks, clear_age, self.cfg.fresh)
-        mine = [(cell_of(x - odometry[0], y - odometry[1]), kind) for x, y, kind in self.cues]
+        mine = self._mine(odometry, cell_of)
         r, c = view.centre
         filled = view.blocked.copy()
         filled[r, c] = True
@@ -238,12 +236,10 @@ class Foreman:
         (r, c), _ = mine[k]
         if cell is None or cell == (r, c) or not (0 <= r < n and 0 <= c < n) or not _dry(view, r, c):
             return None
-        x, y, kind = self.cues[k]
+        x, y, _ = self.cues[k]
         if math.hypot(x - odometry[0], y - odometry[1]) > self.cfg.reach:
             return None
-        del self.cues[k]
-        self.unmarks += 1
-        return Mark("unmark", x - odometry[0], y - odometry[1], kind)
+        return self._take_off(k, odometry)
 
     @staticmethod
     def _cued(view: MapView, mine) -> np.ndarray:
@@ -276,7 +272,15 @@ class Foreman:
             if marking_is_safe(view, trial):
                 chosen = k
                 break
-        x, y, kind = self.cues.pop(chosen)
+        return self._take_off(chosen, odometry)
+
+    def _mine(self, odometry: np.ndarray, cell_of) -> list[tuple[tuple[int, int], str]]:
+        """Its cues as (map cell, kind), in the order they went out."""
+        return [(cell_of(x - odometry[0], y - odometry[1]), kind) for x, y, kind in self.cues]
+
+    def _take_off(self, k: int, odometry: np.ndarray) -> Mark:
+        """Forget its `k`-th cue and unmark it (the caller checked it is within reach)."""
+        x, y, kind = self.cues.pop(k)
         self.unmarks += 1
         return Mark("unmark", x - odometry[0], y - odometry[1], kind)
 
