@@ -233,8 +233,8 @@ class Worker:
             self._legs += 1
         self._leg -= 1
         # An idle worker rests most legs: thirty bodies wandering a small world stand in the
-        # foremen's way (2 foremen and 30 workers took 1.16x the ticks of 2 ConAg agents on
-        # the sample, 1.03x resting 3 legs in 4), and one at rest still sees cues come near.
+        # foremen's way (2 foremen and 30 workers: 1.16x the ticks of 2 ConAg agents on the
+        # sample, 1.07x resting 3 legs in 4; docs/society.md), and one at rest still sees cues come near.
         idle = not frame.holding and self._since_site >= self.cfg.demand_ticks
         if idle and self._legs % (self.cfg.idle_rest + 1) != 0:
             return WorkerStep(0.0, 0.0, "none", "none")
