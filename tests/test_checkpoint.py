@@ -197,3 +197,33 @@ def test_a_failed_write_leaves_the_good_checkpoint_in_place(tmp_path, monkeypatc
     with pytest.raises(CheckpointError):
         write_checkpoint(path, good[:-5])
     assert path.read_bytes() == good
+
+
+@pytest.mark.parametrize("hard_links", [True, False])
+def test_the_checkpoint_file_is_never_absent_while_a_new_one_is_written(tmp_path, monkeypatch, hard_links):
+    """A process killed at any step of a write leaves FILE readable: `conag world --resume
+    FILE`, started by hand, looks nowhere else. (Renaming FILE to FILE.prev first left no
+    FILE for a moment, and a world killed then could not be resumed.)"""
+    world = World(load_scenario(SCENARIOS / "quick_wall.toml"))
+    path = tmp_path / "w.ckpt"
+    write_checkpoint(path, checkpoint_world(world))
+    seen = []
+    real_replace, real_link = os.replace, os.link
+
+    def replace(src, dst):
+        seen.append(read_checkpoint(path)["tick"])  # as a process killed just before this step leaves it
+        real_replace(src, dst)
+        seen.append(read_checkpoint(path)["tick"])
+
+    def no_link(src, dst):
+        raise OSError(1, "Operation not permitted")  # a file system without hard links: a copy instead
+
+    monkeypatch.setattr(os, "replace", replace)
+    monkeypatch.setattr(os, "link", real_link if hard_links else no_link)
+    world.attach("a1")
+    world.step()
+    write_checkpoint(path, checkpoint_world(world))
+    monkeypatch.undo()
+    assert seen[0] == 0 and seen[-1] == 1 and len(seen) == 4  # two steps, FILE there before and after each
+    assert read_checkpoint(previous_path(path))["tick"] == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["w.ckpt", "w.ckpt.prev"]  # no temporary left

@@ -136,7 +136,7 @@ def test_a_resumed_world_lets_go_of_agents_that_did_not_come_back(bus, tmp_path,
 
 
 def _tick(path) -> int:
-    """The tick of the checkpoint at `path`; -1 while there is none (or between the renames)."""
+    """The tick of the checkpoint at `path`; -1 while there is none."""
     try:
         return read_checkpoint(path)["tick"]
     except (OSError, CheckpointError):
@@ -163,7 +163,16 @@ def test_a_hand_started_agent_waits_for_a_killed_world_and_attaches_to_the_resum
         wait_until(lambda: "waiting for world w0 to come back" in agent.err, timeout=30,
                    what="the agent to say it waits")
         resumed = Process("world", "--resume", str(path), "--listen", endpoint)
-        wait_until(lambda: "re-attached to world w0" in agent.err, timeout=60, what="the agent to attach again")
+
+        def attached_again() -> bool:
+            if resumed.proc.poll() is not None:  # (it could not read the checkpoint once: see checkpoint.py)
+                raise AssertionError(f"the resumed world exited {resumed.proc.returncode}: {resumed.err}")
+            return "re-attached to world w0" in agent.err
+
+        try:
+            wait_until(attached_again, timeout=60, what="the agent to attach again")
+        except AssertionError as exc:  # say what both processes said: the wait alone cannot tell why
+            raise AssertionError(f"{exc}\n--- agent:\n{agent.err}\n--- resumed world:\n{resumed.err}") from None
         resumed.wait_for("resumed from")
         tick = int(agent.err.split("re-attached to world w0 at tick ")[1].split()[0])
         # It goes on: the resumed world checkpoints past where it started.

@@ -17,9 +17,9 @@ The file: an 8-byte magic, the format version (uint32), the payload's length (ui
 its SHA-256, then the payload (msgpack). `read_checkpoint` refuses a file that is not a
 checkpoint, of another format version, truncated or corrupt, with a `CheckpointError`
 saying which. `write_checkpoint` writes a temporary file beside the target, fsyncs it,
-reads it back and checks it, keeps the checkpoint it replaces as FILE.prev, renames the
-new one into place and fsyncs the directory: a crash at any moment leaves a good
-checkpoint (FILE, or FILE.prev just then), and a bad write never replaces a good one.
+reads it back and checks it, keeps the checkpoint it replaces as FILE.prev (a second name
+for it, FILE staying in place), renames the new one over FILE and fsyncs the directory: a
+crash at any moment leaves a good checkpoint at FILE, and a bad write never replaces it.
 """
 
 from __future__ import annotations
@@ -28,6 +28,7 @@ import dataclasses
 import hashlib
 import json
 import os
+import shutil
 import struct
 from dataclasses import dataclass
 from pathlib import Path
@@ -190,12 +191,31 @@ def write_checkpoint(path: str | Path, data: bytes) -> None:
             os.fsync(f.fileno())
         decode_checkpoint(tmp.read_bytes(), str(tmp))  # what landed on disk reads back, or nothing changes
         if path.exists():
-            os.replace(path, previous_path(path))
+            _keep_as_previous(path)
         os.replace(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
     _fsync_dir(path.parent)
+
+
+def _keep_as_previous(path: Path) -> None:
+    """Make FILE.prev the checkpoint now at `path`, leaving `path` in place: a second name
+    for the same file (a copy where the file system has no hard links), renamed over
+    FILE.prev. Renaming `path` itself away would leave no FILE until the new one is renamed
+    in, and a process killed just then left a `conag world --resume FILE` nothing to read."""
+    prev = previous_path(path)
+    link = prev.with_name(f".{prev.name}.{os.getpid()}.tmp")
+    link.unlink(missing_ok=True)  # (left by a process of the same pid that was killed here)
+    try:
+        try:
+            os.link(path, link)
+        except OSError:
+            shutil.copyfile(path, link)
+        os.replace(link, prev)
+    except BaseException:
+        link.unlink(missing_ok=True)
+        raise
 
 
 def _fsync_dir(directory: Path) -> None:
@@ -236,7 +256,7 @@ def load_world(path: str | Path) -> World:
 
 def newest_good(path: str | Path) -> Path | None:
     """The checkpoint to resume from: `path` if it reads back, else FILE.prev if that does
-    (a crash between the two renames of a write), else None."""
+    (FILE damaged or removed since it was written), else None."""
     for candidate in (Path(path), previous_path(path)):
         try:
             read_checkpoint(candidate)
