@@ -177,6 +177,20 @@ def test_bad_checkpoint_is_refused_with_a_clear_error(tmp_path, damage, words):
     assert newest_good(path) == previous_path(path)
 
 
+def test_a_missing_checkpoint_names_the_previous_one_if_it_is_intact(tmp_path):
+    world = World(load_scenario(SCENARIOS / "quick_wall.toml"))
+    path = tmp_path / "w.ckpt"
+    with pytest.raises(FileNotFoundError):
+        load_world(path)  # nothing at all: the plain error
+    write_checkpoint(path, checkpoint_world(world))
+    world.attach("a1")
+    world.step()
+    write_checkpoint(path, checkpoint_world(world))
+    path.unlink()
+    with pytest.raises(CheckpointError, match=r"no checkpoint at .*w\.ckpt; .*w\.ckpt\.prev \(tick 0\), is intact"):
+        load_world(path)
+
+
 def test_a_failed_write_leaves_the_good_checkpoint_in_place(tmp_path, monkeypatch):
     world = World(load_scenario(SCENARIOS / "quick_wall.toml"))
     path = tmp_path / "w.ckpt"

@@ -233,20 +233,28 @@ def read_checkpoint(path: str | Path) -> dict:
 
 
 def load_state(path: str | Path) -> dict:
-    """The state in checkpoint `path`; a CheckpointError also says whether FILE.prev is intact."""
+    """The state in checkpoint `path`; a CheckpointError also says whether FILE.prev is intact
+    (and is raised for a missing FILE when it is: FileNotFoundError otherwise)."""
     path = Path(path)
     try:
         return read_checkpoint(path)
     except CheckpointError as exc:
-        prev = previous_path(path)
-        hint = ""
-        if prev.exists():
-            try:
-                tick = read_checkpoint(prev)["tick"]
-                hint = f"; the checkpoint before it, {prev} (tick {tick}), is intact: resume from that"
-            except (CheckpointError, KeyError):
-                pass
-        raise CheckpointError(f"{exc}{hint}") from exc
+        raise CheckpointError(f"{exc}{_previous_intact(path)}") from exc
+    except FileNotFoundError as exc:
+        hint = _previous_intact(path)
+        if not hint:
+            raise
+        raise CheckpointError(f"no checkpoint at {path}{hint}") from exc
+
+
+def _previous_intact(path: Path) -> str:
+    """'; the checkpoint before it, FILE.prev (tick N), is intact: ...' if it is, else ''."""
+    prev = previous_path(path)
+    try:
+        tick = read_checkpoint(prev)["tick"]
+    except (OSError, CheckpointError, KeyError):
+        return ""
+    return f"; the checkpoint before it, {prev} (tick {tick}), is intact: resume from that"
 
 
 def load_world(path: str | Path) -> World:
