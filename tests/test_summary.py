@@ -4,7 +4,11 @@ the dict it replaced gave, keys in the contract's order, and reads back what it 
 from __future__ import annotations
 
 import json
+import signal
 from dataclasses import replace
+from pathlib import Path
+
+import pytest
 
 from protocol.messages import BEHAVIOURS, AgentState, WorldStatus
 from world_server.summary import AgentSummary, RunSummary, run_summary, write_summary
@@ -75,3 +79,41 @@ def test_conag_run_records_which_agent_ran_before_world_restarts():
     assert list(data)[-3:] == ["agents", "agent", "world_restarts"] and data["agent"] == agent
     assert RunSummary.from_json(new.to_json()) == new
     assert "agent" not in RunSummary.of(STATUS).as_dict()   # the world's own summary: it does not know
+
+
+def test_a_summary_is_written_whole_or_not_at_all(tmp_path, monkeypatch):
+    path = tmp_path / "s.json"
+    write_summary(STATUS, path)
+    before = path.read_text()
+
+    def full_disk(*_args, **_kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(Path, "write_text", full_disk)
+    with pytest.raises(OSError):
+        write_summary(replace(STATUS, tick=901), path)
+    monkeypatch.undo()
+    assert path.read_text() == before  # the summary there is untouched, and no temporary is left
+    assert [p.name for p in tmp_path.iterdir()] == ["s.json"]
+
+
+def test_the_world_writes_its_summary_before_a_late_sigterm_can_stop_it(tmp_path, monkeypatch, endpoint):
+    """`conag run` stops its world with SIGINT, then SIGTERM: the world's summary is written
+    while its own handlers still take such signals (once Python's default is back, a SIGTERM
+    kills the process mid-write, and the run read an empty summary: CI, once)."""
+    from conag import cli
+    from conag.commands import world as world_command
+
+    handlers = []
+
+    def write(*args, **kwargs):
+        handlers.append(signal.getsignal(signal.SIGTERM))
+        return write_summary(*args, **kwargs)
+
+    monkeypatch.setattr(world_command, "write_summary", write)
+    path = tmp_path / "final.json"
+    scenario = str(Path(__file__).resolve().parent.parent / "scenarios" / "quick_wall.toml")
+    assert cli.main(["world", scenario, "--tick-mode", "realtime", "--ticks", "3", "--listen", endpoint,
+                     "--quiet", "--summary", str(path)]) == 0
+    assert handlers and handlers[0] not in (signal.SIG_DFL, signal.default_int_handler, None)
+    assert RunSummary.from_json(path.read_text()).ticks == 3

@@ -13,6 +13,7 @@ its last AgentState ({} if none arrived); `stalled` is set by `conag run --stall
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -114,7 +115,15 @@ def run_summary(status: WorldStatus, states: Mapping[str, AgentState] | None = N
 
 def write_summary(status: WorldStatus, path: str | Path, states: Mapping[str, AgentState] | None = None,
                   stalled: bool = False) -> RunSummary:
-    """Write the run summary as JSON to `path`; returns it."""
+    """Write the run summary as JSON to `path`, whole or not at all (a temporary file beside it,
+    renamed into place: a reader never finds half of it); returns it."""
     summary = RunSummary.of(status, states, stalled)
-    Path(path).write_text(summary.to_json(), encoding="utf-8")
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        tmp.write_text(summary.to_json(), encoding="utf-8")
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
     return summary

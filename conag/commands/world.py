@@ -106,12 +106,15 @@ def run(args: argparse.Namespace) -> int:
             final = server.run(stop)
         finally:
             session.close()
-    print("final: " + status_line(final), flush=True)
-    if args.summary:
-        write_summary(final, args.summary, server.agent_states)
-    if args.profile:
-        with open(args.profile, "w", encoding="utf-8") as f:
-            json.dump({"agents": len(final.agent_ids), **server.times.as_dict()}, f, indent=2)
+        # Still within stop_on_signals: `conag run` stops its world with SIGINT and then SIGTERM,
+        # and a SIGTERM that came once the default handler was back killed the world while it
+        # wrote its summary (the run then read an empty file).
+        print("final: " + status_line(final), flush=True)
+        if args.summary:
+            write_summary(final, args.summary, server.agent_states)
+        if args.profile:
+            with open(args.profile, "w", encoding="utf-8") as f:
+                json.dump({"agents": len(final.agent_ids), **server.times.as_dict()}, f, indent=2)
     return 0
 
 
