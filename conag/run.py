@@ -607,7 +607,11 @@ def _start_world(opts: RunOptions, n_agents: int, final_path: Path, checkpoint: 
 def _final_summary(final_path: Path, world: subprocess.Popen) -> RunSummary:
     if not final_path.exists():
         raise RuntimeError(f"the world exited ({world.returncode}) without a final status")
-    return RunSummary.from_json(final_path.read_text(encoding="utf-8"))
+    try:
+        return RunSummary.from_json(final_path.read_text(encoding="utf-8"))
+    except (ValueError, KeyError, TypeError) as exc:  # (the world writes it whole: a foreign or damaged file)
+        raise RuntimeError(f"the world's final status {final_path} cannot be read ({exc}); the world exited "
+                           f"({world.returncode})") from exc
 
 
 def _on_control(fleet: Fleet):

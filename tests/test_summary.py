@@ -117,3 +117,16 @@ def test_the_world_writes_its_summary_before_a_late_sigterm_can_stop_it(tmp_path
                      "--quiet", "--summary", str(path)]) == 0
     assert handlers and handlers[0] not in (signal.SIG_DFL, signal.default_int_handler, None)
     assert RunSummary.from_json(path.read_text()).ticks == 3
+
+
+@pytest.mark.parametrize("text", ["", "{\"not\": \"a summary\"}"])
+def test_conag_run_says_which_file_when_the_worlds_summary_cannot_be_read(tmp_path, text):
+    from conag import run as supervisor
+
+    class Exited:
+        returncode = 0
+
+    path = tmp_path / "final.json"
+    path.write_text(text)
+    with pytest.raises(RuntimeError, match=r"the world's final status .*final\.json cannot be read"):
+        supervisor._final_summary(path, Exited())
