@@ -4,6 +4,7 @@ the dict it replaced gave, keys in the contract's order, and reads back what it 
 from __future__ import annotations
 
 import json
+import os
 import signal
 from dataclasses import replace
 from pathlib import Path
@@ -89,7 +90,7 @@ def test_a_summary_is_written_whole_or_not_at_all(tmp_path, monkeypatch):
     def full_disk(*_args, **_kwargs):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(Path, "write_text", full_disk)
+    monkeypatch.setattr(os, "replace", full_disk)  # the new text written, then the disk full
     with pytest.raises(OSError):
         write_summary(replace(STATUS, tick=901), path)
     monkeypatch.undo()

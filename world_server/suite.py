@@ -22,12 +22,11 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
-import tempfile
 from collections.abc import Iterable, Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from world_server.files import write_text_whole
 from world_server.generator import GENERATOR_VERSION, SUITE_MIXES, GeneratedScenario, generate, suite_plan
 
 
@@ -123,18 +122,6 @@ def _holds(path: Path, digest: str) -> bool:
         return False
 
 
-def _write(path: Path, text: str) -> None:
-    """Whole or not at all: two processes materialising at once each replace the file."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def materialise(manifest: str | Path | Manifest, folder: str | Path) -> list[Path]:
     """The manifest's layout files in `folder`, made where missing or different; returns
     their paths in the manifest's order. Raises SuiteError if the generator does not make
@@ -160,5 +147,5 @@ def materialise(manifest: str | Path | Manifest, folder: str | Path) -> list[Pat
                                  f"{file_name(i, g)} with sha256 {sha256(g.text)[:12]}..., the manifest says "
                                  f"{e.sha256[:12]}...: a changed generator must bump GENERATOR_VERSION and "
                                  f"write a new manifest")
-            _write(folder / e.file, g.text)
+            write_text_whole(folder / e.file, g.text)  # two processes materialising at once
     return [folder / e.file for e in m.layouts]

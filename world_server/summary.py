@@ -13,13 +13,13 @@ its last AgentState ({} if none arrived); `stalled` is set by `conag run --stall
 from __future__ import annotations
 
 import json
-import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from protocol.messages import BEHAVIOURS, AgentState, WorldStatus
+from world_server.files import write_text_whole
 
 
 def behaviour_ticks(state: AgentState | None) -> dict[str, int]:
@@ -115,15 +115,7 @@ def run_summary(status: WorldStatus, states: Mapping[str, AgentState] | None = N
 
 def write_summary(status: WorldStatus, path: str | Path, states: Mapping[str, AgentState] | None = None,
                   stalled: bool = False) -> RunSummary:
-    """Write the run summary as JSON to `path`, whole or not at all (a temporary file beside it,
-    renamed into place: a reader never finds half of it); returns it."""
+    """Write the run summary as JSON to `path`, whole or not at all (`world_server.files`); returns it."""
     summary = RunSummary.of(status, states, stalled)
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        tmp.write_text(summary.to_json(), encoding="utf-8")
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    write_text_whole(path, summary.to_json())
     return summary
