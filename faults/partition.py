@@ -14,6 +14,9 @@ world, and how long after the link came back they were alive with their bodies a
 whether host 3's agents stayed alive throughout, the re-attached agents moved their
 bodies again, the build completed, and `bricks_total` never changed. The agent processes
 are never restarted: `same_processes` says they all still ran when the world finished.
+A build that does not complete also gets the stall report of the last status read, with
+each agent's last AgentState (`conag echo 'agent/*/state' --json` on host 1): where each
+body is, what its agent was doing and what it said blocks it.
 
 The world ticks in lockstep capped at `max_tick_rate` (100 a second): uncapped, the agent
 left alone ran at several hundred ticks a second and could finish the build within the
@@ -38,7 +41,9 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from faults.netns import Hosts, unavailable
+from protocol.messages import AgentState, WorldStatus
 from world_server.scenario import load_scenario
+from world_server.stall import agent_lines
 from world_server.world import World
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -91,6 +96,9 @@ class PartitionRun:
     said_waiting: bool = False   # each cut agent's log says it waits for its world
     wall_seconds: float = 0.0
     error: str = ""
+    # A build that did not complete: the stall report of its last status (every agent's
+    # position, behaviour and blocker, from the AgentStates it last sent; `report_lines`).
+    report: list[str] = field(default_factory=list)
 
     def came_back(self, agent: str, cut_seconds: float) -> bool:
         """`agent` was seen dead and its body leave during the cut, then came back and moved."""
@@ -151,6 +159,35 @@ def measure(statuses: list[tuple[float, dict]], t_cut: float, t_restore: float, 
         last = statuses[-1][1]
         run.restarts = {a: last["agent_restarts"][i] for i, a in enumerate(last["agent_ids"])}
     return run
+
+
+def report_lines(statuses: list[tuple[float, dict]], state_log: str) -> list[str]:
+    """The last status read and, as a stall report has them (`world_server.stall.agent_lines`),
+    each agent's body and last AgentState from `state_log`: the lines `conag echo
+    'agent/*/state' --json` printed (a line cut off when it was stopped is skipped). Empty
+    without a status. What a failed run leaves to diagnose it by: which agent believed what."""
+    if not statuses:
+        return []
+    last = _message(WorldStatus, statuses[-1][1])
+    # Idle since the first status that reported the last count of filled sites.
+    since = next(st["tick"] for _, st in statuses if st["sites_filled"] == last.sites_filled)
+    states: dict[str, AgentState] = {}
+    for line in state_log.splitlines():
+        try:
+            echoed = json.loads(line)
+            if echoed.get("type") == "AgentState":
+                state = _message(AgentState, echoed["message"])
+                states[state.agent_id] = state
+        except (ValueError, TypeError, KeyError):
+            continue
+    head = (f"last status: tick {last.tick}, {last.sites_filled}/{last.sites_total} sites, no site filled "
+            f"for the last {last.tick - since} ticks")
+    return [head, *agent_lines(last, states)]
+
+
+def _message(kind, fields: dict):
+    """A message dataclass from its JSON form (tuples came back as lists)."""
+    return kind(**{k: tuple(v) if isinstance(v, list) else v for k, v in fields.items()})
 
 
 class _Procs:
@@ -251,6 +288,8 @@ def partition_run(opts: PartitionOptions, log_dir: Path, log=print) -> Partition
                                        start_new_session=True)
             procs.procs["status"] = watcher
             reader = _watch_statuses(watcher, statuses)
+            # What each agent last said it does, for the report of a build that fails.
+            procs.start("agent-states", 1, "echo", "agent/*/state", "--json", *bus)
 
             def ready() -> bool:
                 st = statuses[-1][1] if statuses else None
@@ -280,6 +319,9 @@ def partition_run(opts: PartitionOptions, log_dir: Path, log=print) -> Partition
             with open(log_dir / "status.jsonl", "w", encoding="utf-8") as f:
                 f.writelines(json.dumps({"t": round(t - started, 3), **st}) + "\n" for t, st in statuses)
             measure(statuses, t_cut, t_restore, cut, kept, run)
+            last = statuses[-1][1] if statuses else None
+            if run.error or (last is not None and last["sites_filled"] < last["sites_total"]):
+                run.report = report_lines(statuses, procs.log("agent-states"))
             run.said_waiting = all("waiting for world" in procs.log(a) for a in cut)
         except (RuntimeError, OSError) as exc:
             run.error = str(exc)
@@ -327,6 +369,8 @@ def main(argv: list[str] | None = None) -> int:
             log_dir.mkdir(parents=True, exist_ok=True)
             r = partition_run(opts, log_dir)
         print(f"run {i}: {r.line()}", flush=True)
+        for line in r.report:
+            print(f"  {line}", flush=True)
         results.append(r)
     if args.json:
         out = {"options": asdict(opts),

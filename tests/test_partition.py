@@ -32,8 +32,9 @@ def test_agents_cut_off_for_ten_seconds_are_seen_dead_leave_and_come_back_and_th
         pytest.skip(f"no network namespaces here: {reason}")
     opts = PartitionOptions(prefix=f"cgt{os.getpid()}h", cut_seconds=10.0, timeout=240.0)
     run = partition_run(opts, tmp_path, log=lambda line: None)
-    logs = "\n".join(f"--- {p.name}\n{p.read_text(errors='replace')[-1500:]}" for p in sorted(tmp_path.glob("*.log")))
-    where = f"{run.line()}\n{logs}"
+    logs = "\n".join(f"--- {p.name}\n{p.read_text(errors='replace')[-1500:]}" for p in sorted(tmp_path.glob("*.log"))
+                     if p.name != "agent-states.log")  # (their gist is in the report)
+    where = "\n".join([run.line(), *run.report, logs])
     assert _namespaces(opts.prefix) == [], "namespaces left behind"
     assert not run.error, where
     for agent in ("a1", "a2"):
