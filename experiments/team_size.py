@@ -16,12 +16,16 @@ agent-ticks (every agent's behaviour on every tick, summed over the team).
     python3 -m experiments.team_size --quick   # 3 layouts, teams 1, 4, 16, 1 seed (minutes):
                                                # writes out/team_size-quick/
     python3 -m experiments.team_size           # every layout and team, 3 seeds (hours on 2 cores)
+    python3 -m experiments.team_size --resume  # go on with an interrupted run (same options)
     python3 -m experiments.team_size --plot    # the curves of experiments/team_size.json -> out/team_size.png
     python3 -m experiments.team_size --report-only --out DIR   # the tables again from DIR/team_size.json
 
 Writes team_size.json and team_size.md (experiments/ for the full run, --out otherwise)
 and, for the full run, the team-size section of docs/results/experiments.md. Every run is
 deterministic for its layout, team and seed: the same command gives the same tables.
+Each run is journalled as it finishes (team_size.partial.jsonl in the output folder,
+`experiments.journal`), so `--resume` runs only what an interrupted run had not finished,
+for the same code and agent settings; a finished run removes its journal.
 """
 
 from __future__ import annotations
@@ -42,6 +46,7 @@ from agent_runtime.config import ADDITIONS, AgentConfig
 from conag import sim
 from conag.agent_settings import split_names
 from experiments.generalisation import DEFAULT_STALL, distance_bound, stall_limit
+from experiments.journal import Journal, code_version
 from experiments.report import RESULTS_DOC, write_section
 from experiments.workers import pool
 from protocol.messages import BEHAVIOURS
@@ -59,6 +64,7 @@ MIN_SITES, MAX_SITES = 40, 200
 GENERATED = (("wall", 40, 80), ("ring", 45, 80), ("nested_rings", 40, 80), ("pocket", 40, 80),
              ("letter", 50, 120), ("polyomino", 40, 80), ("multi", 60, 160), ("block", 35, 100),
              ("spiral", 40, 90), ("corridor", 45, 80), ("solid_hollow", 40, 80), ("multi", 90, 200))
+JOURNAL = "team_size.partial.jsonl"   # the runs finished so far (see --resume)
 SHOWN = ("explore", "brick_nav", "config_nav", "approach_red", "grab", "drop", "avoid", "unstick")
 FOOD_AND_WATER = ("approach_food", "approach_water", "eat", "drink")  # hunger and thirst, one column
 
@@ -146,6 +152,25 @@ def run_one(name: str, text: str, agents: int, seed: int, cfg: AgentConfig | Non
     return Run(name, agents, seed, status.sites_total, result.completed, result.stalled, result.ticks,
                status.sites_filled, float(sum(status.agent_distance)), distance_bound(sc, starts),
                {b: int(ticks[b]) for b in BEHAVIOURS if ticks[b]}, time.perf_counter() - began)
+
+
+# ------------------------------------------------------------------ resuming
+
+Job = tuple[str, str, int, int, AgentConfig]   # layout name, its TOML, agents, seed, agent settings
+
+
+def job_key(job: Job, code: str) -> list:
+    """What a journalled run is for: the layout, the team, the seed, every agent setting and
+    the code version (`experiments.journal.code_version`)."""
+    name, _, agents, seed, cfg = job
+    return ["team_size", name, agents, seed, json.dumps(asdict(cfg), sort_keys=True), code]
+
+
+def pending(journal: Journal, jobs: list[Job], code: str) -> tuple[list[Run], list[Job]]:
+    """(the runs `journal` already holds for `jobs`, the jobs still to run)."""
+    found = journal.results()
+    done = [Run(**found[tuple(job_key(j, code))]) for j in jobs if tuple(job_key(j, code)) in found]
+    return done, [j for j in jobs if tuple(job_key(j, code)) not in found]
 
 
 # ------------------------------------------------------------------ tables
@@ -261,6 +286,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="additions to switch on (comma-separated, agent_runtime.config.ADDITIONS)")
     ap.add_argument("--without", default="", metavar="NAMES", help="additions to switch off (comma-separated)")
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--resume", action="store_true", help="go on with an interrupted run of the same options "
+                    "(its finished runs are in --out's team_size.partial.jsonl)")
     ap.add_argument("--out", type=Path, default=None, help="folder for team_size.json and .md")
     ap.add_argument("--plot", action="store_true", help="draw the curves of team_size.json (in --out, default "
                     "experiments/) into out/team_size.png, running nothing")
@@ -293,15 +320,20 @@ def main(argv: list[str] | None = None) -> int:
     full = not (args.quick or args.layouts or args.teams or args.seeds or flags)
     out = args.out or (ROOT / "experiments" if full else ROOT / "out" / "team_size-quick")
     out.mkdir(parents=True, exist_ok=True)
-    jobs = [(n, every[n], a, s, cfg) for n in names for a in teams for s in seeds]
+    jobs: list[Job] = [(n, every[n], a, s, cfg) for n in names for a in teams for s in seeds]
     jobs.sort(key=lambda j: -j[2])  # the big teams first: they take longest
-    runs = []
+    code = code_version()
+    journal = Journal(out / JOURNAL, resume=args.resume)
+    runs, todo = pending(journal, jobs, code)
+    if args.resume:
+        print(f"resuming: {len(runs)} of {len(jobs)} runs already done", file=sys.stderr, flush=True)
     with pool(args.jobs) as ex:
-        futures = [ex.submit(run_one, *j) for j in jobs]
-        for k, fut in enumerate(as_completed(futures), 1):
+        futures = {ex.submit(run_one, *j): j for j in todo}
+        for fut in as_completed(futures):
             r = fut.result()
             runs.append(r)
-            print(f"[{k}/{len(jobs)}] {r.layout} {r.agents} agent(s) seed {r.seed}: "
+            journal.append(job_key(futures[fut], code), asdict(r))
+            print(f"[{len(runs)}/{len(jobs)}] {r.layout} {r.agents} agent(s) seed {r.seed}: "
                   f"{'complete' if r.completed else 'stalled' if r.stalled else 'out of ticks'} at tick {r.ticks} "
                   f"({r.sites_filled}/{r.sites}), distance / bound {r.distance / r.bound if r.bound else 0:.2f} "
                   f"({r.seconds:.0f} s)", file=sys.stderr, flush=True)
@@ -322,6 +354,7 @@ def main(argv: list[str] | None = None) -> int:
     (out / "team_size.md").write_text(text, encoding="utf-8")
     if full:
         write_section(RESULTS_DOC, "team-size", text)
+    journal.remove()
     print(text)
     return 0
 

@@ -4,7 +4,11 @@ is mean ticks with 1 agent over mean ticks with N."""
 
 from __future__ import annotations
 
+from dataclasses import asdict, replace
+
+from agent_runtime.config import AgentConfig
 from experiments import team_size
+from experiments.journal import Journal
 from world_server.buildability import check_buildable
 from world_server.scenario import parse_scenario
 
@@ -35,3 +39,16 @@ def test_speed_up_is_mean_ticks_alone_over_mean_ticks_with_the_team():
     assert rows[4]["distance_bound"] == 2.0
     shares = rows[4]["shares"]
     assert abs(sum(shares.values()) - 1.0) < 1e-12 and shares["brick_nav"] == 300 / 2400
+
+
+def test_a_resumed_run_runs_only_what_the_journal_holds_not_for_the_same_code_and_settings(tmp_path):
+    cfg = AgentConfig()
+    jobs = [("x", "", 1, 1, cfg), ("x", "", 4, 1, cfg), ("x", "", 4, 2, cfg)]
+    journal = Journal(tmp_path / team_size.JOURNAL, resume=False)
+    journal.append(team_size.job_key(jobs[1], "v1"), asdict(_run(4, 500)))
+    journal.append(team_size.job_key(jobs[2], "v0"), asdict(_run(4, 600)))              # other code
+    other = ("x", "", 1, 1, replace(cfg, share_bricks=True))
+    journal.append(team_size.job_key(other, "v1"), asdict(_run(1, 900)))                 # other settings
+    done, todo = team_size.pending(Journal(tmp_path / team_size.JOURNAL, resume=True), jobs, "v1")
+    assert done == [_run(4, 500)]
+    assert todo == [jobs[0], jobs[2]]
