@@ -1,0 +1,141 @@
+"""`python3 -m faults.cutoff`: `faults.partition`'s story, in process and from a seed.
+
+`faults.partition` cuts a host's agents off over a real bus, so what a run meets depends on
+the machine's timing, and a failure there (31 of 32 sites on nested_squares, once in about
+twenty CI runs) cannot be run again. This runs the same story in one process, lockstep
+(`conag.sim`), reproducibly from a seed: agents a1 and a2 stop answering at tick `cut` (three
+ticks later the world stops their bodies, as a lockstep world does after three missed
+deadlines), are seen dead at tick `dead` (the world detaches them: a held brick is put down,
+the bodies leave after the grace) and attach again at tick `back` with new brains, as the
+agent processes do when their link returns; a3 builds throughout. The three ticks are drawn
+from the seed in the ranges partition runs show (cut 150-259, dead 150-349 ticks later, back
+600-799 ticks after the cut). A run ends complete, or stalled once no site has been filled
+for `stall` ticks.
+
+    python3 -m faults.cutoff --seeds 1-400        # which seeds stall (about a second each)
+    python3 -m faults.cutoff --seeds 364 -v       # one run: its line and each agent's last word
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from agent_runtime.brain import Brain
+from conag import sim
+from world_server.scenario import Scenario, load_scenario
+
+ROOT = Path(__file__).resolve().parent.parent
+NESTED_SQUARES = ROOT / "scenarios" / "nested_squares.toml"
+CUT = ("a1", "a2")        # the agents cut off; a3 is not
+HALT_AFTER = 3            # ticks without a command before the world stops a body (missed deadlines)
+STALL = 6000              # ticks without a site filled that end a run (60 s at a partition run's 100 Hz)
+
+
+@dataclass
+class CutoffRun:
+    """One run: when the cut came, how the build ended, and the agents' last word."""
+
+    seed: int
+    cut: int
+    dead: int
+    back: int
+    completed: bool = False
+    ticks: int = 0
+    sites_filled: int = 0
+    sites_total: int = 0
+    bricks_total: int = 0
+    restarts: dict[str, int] = field(default_factory=dict)
+    agents: list[str] = field(default_factory=list)   # per agent: behaviour, sites it believes open, blocker
+
+    def line(self) -> str:
+        state = "complete" if self.completed else "STALLED"
+        return (f"seed {self.seed}: {state}, {self.sites_filled}/{self.sites_total} sites in {self.ticks} ticks; "
+                f"cut at tick {self.cut}, dead at {self.dead}, back at {self.back}; bricks_total {self.bricks_total}")
+
+
+def schedule(seed: int) -> tuple[int, int, int]:
+    """(cut, dead, back) ticks of run `seed`."""
+    rng = np.random.default_rng(seed)
+    cut = int(rng.integers(150, 260))
+    return cut, cut + int(rng.integers(150, 350)), cut + int(rng.integers(600, 800))
+
+
+def cutoff_run(seed: int, scenario: Scenario | None = None, stall: int = STALL) -> CutoffRun:
+    """Build `scenario` (nested_squares) with three agents, a1 and a2 cut off as `schedule` says."""
+    sc = scenario or load_scenario(NESTED_SQUARES)
+    run = sim.start(sc, agents=3, seed=seed)
+    world = run.world
+    out = CutoffRun(seed, *schedule(seed))
+    best, since = -1, 0
+    while not world.completed() and world.tick - since <= stall and world.tick < sc.max_ticks:
+        tick = world.tick
+        if tick == out.cut + HALT_AFTER:
+            for agent in CUT:
+                world.halt(agent)
+        if tick == out.dead:
+            for agent in CUT:
+                world.detach(agent)
+        if tick == out.back:
+            for i, agent in enumerate(CUT):
+                old = run.brains[agent]
+                run.brains[agent] = Brain(world.attach(agent), old.cfg, np.random.default_rng([seed, 7, i]))
+        silent = out.cut <= tick < out.back
+        for frame in world.frames():
+            if silent and frame.agent_id in CUT:
+                continue
+            step = run.brains[frame.agent_id].step(frame)
+            world.set_command(frame.agent_id, step.speed, step.turn, step.action, step.mark)
+        world.step()
+        filled = int(world.sites_filled().sum())
+        if filled > best:
+            best, since = filled, world.tick
+    status = world.status()
+    out.completed, out.ticks = world.completed(), world.tick
+    out.sites_filled, out.sites_total = status.sites_filled, status.sites_total
+    out.bricks_total = status.bricks_total
+    out.restarts = dict(zip(status.agent_ids, status.agent_restarts))
+    for agent, brain in run.brains.items():
+        said = brain.state_report(world.tick)
+        out.agents.append(f"{agent}: {said.behaviour}, {'holding a brick' if said.holding else 'holding nothing'}, "
+                          f"{said.sites_open} sites open, blocker: {said.blocker or 'none'}")
+    return out
+
+
+def seeds_arg(text: str) -> list[int]:
+    """'1-400', '364' or '3,7,10-12' as a list of seeds."""
+    seeds: list[int] = []
+    for part in text.split(","):
+        match = re.fullmatch(r"(\d+)(?:-(\d+))?", part.strip())
+        if match is None or int(match[2] or match[1]) < int(match[1]):
+            raise argparse.ArgumentTypeError(f"seeds as 1-400 or 3,7,10-12, not {text!r}")
+        seeds += range(int(match[1]), int(match[2] or match[1]) + 1)
+    return seeds
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python3 -m faults.cutoff", description=__doc__.split("\n\n")[0])
+    p.add_argument("--seeds", type=seeds_arg, default=seeds_arg("1-20"), help="seeds to run (default 1-20)")
+    p.add_argument("--stall", type=int, default=STALL, help=f"ticks without a fill that end a run (default {STALL})")
+    p.add_argument("-v", "--verbose", action="store_true", help="every run's line, and each agent's last word")
+    args = p.parse_args(argv)
+    stalled = []
+    for seed in args.seeds:
+        r = cutoff_run(seed, stall=args.stall)
+        if args.verbose or not r.completed:
+            print(r.line(), flush=True)
+            for line in r.agents if args.verbose or not r.completed else ():
+                print(f"  {line}", flush=True)
+        if not r.completed:
+            stalled.append(seed)
+    print(f"{len(stalled)} of {len(args.seeds)} runs stalled" + (f": seeds {stalled}" if stalled else ""))
+    return 1 if stalled else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
