@@ -12,8 +12,8 @@ from the seed in the ranges partition runs show (cut 150-259, dead 150-349 ticks
 600-799 ticks after the cut). A run ends complete, or stalled once no site has been filled
 for `stall` ticks.
 
-    python3 -m faults.cutoff --seeds 1-400        # which seeds stall (about a second each)
-    python3 -m faults.cutoff --seeds 364 -v       # one run: its line and each agent's last word
+    python3 -m faults.cutoff --seeds 1-400        # a line per run (about a second each); which stall
+    python3 -m faults.cutoff --seeds 364 -v       # one run, and each agent's last word
 """
 
 from __future__ import annotations
@@ -122,14 +122,15 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python3 -m faults.cutoff", description=__doc__.split("\n\n")[0])
     p.add_argument("--seeds", type=seeds_arg, default=seeds_arg("1-20"), help="seeds to run (default 1-20)")
     p.add_argument("--stall", type=int, default=STALL, help=f"ticks without a fill that end a run (default {STALL})")
-    p.add_argument("-v", "--verbose", action="store_true", help="every run's line, and each agent's last word")
+    p.add_argument("-v", "--verbose", action="store_true",
+                   help="each agent's last word after every run's line (without: after a stalled run's only)")
     args = p.parse_args(argv)
     stalled = []
-    for seed in args.seeds:
+    for k, seed in enumerate(args.seeds, 1):
         r = cutoff_run(seed, stall=args.stall)
+        print(f"[{k}/{len(args.seeds)}] {r.line()}", flush=True)
         if args.verbose or not r.completed:
-            print(r.line(), flush=True)
-            for line in r.agents if args.verbose or not r.completed else ():
+            for line in r.agents:
                 print(f"  {line}", flush=True)
         if not r.completed:
             stalled.append(seed)
