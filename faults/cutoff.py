@@ -28,6 +28,8 @@ import numpy as np
 
 from agent_runtime.brain import Brain
 from conag import sim
+from conag.sim import SimRun
+from protocol.messages import AgentState
 from world_server.scenario import Scenario, load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -74,18 +76,8 @@ def cutoff_run(seed: int, scenario: Scenario | None = None, stall: int = STALL) 
     out = CutoffRun(seed, *schedule(seed))
     best, since = -1, 0
     while not world.completed() and world.tick - since <= stall and world.tick < sc.max_ticks:
-        tick = world.tick
-        if tick == out.cut + HALT_AFTER:
-            for agent in CUT:
-                world.halt(agent)
-        if tick == out.dead:
-            for agent in CUT:
-                world.detach(agent)
-        if tick == out.back:
-            for i, agent in enumerate(CUT):
-                old = run.brains[agent]
-                run.brains[agent] = Brain(world.attach(agent), old.cfg, np.random.default_rng([seed, 7, i]))
-        silent = out.cut <= tick < out.back
+        _cut_events(run, out)
+        silent = out.cut <= world.tick < out.back
         for frame in world.frames():
             if silent and frame.agent_id in CUT:
                 continue
@@ -100,11 +92,29 @@ def cutoff_run(seed: int, scenario: Scenario | None = None, stall: int = STALL) 
     out.sites_filled, out.sites_total = status.sites_filled, status.sites_total
     out.bricks_total = status.bricks_total
     out.restarts = dict(zip(status.agent_ids, status.agent_restarts))
-    for agent, brain in run.brains.items():
-        said = brain.state_report(world.tick)
-        out.agents.append(f"{agent}: {said.behaviour}, {'holding a brick' if said.holding else 'holding nothing'}, "
-                          f"{said.sites_open} sites open, blocker: {said.blocker or 'none'}")
+    out.agents = [_last_word(agent, brain.state_report(world.tick)) for agent, brain in run.brains.items()]
     return out
+
+
+def _cut_events(run: SimRun, out: CutoffRun) -> None:
+    """What the world does to the cut agents at this tick: stop their bodies (deadlines
+    missed), detach them (seen dead), attach them again with new brains (the link is back)."""
+    world, tick = run.world, run.world.tick
+    if tick == out.cut + HALT_AFTER:
+        for agent in CUT:
+            world.halt(agent)
+    if tick == out.dead:
+        for agent in CUT:
+            world.detach(agent)
+    if tick == out.back:
+        for i, agent in enumerate(CUT):
+            old = run.brains[agent]
+            run.brains[agent] = Brain(world.attach(agent), old.cfg, np.random.default_rng([out.seed, 7, i]))
+
+
+def _last_word(agent: str, said: AgentState) -> str:
+    return (f"{agent}: {said.behaviour}, {'holding a brick' if said.holding else 'holding nothing'}, "
+            f"{said.sites_open} sites open, blocker: {said.blocker or 'none'}")
 
 
 def seeds_arg(text: str) -> list[int]:
