@@ -14,9 +14,9 @@ world, and how long after the link came back they were alive with their bodies a
 whether host 3's agents stayed alive throughout, the re-attached agents moved their
 bodies again, the build completed, and `bricks_total` never changed. The agent processes
 are never restarted: `same_processes` says they all still ran when the world finished.
-A build that does not complete also gets the stall report of the last status read, with
-each agent's last AgentState (`conag echo 'agent/*/state' --json` on host 1): where each
-body is, what its agent was doing and what it said blocks it.
+A build that does not complete also gets a report: the last status read and, as a stall
+report has them, each agent's body and last AgentState (`conag echo 'agent/*/state' --json`
+on host 1): what its agent was doing and what it said blocks it.
 
 The world ticks in lockstep capped at `max_tick_rate` (100 a second): uncapped, the agent
 left alone ran at several hundred ticks a second and could finish the build within the
@@ -96,8 +96,8 @@ class PartitionRun:
     said_waiting: bool = False   # each cut agent's log says it waits for its world
     wall_seconds: float = 0.0
     error: str = ""
-    # A build that did not complete: the stall report of its last status (every agent's
-    # position, behaviour and blocker, from the AgentStates it last sent; `report_lines`).
+    # A build that did not complete: its last status and every agent's position, behaviour
+    # and blocker, from the AgentStates it last sent (`report_lines`).
     report: list[str] = field(default_factory=list)
 
     def came_back(self, agent: str, cut_seconds: float) -> bool:

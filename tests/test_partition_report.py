@@ -1,6 +1,6 @@
 """The partition harness's report of a build that did not complete (faults/partition.py):
-the stall report of the last status, with each agent's last AgentState as `conag echo
---json` printed it. The harness itself needs network namespaces (tests/test_partition.py);
+the last status and each agent's line as a stall report has it, from the agent's last
+AgentState as `conag echo --json` printed it. The harness itself needs network namespaces (tests/test_partition.py);
 its report is made from what it read, checked here without them."""
 
 from __future__ import annotations
