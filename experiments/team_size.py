@@ -169,8 +169,8 @@ def job_key(job: Job, code: str) -> list:
 def pending(journal: Journal, jobs: list[Job], code: str) -> tuple[list[Run], list[Job]]:
     """(the runs `journal` already holds for `jobs`, the jobs still to run)."""
     found = journal.results()
-    done = [Run(**found[tuple(job_key(j, code))]) for j in jobs if tuple(job_key(j, code)) in found]
-    return done, [j for j in jobs if tuple(job_key(j, code)) not in found]
+    keyed = [(job, tuple(job_key(job, code))) for job in jobs]
+    return [Run(**found[key]) for _, key in keyed if key in found], [job for job, key in keyed if key not in found]
 
 
 # ------------------------------------------------------------------ tables

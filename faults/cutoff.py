@@ -10,7 +10,7 @@ the bodies leave after the grace) and attach again at tick `back` with new brain
 agent processes do when their link returns; a3 builds throughout. The three ticks are drawn
 from the seed in the ranges partition runs show (cut 150-259, dead 150-349 ticks later, back
 600-799 ticks after the cut). A run ends complete, or stalled once no site has been filled
-for `stall` ticks.
+for `stall` ticks (`SimRun.run`'s stall clock), or at the scenario's `max_ticks`.
 
     python3 -m faults.cutoff --seeds 1-400        # a line per run (about a second each); which stall
     python3 -m faults.cutoff --seeds 364 -v       # one run, and each agent's last word
@@ -48,6 +48,7 @@ class CutoffRun:
     dead: int
     back: int
     completed: bool = False
+    stalled: bool = False        # ended by the stall clock (else complete, or out of ticks)
     ticks: int = 0
     sites_filled: int = 0
     sites_total: int = 0
@@ -56,7 +57,7 @@ class CutoffRun:
     agents: list[str] = field(default_factory=list)   # per agent: behaviour, sites it believes open, blocker
 
     def line(self) -> str:
-        state = "complete" if self.completed else "STALLED"
+        state = "complete" if self.completed else "STALLED" if self.stalled else "out of ticks"
         return (f"seed {self.seed}: {state}, {self.sites_filled}/{self.sites_total} sites in {self.ticks} ticks; "
                 f"cut at tick {self.cut}, dead at {self.dead}, back at {self.back}; bricks_total {self.bricks_total}")
 
@@ -72,33 +73,22 @@ def cutoff_run(seed: int, scenario: Scenario | None = None, stall: int = STALL) 
     """Build `scenario` (nested_squares) with three agents, a1 and a2 cut off as `schedule` says."""
     sc = scenario or load_scenario(NESTED_SQUARES)
     run = sim.start(sc, agents=3, seed=seed)
-    world = run.world
     out = CutoffRun(seed, *schedule(seed))
-    best, since = -1, 0
-    while not world.completed() and world.tick - since <= stall and world.tick < sc.max_ticks:
-        _cut_events(run, out)
-        silent = out.cut <= world.tick < out.back
-        for frame in world.frames():
-            if silent and frame.agent_id in CUT:
-                continue
-            step = run.brains[frame.agent_id].step(frame)
-            world.set_command(frame.agent_id, step.speed, step.turn, step.action, step.mark)
-        world.step()
-        filled = int(world.sites_filled().sum())
-        if filled > best:
-            best, since = filled, world.tick
-    status = world.status()
-    out.completed, out.ticks = world.completed(), world.tick
+    run.before_step = lambda r, frame: None if frame.agent_id in CUT and out.cut <= r.world.tick < out.back else frame
+    result = run.run(sc.max_ticks, stall_ticks=stall, observers=[lambda r: _cut_events(r, out)])
+    status = run.world.status()
+    out.completed, out.stalled, out.ticks = result.completed, result.stalled, result.ticks
     out.sites_filled, out.sites_total = status.sites_filled, status.sites_total
     out.bricks_total = status.bricks_total
     out.restarts = dict(zip(status.agent_ids, status.agent_restarts))
-    out.agents = [_last_word(agent, brain.state_report(world.tick)) for agent, brain in run.brains.items()]
+    out.agents = [_last_word(agent, brain.state_report(result.ticks)) for agent, brain in run.brains.items()]
     return out
 
 
 def _cut_events(run: SimRun, out: CutoffRun) -> None:
-    """What the world does to the cut agents at this tick: stop their bodies (deadlines
-    missed), detach them (seen dead), attach them again with new brains (the link is back)."""
+    """What the world does to the cut agents once it has reached this tick: stop their bodies
+    (deadlines missed), detach them (seen dead), attach them again with new brains (the link
+    is back)."""
     world, tick = run.world, run.world.tick
     if tick == out.cut + HALT_AFTER:
         for agent in CUT:

@@ -92,6 +92,21 @@ def test_a_brain_started_again_at_a_drop_never_hears_of_it_and_the_build_goes_on
     assert sum(r.restarts for r in run.world.agents.values()) == restart.restarts   # the world counts them too
 
 
+def test_a_withheld_frame_leaves_the_brain_unstepped_and_the_last_command_standing():
+    run = sim.start(load_scenario(QUICK_WALL))
+    run.run(20)                                  # the agent is under way
+    agent = next(iter(run.brains))
+    index = run.world.agents[agent].index
+    speed, ticks = float(run.world.speed[index]), run.behaviour_ticks[agent].total()
+    assert speed > 0
+    run.before_step = lambda r, frame: None      # cut off: no frame reaches the brain
+    start = run.world.agent_poses()[index, :2].copy()
+    run.run(5)
+    assert run.behaviour_ticks[agent].total() == ticks            # the brain did not step
+    assert float(run.world.speed[index]) == speed                 # the world kept its command
+    assert (run.world.agent_poses()[index, :2] != start).any()    # and drove the body on
+
+
 def test_a_restart_share_outside_zero_to_one_is_refused():
     with pytest.raises(ValueError, match=r"in \[0, 1\]"):
         RestartAtDrop(1.5, seed=0)

@@ -7,7 +7,8 @@ run --stall-ticks N` gives up; `stall_report()` then says what each agent was at
 of its `stop` conditions holds, calling its `observers` after every tick, and returns a
 `SimResult`. `on_step` sees every decision (the teacher's view); `before_step` sees each
 frame before its brain does, and may start that brain again (`SimRun.restart`, as
-`conag.sim.restarts` does at the worst moment). `SimRun.perturb`
+`conag.sim.restarts` does at the worst moment) or withhold the frame (None: the brain does
+not step and the world keeps its last command, as from a process cut off, `faults.cutoff`). `SimRun.perturb`
 changes the world as `conag perturb` does, handing a changed blueprint to every brain as
 the Blueprint message does on the bus. `start(..., cfg="paper")` runs the agent of a
 preset as `conag run --agent paper` does; `SimRun.agent` and `SimResult.agent` record
@@ -62,7 +63,8 @@ class SimRun:
     filled_at: np.ndarray | None = None  # per site (world order), the tick it was last filled; -1: empty
     on_step: Callable[[str, Step], None] | None = None  # sees every decision (the teacher's view)
     # sees each frame before its brain steps on it, and returns the frame the brain gets
-    before_step: Callable[[SimRun, SensorFrame], SensorFrame] | None = None
+    # (None: none this tick; the world keeps the agent's last command)
+    before_step: Callable[[SimRun, SensorFrame], SensorFrame | None] | None = None
     stall: StallClock | None = None  # the last run's, when it watched for stalls
     agent: dict = field(default_factory=dict)  # which agent runs (`AgentConfig.describe`), for SimResult
     # The brains that tell and hear brick news, kept per number of brains (`_pass_news`).
@@ -70,9 +72,10 @@ class SimRun:
 
     def step(self) -> None:
         """One lockstep tick: every brain answers its frame, then the world steps."""
-        for frame in self.world.frames():
-            if self.before_step is not None:
-                frame = self.before_step(self, frame)
+        for sensed in self.world.frames():
+            frame = sensed if self.before_step is None else self.before_step(self, sensed)
+            if frame is None:
+                continue
             s = self.brains[frame.agent_id].step(frame)
             self.behaviours[frame.agent_id] = s.behaviour
             self.behaviour_ticks.setdefault(frame.agent_id, Counter())[s.behaviour] += 1
