@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from agent_runtime.esm import BRICK, CONFIG, EgocentricMaps
+from agent_runtime.esm import AGENT, BRICK, CONFIG, EgocentricMaps
 from agent_runtime.far_memory import FarMemory
 from agent_runtime.sealing import (
     FRESH_SITE,
@@ -26,6 +26,7 @@ from agent_runtime.sealing import (
     around,
     connected,
     cut_off,
+    dilate,
     walling_in,
 )
 from agent_runtime.spreading import readonly
@@ -153,7 +154,11 @@ class SealGuard:
         if (tick is not None and kept is not None and kept[0] == tick and kept[1] is open_sites
                 and kept[2] is blocked and kept[3] is supply):
             return kept[4]
-        recent = open_sites & (self.maps.clear_age <= FRESH_SITE)
+        # A gap another agent stands beside may be filled at this very moment, out of this
+        # agent's sight: two agents closing a ring's last two gaps at once each trusted the
+        # other's as the way in (faults.cutoff seed 364). Such a site is no way through.
+        contested = dilate(self.maps.maps[AGENT] > 0.5)
+        recent = open_sites & (self.maps.clear_age <= FRESH_SITE) & ~contested
         structure = (self.maps.maps[BRICK] > 0.5) & (self.maps.maps[CONFIG] > 0.5)
         memory = self._memory_key()
         key = (b"".join(g.tobytes() for g in (open_sites, blocked, supply, recent, self.maps.known, structure)),

@@ -32,3 +32,12 @@ def test_agents_cut_off_and_back_with_new_brains_complete_the_build_with_every_b
     assert run.bricks_total == 34                        # a detached agent's brick is put down, not lost
     assert run.restarts == {"a1": 1, "a2": 1, "a3": 0}   # each cut agent attached again once
     assert run.back < run.ticks
+
+
+@pytest.mark.slow
+def test_two_agents_closing_a_rings_last_gaps_at_once_leave_no_site_sealed_in():
+    # Seed 364: a1 and a2 filled the outer ring's last two gaps 19 ticks apart, each
+    # trusting the other's as the way in (seen empty lately), and sealed the inner ring's
+    # last open site in (31/32). A gap another agent stands beside is no way in (SealGuard).
+    run = cutoff_run(364)
+    assert run.completed and run.sites_filled == run.sites_total == 32, run.line()

@@ -4,7 +4,8 @@ promises, on any grid.
 
 Grids are [row, col]; `+` open site, `B` structure brick (a filled site), `#` wall, food
 or water, `.` ground seen free, `?` ground never seen, `S` the supply, `A` the agent (on
-ground seen free), `~` a water mark on an open site (a disc mapped a cell off).
+ground seen free), `o` another agent (on ground seen free), `~` a water mark on an open site
+(a disc mapped a cell off).
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent_runtime.esm import BRICK, CONFIG, EgocentricMaps
+from agent_runtime.esm import AGENT, BRICK, CONFIG, EgocentricMaps
 from agent_runtime.far_memory import FarMemory
 from agent_runtime.seal_guard import SealGuard
 from agent_runtime.sealing import FRESH_SITE, cut_off, enclosed_sites
@@ -110,6 +111,7 @@ def _guard(picture: str, stale: str = "") -> tuple[SealGuard, dict[str, np.ndarr
     maps = EgocentricMaps(n)
     maps.maps[CONFIG] = _cells(full, "+~B")
     maps.maps[BRICK] = _cells(full, "B")
+    maps.maps[AGENT] = _cells(full, "o")
     open_sites = _cells(full, "+~")
     blocked = _cells(full, "#~B")
     maps.known[:] = ~_cells(full, "#~")             # a cell marked water was never seen free
@@ -191,3 +193,30 @@ def test_bricks_round_a_pocket_behind_a_stale_mouth_are_not_doubted():
     guard, inputs = _guard(POCKET, POCKET_STALE)
     inside_mouth, deepest = (1, 0), (-1, 1)
     assert _unsafe(guard, inputs, inside_mouth, deepest) == [True, False]
+
+
+# ------------------------------------------------------------------ a way in another agent may close
+
+RING_OF_TWO_GAPS = """
+S...{top}....
+.BBB+BBB.
+.B.....B.
+.B..+..B.
+.B.....B.
+.BBB+BBB.
+....A....
+"""
+
+
+def test_a_gap_another_agent_stands_beside_is_no_way_in():
+    # A ring of structure with two gaps and an open site inside; the agent beside the
+    # south gap holds a brick. The north gap, seen empty just now, is the way in that
+    # lets it fill the south one, unless another agent stands beside it: that one may be
+    # filling it out of this agent's sight, and each of two agents closing a ring's last
+    # two gaps at once trusted the other's as the way in, sealing the site inside
+    # (faults.cutoff seed 364). Beside a contested gap the south one waits.
+    south = (-1, 0)
+    free, free_inputs = _guard(RING_OF_TWO_GAPS.format(top="."))
+    contested, contested_inputs = _guard(RING_OF_TWO_GAPS.format(top="o"))
+    assert _unsafe(free, free_inputs, south) == [False]
+    assert _unsafe(contested, contested_inputs, south) == [True]
