@@ -29,8 +29,10 @@ Every process that touches the bus takes --zenoh-config FILE, --connect ENDPOINT
 from __future__ import annotations
 
 import argparse
+import faulthandler
 import importlib
 import logging
+import signal
 import sys
 from dataclasses import dataclass
 from types import ModuleType
@@ -126,6 +128,13 @@ def log_level(args: argparse.Namespace) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    # SIGUSR1 prints every thread's stack to stderr and the process goes on: where a
+    # process that does not stop, or seems stuck, is waiting (a test that times out asks).
+    if hasattr(signal, "SIGUSR1"):
+        try:
+            faulthandler.register(signal.SIGUSR1, all_threads=True)
+        except ValueError:   # (io.UnsupportedOperation) stderr is no file: main() called under a capture
+            pass
     logging.basicConfig(level=log_level(args), format="%(asctime)s %(name)s %(levelname)s %(message)s")
     try:
         if getattr(args, "find_run", False) and not getattr(args, "file", None):  # (conag view FILE: no bus)

@@ -268,9 +268,18 @@ class Process:
                 self._cond.wait(min(remaining, 0.2))
 
     def stop(self, sig=signal.SIGTERM, timeout: float = 5.0) -> int:
-        """Send `sig` and wait for the exit; returns the exit code."""
+        """Send `sig` and wait for the exit; returns the exit code. A process still there
+        after `timeout` is asked for its threads' stacks (SIGUSR1) and killed, and the
+        test fails with its stderr: where it waited."""
         self.proc.send_signal(sig)
-        rc = self.proc.wait(timeout)
+        try:
+            rc = self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            self.proc.send_signal(signal.SIGUSR1)
+            time.sleep(1.0)
+            self.kill()
+            raise AssertionError(f"conag did not exit within {timeout} s of signal {sig!r}; its stderr, "
+                                 f"with every thread's stack at the end:\n{self.err}") from None
         for t in self._readers:
             t.join(5)
         return rc

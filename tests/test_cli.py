@@ -98,6 +98,17 @@ def test_sigint_stops_a_world_cleanly(running_world):
     assert "Traceback" not in world.err and "KeyboardInterrupt" not in world.err
 
 
+def test_sigusr1_prints_where_each_thread_waits_and_the_world_goes_on(running_world):
+    # What a test that times out on a stop asks for (conftest's Process.stop).
+    world, ep = running_world()
+    world.proc.send_signal(signal.SIGUSR1)
+    # The main thread's stack ends where `python -m conag` started it.
+    wait_until(lambda: "_run_module_as_main" in world.err, what="the main thread's stack on stderr")
+    assert "thread 0x" in world.err.lower() and "(most recent call first)" in world.err, world.err
+    assert _status(ep)["tick"] >= 0  # still serving
+    assert world.stop(signal.SIGTERM) == 0, world.err
+
+
 def test_status_without_a_world_fails_within_its_timeout():
     ep = f"tcp/127.0.0.1:{free_port()}"
     r = conag("status", "--connect", ep, "--timeout", "1", timeout=20)
