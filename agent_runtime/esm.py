@@ -274,7 +274,8 @@ class EgocentricMaps:
         # would be sealed for good. Farther readings still clear the cells in front of them,
         # and the wall is mapped as it comes near.
         # The rest is marked at its cell, except (`obstacle_trust`) food and water read from
-        # farther than the obstacle trust whose cell is a blueprint site.
+        # farther than the obstacle trust whose cell is a blueprint site; a wall read from
+        # within it always is.
         on = self.sensing
         _sense_kernel(self._all, self.clear_age.reshape(-1), self.known.reshape(-1), cells, dist, k, sector, starts,
                       core_sector, core_starts, vx, vy, r, float(reach), self.size, self.centre,
@@ -595,6 +596,14 @@ def _sense_kernel(flat, clear_age, known, cells, dist, k, sector, starts, core_s
                                       BAND, n_ch)
     else:  # the plain rule: every reading is written where its sector's centre angle puts it
         explained = np.zeros((n_ch, sectors), np.bool_)
+    # A near wall reading is its own cell, never a marked wall cell beside it that only the
+    # sector's width reaches: walls stand on cell centres, and within `trust` the sector's
+    # centre angle lands in the right cell. Taken by a marked neighbour, a wall cell beside
+    # the agent stayed off the map and a one-cell gap looked two cells wide.
+    if trust < math.inf:
+        for s in range(sectors):
+            if r[_OBSTACLE_CH, s] <= trust:
+                explained[_OBSTACLE_CH, s] = False
     for i in range(AGENT * nn, (AGENT + 1) * nn):
         flat[i] = 0.0
     hit = np.zeros((n_ch, sectors), np.bool_)

@@ -134,7 +134,48 @@ def _inputs_kernel(marks, recalled, extra_supply, clear_age, site_memory, agents
             any_open |= site
     # The cells around the agent are never in doubt: it would be touching a brick there.
     closed[max(centre - 1, 0):centre + 2, max(centre - 1, 0):centre + 2] = False
+    _enter_where_free(extra_supply, obstacles, config_goals, supply)
     return out, any_open
+
+
+@njit(cache=True)
+def _enter_where_free(extra_supply, obstacles, sites, supply):
+    """A supply beyond the map enters it at the border cell nearest it (`extra_supply`);
+    where that cell is in the way (a wall, a disc) or a site, it enters at the nearest
+    border cell that is neither, into `supply`. Dropped there, it was lost: an agent a
+    cell off the line that puts it on a disc protected no path and filled a slot's mouth
+    first, a cell farther on it protected the slot again, and it turned back there for
+    ever (unseen gen-multi 11270001)."""
+    n, m = obstacles.shape
+    ring = 2 * (n + m) - 4 if n > 1 and m > 1 else n * m   # (a grid one cell thin is all border)
+    for i in range(ring):
+        r, c = _border_cell(i, n, m)
+        if not extra_supply[r, c] or not (obstacles[r, c] | sites[r, c]):
+            continue
+        best, br, bc = n + m, -1, -1
+        for j in range(ring):
+            rr, cc = _border_cell(j, n, m)
+            if not (obstacles[rr, cc] | sites[rr, cc]):
+                d = max(abs(rr - r), abs(cc - c))
+                if d < best:
+                    best, br, bc = d, rr, cc
+        if br >= 0:
+            supply[br, bc] = True
+
+
+@njit(cache=True, inline="always")
+def _border_cell(i, n, m):
+    """The i-th cell of an n x m grid's border: the top row, the bottom row, then the
+    left and right columns between them (a grid one cell thin: every cell in turn)."""
+    if n < 2 or m < 2:
+        return i // m, i % m
+    if i < m:
+        return 0, i
+    i -= m
+    if i < m:
+        return n - 1, i
+    i -= m
+    return 1 + i // 2, (0 if i % 2 == 0 else m - 1)
 
 
 @njit(cache=True)

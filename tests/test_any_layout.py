@@ -683,13 +683,6 @@ def test_a_one_cell_gap_in_a_wall_is_never_sealed_by_the_map(path, seed):
         assert maps.maps[OBSTACLE][near] == 1.0
 
 
-@pytest.mark.xfail(strict=True, reason="esm.EgocentricMaps.sense gives a near wall reading to a marked wall cell "
-                   "beside its own. The fix (a wall reading within the obstacle trust is always its own cell) "
-                   "moves other builds, and three then stall: 117-gen-pocket (4 agents in a one-cell corridor of "
-                   "31 sites, 5 filled), unseen gen-multi-11270001 (1 agent turns back at a cell's edge in a "
-                   "slot: the supply beyond the map enters at a border cell that holds a disc, and is lost) "
-                   "and unseen gen-polyomino-11240006 (a ring closed with sites open inside: the seal guard "
-                   "counts the ring's far inside, beyond its checked square, as the outside) (issue 35)")
 def test_a_wall_cell_beside_the_agent_is_mapped_though_its_neighbour_is_marked():
     # Hypothesis found it (issue 35): at (9.3, 13.5) the agent maps the wall cells (10, 12-14);
     # two cells south, at (9.3, 11.5), wall cell (10, 11) is 1.2 cells due east, read by

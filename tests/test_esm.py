@@ -508,8 +508,9 @@ def reference_sense(m: EgocentricMaps, ranges: np.ndarray, reach: float, on: Sen
        wedge within 0.75 of its distance): score = distance to the measured point, minus 2
        if the cell is marked in that layer, minus 1 for a brick on a blueprint cell; the best
        must be marked or a blueprint brick cell. Other marked, non-blueprint brick cells of
-       the band are ghosts and cleared. Unattributed readings are written at the sector's
-       centre angle. Without `ghost_association` none is attributed and there are no ghosts.
+       the band are ghosts and cleared. Unattributed readings, and (with `obstacle_trust`)
+       wall readings within the obstacle trust, are written at the sector's centre angle.
+       Without `ghost_association` none is attributed and there are no ghosts.
     3. With `obstacle_trust`, walls farther than obstacle_trust(sectors) are not written,
        nor far food and water on a site.
     """
@@ -571,7 +572,10 @@ def reference_sense(m: EgocentricMaps, ranges: np.ndarray, reach: float, on: Sen
             cell = m.cell_of(px, py)
             # far walls are not written (see obstacle_trust), nor far food and water on a site
             on_site = m.contains(*cell) and cleared[CONFIG][cell] > 0.5
-            if not won and not (layer == OBSTACLE and far) and not (layer in (FOOD, WATER) and far and on_site):
+            # a near wall reading is its own cell, even where a marked wall cell beside it won
+            near_wall = layer == OBSTACLE and on.obstacle_trust and not far
+            if ((not won or near_wall) and not (layer == OBSTACLE and far)
+                    and not (layer in (FOOD, WATER) and far and on_site)):
                 plain.append((layer, cell))
             if layer == BRICK:  # ghosts of the one brick this sector saw, attributed or written plainly
                 ghosts += [(layer, c) for score, c, marked, bp in scored if marked and not bp and c not in won]

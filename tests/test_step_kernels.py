@@ -224,7 +224,22 @@ def test_the_navigation_inputs_are_the_numpy_expressions(seed, size, site_memory
     closed[centre - 1:centre + 2, centre - 1:centre + 2] = False
     assert np.array_equal(got.config_goals, config_goals) and np.array_equal(got.brick_goals, brick_goals)
     assert np.array_equal(got.obstacles, obstacles) and np.array_equal(got.closed, closed)
-    assert np.array_equal(got.supply_bricks, brick_goals | (extra & ~obstacles & ~config))
+    # The extra supply where nothing is in the way; where its border cell is taken (in
+    # the way, or a site), the nearest free border cells instead (`_enter_where_free`).
+    base = brick_goals | (extra & ~obstacles & ~config)
+    assert np.array_equal(got.supply_bricks & base, base)
+    border = np.ones((size, size), bool)
+    border[1:-1, 1:-1] = False
+    free = border & ~obstacles & ~config
+    taken = np.argwhere(extra & border & (obstacles | config))
+    moved = got.supply_bricks & ~base
+    near = np.zeros_like(free)
+    for r, c in taken:
+        d = np.maximum(*np.abs(np.indices((size, size)) - np.array([r, c])[:, None, None]))
+        if free.any():
+            near |= free & (d == d[free].min())
+            assert (got.supply_bricks & free & (d == d[free].min())).any()   # each enters somewhere nearest
+    assert not (moved & ~near).any()                              # and nowhere else
     assert got.any_open == bool(config_goals.any())
     goals = brick_goals & (rng.random((size, size)) < 0.5)           # what the matching left as goals
     config_obstacles, brick_obstacles = nm_obstacles(got.in_the_way, brick, goals, centre)
