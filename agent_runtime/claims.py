@@ -31,8 +31,10 @@ def claimed_by_others(goals: np.ndarray, others: np.ndarray, row: float, col: fl
     out = np.zeros(goals.shape, bool)
     if not len(g) or not len(a):
         return out
-    agents = np.vstack([[row, col], a.astype(np.float64)])
-    # C order (argwhere's is not): one compiled signature of the kernel.
+    agents = np.empty((len(a) + 1, 2))
+    agents[0] = row, col
+    agents[1:] = a
+    # both in C order (argwhere's is not, and vstack keeps it): one compiled signature.
     taken = _greedy(agents, np.ascontiguousarray(g, np.float64))
     out[g[taken > 0, 0], g[taken > 0, 1]] = True
     return out

@@ -34,7 +34,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from agent_runtime.spreading import _DC, _DR, _STEP
+from agent_runtime.spreading import _DC, _DR, _STEP, readonly
 
 # Repaired only when at most this many cells changed, and given up once it has queued
 # MAX_QUEUED cells: a repair costs about what it touches, a heap's step dearer than the
@@ -71,7 +71,8 @@ def repair_from_bytes(field: np.ndarray, before: np.ndarray, after: np.ndarray, 
     (r + rows, c + cols) now, and the cells that come onto the map were not there: it is
     repaired only when every cell that left the map was an obstacle (as beyond the
     world's edge), so that no way led through them, and the newcomers count as changed."""
-    done, out = _repair_kernel(field, before, after, offset, MAX_CHANGED, MAX_QUEUED, moved[0], moved[1])
+    # read-only, as FieldCache keeps its fields: one compiled signature whoever calls
+    done, out = _repair_kernel(readonly(field), before, after, offset, MAX_CHANGED, MAX_QUEUED, moved[0], moved[1])
     return out if done else None
 
 

@@ -291,6 +291,7 @@ def small_layouts(draw):
     return ["".join(row) for row in grid]
 
 
+@pytest.mark.slow   # 1,500 layouts, each searched exhaustively: about 2 s
 @settings(max_examples=1500, deadline=None, suppress_health_check=[HealthCheck.filter_too_much])
 @given(layout=small_layouts())
 def test_agrees_with_exhaustive_search_on_small_layouts(layout):

@@ -38,7 +38,7 @@ def test_cluster_without_dask_distributed_says_what_to_install(monkeypatch, tmp_
 
 def test_no_scheduler_at_the_address_is_a_clear_error(monkeypatch):
     pytest.importorskip("distributed")
-    monkeypatch.setattr(runner, "CONNECT_TIMEOUT", "1s")
+    monkeypatch.setattr(runner, "CONNECT_TIMEOUT", "300ms")
     with pytest.raises(runner.ClusterError, match=r"no Dask scheduler reachable at tcp://127\.0\.0\.1"):
         runner.connect(f"tcp://127.0.0.1:{free_port()}")
 

@@ -359,6 +359,7 @@ def test_rate_meter_reports_rate_and_spread_of_the_gaps():
 
 # --- over the bus ---------------------------------------------------------------------------------
 
+@pytest.mark.slow   # a build of three agents over the bus, recorded and replayed: about 2 s
 def test_a_recorded_run_of_three_agents_is_reproduced_frame_for_frame_by_a_fresh_world(bus, start_world, tmp_path):
     scenario = load_scenario(SCENARIOS / "fig6.toml")
     # The agents compile their kernels on their first step: no lockstep timeout meanwhile, so

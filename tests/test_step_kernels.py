@@ -25,6 +25,7 @@ from agent_runtime.spreading import (
     distance_field,
     gradient_step,
     reachable,
+    readonly,
     seeded_distance_field,
 )
 from conag import sim
@@ -110,7 +111,7 @@ def test_the_ring_search_for_the_nearest_cell_finds_what_a_whole_scan_finds(seed
     rng = np.random.default_rng(seed)
     cells = rng.random((size, size)) < density
     fx, fy = (float(v) for v in rng.uniform(-0.5, 0.5, 2)) if frac is None else (frac, -frac)
-    got = _nearest_cell(cells, size // 2, fx, fy)
+    got = _nearest_cell(readonly(cells), size // 2, fx, fy)   # as the brain passes it: one signature
     assert (bool(got[0]), int(got[1]), int(got[2])) == _plain_nearest_cell(cells, size // 2, fx, fy)
 
 
@@ -419,7 +420,7 @@ def test_the_seal_guards_goal_near_check_is_the_numpy_slice(seed, size, radius, 
     goals = np.random.default_rng(seed).random((size, size)) < density
     c = size // 2
     expected = bool(np.count_nonzero(goals[max(c - radius, 0):c + radius + 1, max(c - radius, 0):c + radius + 1]))
-    assert _any_within(goals, c, radius) == expected
+    assert _any_within(readonly(goals), c, radius) == expected   # as the guard passes it
 
 
 def test_a_slot_asked_with_a_few_cells_changed_gets_the_kernels_field_repaired():

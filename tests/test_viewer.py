@@ -162,6 +162,7 @@ def _maps_events(url: str, until: Callable[[list[dict]], bool], timeout: float =
     return events
 
 
+@pytest.mark.slow   # waits out ten display periods: about 3 s
 def test_the_shown_agents_maps_are_pushed_on_the_event_stream_once_each_when_they_change(bus):
     # A page polling /api/maps every second cost it and the viewer more than the maps did: the
     # stream that carries the pictures pushes a snapshot once, when a new one came.
