@@ -26,7 +26,6 @@ from agent_runtime.sealing import (
     around,
     connected,
     cut_off,
-    dilate,
     walling_in,
 )
 from agent_runtime.spreading import readonly
@@ -157,8 +156,8 @@ class SealGuard:
         # A gap another agent stands beside may be filled at this very moment, out of this
         # agent's sight: two agents closing a ring's last two gaps at once each trusted the
         # other's as the way in (faults.cutoff seed 364). Such a site is no way through.
-        contested = dilate(self.maps.maps[AGENT] > 0.5)
-        recent = open_sites & (self.maps.clear_age <= FRESH_SITE) & ~contested
+        recent = _fresh_uncontested(readonly(open_sites), readonly(self.maps.clear_age),
+                                    readonly(self.maps.maps[AGENT]), FRESH_SITE)
         structure = (self.maps.maps[BRICK] > 0.5) & (self.maps.maps[CONFIG] > 0.5)
         memory = self._memory_key()
         key = (b"".join(g.tobytes() for g in (open_sites, blocked, supply, recent, self.maps.known, structure)),
@@ -252,6 +251,26 @@ class SealGuard:
                 g.setflags(write=False)
             self._grids = kept = (key, grids)
         return kept[1]
+
+
+@njit(cache=True)
+def _fresh_uncontested(open_sites, clear_age, agents, fresh):
+    """The open sites seen empty within `fresh` ticks with no agent's mark (> 0.5) within
+    one cell (8-neighbours): `open_sites & (clear_age <= fresh) & ~dilate(agents > 0.5)`
+    in one pass (the dilation of the whole map cost a step more than the guard's cache saved)."""
+    n, m = open_sites.shape
+    out = np.zeros((n, m), np.bool_)
+    for r in range(n):
+        for c in range(m):
+            if not open_sites[r, c] or not clear_age[r, c] <= fresh:
+                continue
+            free = True
+            for rr in range(max(r - 1, 0), min(r + 2, n)):
+                for cc in range(max(c - 1, 0), min(c + 2, m)):
+                    if agents[rr, cc] > 0.5:
+                        free = False
+            out[r, c] = free
+    return out
 
 
 @njit(cache=True)

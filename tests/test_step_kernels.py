@@ -436,3 +436,18 @@ def test_a_slot_asked_with_a_few_cells_changed_gets_the_kernels_field_repaired()
         obstacles.flat[rng.integers(0, obstacles.size, 2)] ^= True   # an agent's mark moves
         assert np.array_equal(cache.distance(goals, obstacles, "config"), distance_field(goals, obstacles))
     assert cache.repairs >= 20 and cache.misses <= 31
+
+
+@settings(max_examples=100, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), size=st.sampled_from([1, 2, 5, 41]),
+       density=st.sampled_from([0.0, 0.05, 0.5]))
+def test_the_seal_guards_fresh_uncontested_sites_are_the_numpy_expression(seed, size, density):
+    from agent_runtime.seal_guard import _fresh_uncontested
+    from agent_runtime.sealing import FRESH_SITE, dilate
+    rng = np.random.default_rng(seed)
+    open_sites = rng.random((size, size)) < 0.5
+    clear_age = rng.choice(np.array([0, FRESH_SITE, FRESH_SITE + 1, np.inf], np.float32), (size, size))
+    agents = np.where(rng.random((size, size)) < density, 1.0, rng.random((size, size)) * 0.5).astype(np.float32)
+    expected = open_sites & (clear_age <= FRESH_SITE) & ~dilate(agents > 0.5)
+    got = _fresh_uncontested(readonly(open_sites), readonly(clear_age), readonly(agents), FRESH_SITE)
+    assert np.array_equal(got, expected)
