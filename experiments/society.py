@@ -55,6 +55,7 @@ class Job:
     workers: int       # 0 for a ConAg team of `foremen` agents
     stall: int
     text: str = field(default="", repr=False)
+    seed_offset: int = 0  # added to the layout's seed, for the world and every member
 
 
 @dataclass(frozen=True)
@@ -85,9 +86,10 @@ def teams(foremen: int, workers: list[int]) -> list[tuple[str, int, int]]:
 def run_one(job: Job) -> Outcome:
     """Build one layout with one team, timing every decision step and world step."""
     sc = parse_scenario(job.text, job.layout)
+    seed = sc.seed + job.seed_offset
     try:
-        run = (start_society(sc, job.foremen, job.workers) if job.workers
-               else sim.start(sc, agents=job.foremen, cfg=AgentConfig()))
+        run = (start_society(sc, job.foremen, job.workers, seed=seed) if job.workers
+               else sim.start(sc, agents=job.foremen, cfg=AgentConfig(), seed=seed))
     except RuntimeError:  # no free cell left for a body: the team does not fit in this world
         return Outcome(job.layout, family_of(sc), job.team, False, False, 0, 0, 0, 0.0, 0, 0, 0.0, 0.0)
     start_cells = sc.to_cell(run.world.discs.xy)
@@ -161,7 +163,9 @@ def failures(outcomes: list[Outcome]) -> str:
 
 def markdown(outcomes: list[Outcome], args: argparse.Namespace, order: list[str]) -> str:
     layouts = sorted({o.layout for o in outcomes})
-    command = "python3 -m experiments.society " + ("--quick" if args.quick else f"--jobs {args.jobs}")
+    command = "python3 -m experiments.society " + ("--quick" if args.quick else f"--jobs {args.jobs}") + "".join(
+        f" --{flag} {value}" for flag, value in (("workers", args.workers), ("seed-offset", args.seed_offset))
+        if value)
     which = (f"the {QUICK_LAYOUTS} cheapest to build of" if args.quick
              else "all of" if len(layouts) >= args.sample
              else f"the sweep stopped part way: the first {len(layouts)} of")
@@ -197,6 +201,9 @@ def main() -> int:
     ap.add_argument("--foremen", type=int, help="F (default 2; 1 with --quick)")
     ap.add_argument("--workers", help="W, comma separated (default 4,10,30; 4 with --quick)")
     ap.add_argument("--stall", type=int, default=DEFAULT_STALL, help="ticks without a site filled that end a run")
+    ap.add_argument("--seed-offset", type=int, default=0,
+                    help="add this to every layout's seed (worlds and members; another draw of the same "
+                         "sweep): writes society_seeds+N.json and .md, and leaves the results page alone")
     ap.add_argument("--report-only", action="store_true", help="the tables again from the JSON")
     ap.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     runner.add_cluster_argument(ap)
@@ -204,7 +211,7 @@ def main() -> int:
     foremen = args.foremen or (1 if args.quick else 2)
     workers = [int(w) for w in (args.workers or ("4" if args.quick else "4,10,30")).split(",")]
     order = [name for name, _, _ in teams(foremen, workers)]
-    stem = "society_quick" if args.quick else "society"
+    stem = ("society_quick" if args.quick else "society") + (f"_seeds{args.seed_offset:+d}" if args.seed_offset else "")
     path = OUT / f"{stem}.json"
     if args.report_only:
         outcomes = [Outcome(**o) for o in json.loads(path.read_text(encoding="utf-8"))]
@@ -215,7 +222,7 @@ def main() -> int:
         names = sample(args.sample)
         if args.quick:
             names = quick_sample(names, QUICK_LAYOUTS)
-        jobs = [Job(name, team, f, w, args.stall, (LAYOUTS / name).read_text(encoding="utf-8"))
+        jobs = [Job(name, team, f, w, args.stall, (LAYOUTS / name).read_text(encoding="utf-8"), args.seed_offset)
                 for name in names for team, f, w in teams(foremen, workers)]
         outcomes, began = [], time.monotonic()
         for done in runner.run(run_one, jobs, runner.where_of(args, args.jobs)):
@@ -229,7 +236,7 @@ def main() -> int:
         path.write_text(json.dumps([asdict(o) for o in outcomes], indent=1) + "\n", encoding="utf-8")
     text = markdown(outcomes, args, order)
     (OUT / f"{stem}.md").write_text(text, encoding="utf-8")
-    if not args.quick:  # the results page holds the sample's table; the quick one stays beside the script
+    if not args.quick and not args.seed_offset:  # the results page holds the sample's table
         write_section(RESULTS_DOC, "society", text.replace("../docs/", "../"))
     print(text)
     return 0

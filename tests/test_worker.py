@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from agent_runtime.worker import Worker
+from agent_runtime.worker import Worker, WorkerConfig
 from protocol.messages import CHANNELS, CUE_KINDS, NO_READING, SensorFrame
 from tests.conftest import make
 
@@ -144,20 +144,38 @@ def test_in_a_world_a_worker_brings_a_brick_nobody_wants_back_to_the_supply():
     assert w.frame("w1").cues[SUPPLY * S:(SUPPLY + 1) * S] != (NO_READING,) * S   # still seen
 
 
-def test_an_idle_worker_rests_most_of_its_legs():
-    # Thirty bodies wandering a small world stand in the foremen's way: a worker with no
-    # brick and no site cue seen lately walks one leg in idle_rest + 1.
-    def moving_share(w: Worker, steps: int = 3000) -> float:
-        return sum(w.step(frame()).speed > 0 for _ in range(steps)) / steps
-
-    busy = worker()
-    busy_share = 0.0
-    for _ in range(30):                      # a site cue in sight now and then: never idle
-        busy.step(frame(sites=WANTED))
-        busy_share += moving_share(busy, 100) / 30
-    idle = worker()
+def idle_worker() -> Worker:
+    """A worker that has seen no site cue for demand_ticks (and, its frames carrying no
+    odometry, is never stuck)."""
+    w = make("....\n.A..\n....", cue_reach=5.0)
+    idle = Worker(w.attach("w1"), WorkerConfig(stuck_ticks=100_000), rng=np.random.default_rng(0))
     for _ in range(idle.cfg.demand_ticks):
         idle.step(frame())
-    idle_share = moving_share(idle)
-    assert idle_share < busy_share / 2.5
-    assert idle_share > 0.0                  # it still walks now and then: cues may be elsewhere
+    return idle
+
+
+def test_an_idle_worker_with_no_wall_in_sight_walks_until_it_sees_one():
+    idle = idle_worker()
+    steps = [idle.step(frame()) for _ in range(200)]
+    assert all(s.behaviour == "explore" for s in steps) and sum(s.speed > 0 for s in steps) > 50
+
+WALL = CHANNELS.index("obstacle")
+
+
+def test_an_idle_worker_parks_beside_a_wall_out_of_the_way():
+    # Idle bodies in the open stand where foremen walk; along a wall nobody's way runs.
+    def with_wall(angle: float, d: float) -> SensorFrame:
+        f = frame()
+        ranges = np.asarray(f.ranges).reshape(len(CHANNELS), S).copy()
+        ranges[WALL, sector(angle)] = d
+        return SensorFrame("w1", 5, 0.0, 0.0, 0.0, S, tuple(ranges.ravel()), False,
+                           cues=f.cues, cue_under="")
+
+    idle = idle_worker()
+    towards = idle.step(with_wall(0.1, 4.0))
+    assert towards.speed > 0 and abs(towards.turn) < 0.3          # walks to the wall ahead
+    assert all(idle.step(with_wall(0.1, 1.0)).speed == 0 for _ in range(200))   # and stays by it
+    busy = worker()
+    busy.step(frame(sites=WANTED))
+    moves = [busy.step(with_wall(0.1, 1.0)).speed > 0 for _ in range(100)]
+    assert any(moves)                                              # a worker with work does not park
