@@ -13,6 +13,7 @@ seeds it used:
     lattice_learning     Fig. 11: learning the rule set, from lattice_learning.json
     noise_maps           docs/noise.md: one agent's maps under each noise option (seeded runs, a minute)
     noise                completion and map error per noise setting, from experiments/noise.json
+    team_size            issue 36: speed-up and behaviour shares against the team size, from team_size.json
 
 Each experiment's full run draws its own pictures as well; this command draws them without
 running the experiments. By default it writes into experiments/, where the results pages
@@ -83,6 +84,15 @@ def noise_sweep(out: Path) -> list[Path]:
     return [noise.plot([noise.Outcome(**r) for r in rows], out / "noise.png")]
 
 
+def team_size(out: Path) -> list[Path]:
+    from experiments import team_size as ts
+
+    rows = json.loads((HERE / "team_size.json").read_text(encoding="utf-8"))["rows"]
+    path = out / "team_size.png"
+    ts.plot(rows, path)
+    return [path]
+
+
 # name -> what draws it (lattice() draws all three lattice_* pictures at once)
 PICTURES: dict[str, Callable[[Path], list[Path]]] = {
     "fig9_learning": fig9_learning,
@@ -93,6 +103,7 @@ PICTURES: dict[str, Callable[[Path], list[Path]]] = {
     "lattice_learning": lattice_learning,
     "noise_maps": noise_maps,
     "noise": noise_sweep,
+    "team_size": team_size,
 }
 
 

@@ -232,18 +232,61 @@ def tables(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def goals(rows: list[dict]) -> str:
+    """Issue 36's goals for teams, checked on the rows: speed-up at 8 agents of at least 6
+    (layouts of 40 or more sites), at 32 of at least 16 (100 or more sites), no layout slower
+    with more agents (median ticks over seeds), distance / bound at 8 agents at most 2.0."""
+    at = {(r["layout"], r["agents"]): r for r in rows}
+    names = list(dict.fromkeys(r["layout"] for r in rows))
+
+    def line(goal: str, n: int, min_sites: int, key: str, ok) -> str:
+        vals = [(name, at[name, n][key]) for name in names
+                if (name, n) in at and at[name, n]["sites"] >= min_sites and np.isfinite(at[name, n][key])]
+        if not vals:
+            return f"* {goal}: no layout of {min_sites} or more sites with a team of {n} in this run."
+        met = [name for name, v in vals if ok(v)]
+        low, high = min(v for _, v in vals), max(v for _, v in vals)
+        return (f"* {goal}: met on {len(met)} of {len(vals)} layouts (from {low:.2f} to {high:.2f}, "
+                f"median {statistics.median(v for _, v in vals):.2f})"
+                + ("" if len(met) == len(vals) else
+                   "; not on " + ", ".join(name for name, _ in vals if name not in met)) + ".")
+
+    slower = []
+    for name in names:
+        teams = sorted(n for (layout, n) in at if layout == name)
+        for i, small in enumerate(teams):
+            worse = [big for big in teams[i + 1:] if at[name, big]["ticks_median"] > at[name, small]["ticks_median"]]
+            if worse:
+                slower.append(f"{name} ({', '.join(map(str, worse))} agents slower than {small})")
+                break
+    return "\n".join([
+        line("speed-up at 8 agents of at least 6", 8, 40, "speedup", lambda v: v >= 6),
+        line("speed-up at 32 agents of at least 16, layouts of 100 or more sites", 32, 100, "speedup",
+             lambda v: v >= 16),
+        "* no layout slower with more agents (median ticks over seeds): "
+        + ("met." if not slower else f"not met on {len(slower)} of {len(names)} layouts: " + "; ".join(slower) + "."),
+        line("distance / bound at 8 agents at most 2.0", 8, 40, "distance_bound", lambda v: v <= 2.0),
+    ])
+
+
 def report(rows: list[dict], command: str, note: str) -> str:
-    subset = "" if not note else (f"\nA subset of the study: the full run, `python3 -m experiments.team_size` "
-                                  f"({len(layouts())} layouts x {len(TEAMS)} teams x {len(SEEDS)} seeds), takes "
-                                  "hours on 2 cores and has not been run for this table.\n")
+    subset = "" if not note else (f"\nA subset of the study; the whole of it is `python3 -m experiments.team_size` "
+                                  f"({len(layouts())} layouts x {len(TEAMS)} teams x {len(SEEDS)} seeds).\n")
+    picture = ("\n![speed-up and behaviour shares against the team size](../../experiments/team_size.png)\n\n"
+               "The curves (speed-up per layout; each behaviour's share of agent-ticks, all layouts): "
+               "`python3 -m experiments.pictures team_size`.\n" if not note else
+               "\nThe curves: `python3 -m experiments.team_size --plot --out DIR` (out/team_size.png).\n")
     return f"""## Team size: 1 to 64 agents (issue 36) {{#team-size}}
 
 `{command}`{note}. The default agent (or the one `--with`/`--without` make), in-process and
 lockstep; a run stops when complete, stalled (no site filled for {DEFAULT_STALL} ticks, or the
 world's cells per agent if more) or at the layout's `max_ticks`. Speed-up = mean ticks with 1
 agent / mean ticks with N (ideal: N).
-The curves: `python3 -m experiments.team_size --plot` (out/team_size.png, not committed).
-{subset}
+{picture}{subset}
+Issue 36's goals (item 2), on these runs:
+
+{goals(rows)}
+
 {tables(rows)}
 """
 

@@ -52,3 +52,19 @@ def test_a_resumed_run_runs_only_what_the_journal_holds_not_for_the_same_code_an
     done, todo = team_size.pending(Journal(tmp_path / team_size.JOURNAL, resume=True), jobs, "v1")
     assert done == [_run(4, 500)]
     assert todo == [jobs[0], jobs[2]]
+
+
+def _row(layout: str, sites: int, agents: int, ticks: float, speedup: float, bound: float) -> dict:
+    return dict(layout=layout, sites=sites, agents=agents, runs=3, completed=3, ticks_mean=ticks,
+                ticks_median=ticks, speedup=speedup, distance_bound=bound, shares={})
+
+
+def test_the_goals_name_the_layouts_that_miss_them():
+    rows = [_row("a", 120, 1, 8000, 1.0, 1.5), _row("a", 120, 8, 1000, 8.0, 1.9), _row("a", 120, 32, 400, 20.0, 3.0),
+            _row("b", 50, 1, 6000, 1.0, 1.5), _row("b", 50, 8, 1200, 5.0, 2.4), _row("b", 50, 16, 900, 6.7, 2.8),
+            _row("b", 50, 32, 1500, 4.0, 4.0)]
+    text = team_size.goals(rows).splitlines()
+    assert text[0].startswith("* speed-up at 8 agents of at least 6: met on 1 of 2") and text[0].endswith("not on b.")
+    assert "met on 1 of 1" in text[1]                              # only "a" has 100 sites or more
+    assert "not met on 1 of 2 layouts: b (32 agents slower than 8)" in text[2]
+    assert "met on 1 of 2" in text[3] and text[3].endswith("not on b.")
