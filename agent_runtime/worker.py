@@ -232,22 +232,21 @@ class Worker:
             self._leg = int(self.rng.integers(self.cfg.leg[0], self.cfg.leg[1] + 1))
         self._leg -= 1
         idle = not frame.holding and self._since_site >= self.cfg.demand_ticks
-        if idle:
-            return self._park(frame, ranges)
-        return self._head(frame, ranges, self._leg_heading, math.inf, "explore")
+        parked = self._park(frame, ranges) if idle else None
+        return parked or self._head(frame, ranges, self._leg_heading, math.inf, "explore")
 
-    def _park(self, frame: SensorFrame, ranges: np.ndarray) -> WorkerStep:
+    def _park(self, frame: SensorFrame, ranges: np.ndarray) -> WorkerStep | None:
         """An idle worker gets out of the way: to the nearest wall in sight, and stands there.
 
         Thirty idle bodies on the open floor stand where the foremen walk, and every one is
         a detour for them; beside a wall nobody's way runs. Parked, it still sees a site cue
-        come within sensor range, and goes back to work. With no wall in sight it walks its
-        legs until one is (2 foremen and 30 workers on the sample: 0.94-0.98x the ticks of 2
+        come within sensor range, and goes back to work. With no wall in sight (None) it
+        walks its legs until one is (2 foremen and 30 workers on the sample: 0.94-0.98x the ticks of 2
         ConAg agents alone; resting in the open 3 legs in 4, 1.07-1.10x; docs/society.md)."""
         walls = ranges[_WALL]
         wall = _nearest(walls)
         if wall is None:
-            return self._head(frame, ranges, self._leg_heading, math.inf, "explore")
+            return None
         if walls[wall] <= self.cfg.park_at:
             return WorkerStep(0.0, 0.0, "none", "none")
         return self._head(frame, ranges, self.bearings[wall], walls[wall], "explore",

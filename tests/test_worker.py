@@ -12,7 +12,7 @@ from protocol.messages import CHANNELS, CUE_KINDS, NO_READING, SensorFrame
 from tests.conftest import make
 
 S = 16
-BRICK = CHANNELS.index("brick")
+BRICK, WALL = CHANNELS.index("brick"), CHANNELS.index("obstacle")
 SITE, SUPPLY = CUE_KINDS.index("site"), CUE_KINDS.index("supply")
 
 
@@ -20,11 +20,12 @@ def sector(angle: float) -> int:
     return int((angle % (2 * math.pi)) / (2 * math.pi / S))
 
 
-def frame(heading=0.0, holding=False, under="", bricks=(), sites=(), supplies=()) -> SensorFrame:
-    """A frame with bricks / cues at (angle, distance)."""
+def frame(heading=0.0, holding=False, under="", bricks=(), sites=(), supplies=(), walls=()) -> SensorFrame:
+    """A frame with bricks / walls / cues at (angle, distance)."""
     ranges = np.full((len(CHANNELS), S), NO_READING)
     cues = np.full((len(CUE_KINDS), S), NO_READING)
-    for grid, ch, items in ((ranges, BRICK, bricks), (cues, SITE, sites), (cues, SUPPLY, supplies)):
+    for grid, ch, items in ((ranges, BRICK, bricks), (ranges, WALL, walls), (cues, SITE, sites),
+                            (cues, SUPPLY, supplies)):
         for angle, d in items:
             grid[ch, sector(angle)] = d
     return SensorFrame("w1", 5, heading, 0.0, 0.0, S, tuple(ranges.ravel()), holding,
@@ -159,23 +160,13 @@ def test_an_idle_worker_with_no_wall_in_sight_walks_until_it_sees_one():
     steps = [idle.step(frame()) for _ in range(200)]
     assert all(s.behaviour == "explore" for s in steps) and sum(s.speed > 0 for s in steps) > 50
 
-WALL = CHANNELS.index("obstacle")
-
-
 def test_an_idle_worker_parks_beside_a_wall_out_of_the_way():
     # Idle bodies in the open stand where foremen walk; along a wall nobody's way runs.
-    def with_wall(angle: float, d: float) -> SensorFrame:
-        f = frame()
-        ranges = np.asarray(f.ranges).reshape(len(CHANNELS), S).copy()
-        ranges[WALL, sector(angle)] = d
-        return SensorFrame("w1", 5, 0.0, 0.0, 0.0, S, tuple(ranges.ravel()), False,
-                           cues=f.cues, cue_under="")
-
     idle = idle_worker()
-    towards = idle.step(with_wall(0.1, 4.0))
+    towards = idle.step(frame(walls=[(0.1, 4.0)]))
     assert towards.speed > 0 and abs(towards.turn) < 0.3          # walks to the wall ahead
-    assert all(idle.step(with_wall(0.1, 1.0)).speed == 0 for _ in range(200))   # and stays by it
+    assert all(idle.step(frame(walls=[(0.1, 1.0)])).speed == 0 for _ in range(200))   # and stays by it
     busy = worker()
     busy.step(frame(sites=WANTED))
-    moves = [busy.step(with_wall(0.1, 1.0)).speed > 0 for _ in range(100)]
+    moves = [busy.step(frame(walls=[(0.1, 1.0)])).speed > 0 for _ in range(100)]
     assert any(moves)                                              # a worker with work does not park
