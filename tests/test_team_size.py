@@ -6,6 +6,8 @@ from __future__ import annotations
 
 from dataclasses import asdict, replace
 
+import pytest
+
 from agent_runtime.config import AgentConfig
 from experiments import team_size
 from experiments.journal import Journal
@@ -68,3 +70,38 @@ def test_the_goals_name_the_layouts_that_miss_them():
     assert "met on 1 of 1" in text[1]                              # only "a" has 100 sites or more
     assert "not met on 1 of 2 layouts: b (32 agents slower than 8)" in text[2]
     assert "met on 1 of 2" in text[3] and text[3].endswith("not on b.")
+
+
+def _study(layout: str, ticks: int, seeds=team_size.SEEDS) -> list[dict]:
+    return [asdict(replace(_run(n, ticks // n), layout=layout, seed=s)) for n in team_size.TEAMS for s in seeds]
+
+
+def test_merge_puts_a_layouts_runs_in_place_of_the_studys_and_says_where_they_came_from():
+    full = dict(command="python3 -m experiments.team_size", note="",
+                runs=_study("circle", 6400) + _study("conag", 6400))
+    full["rows"] = team_size.summarise([team_size.Run(**r) for r in full["runs"]])
+    part = dict(command="python3 -m experiments.team_size --layouts conag", note=" (layouts conag)",
+                runs=_study("conag", 3200))
+    merged = team_size.merge(full, part)
+    assert [r for r in merged["runs"] if r["layout"] == "circle"] == full["runs"][:len(full["runs"]) // 2]
+    assert sorted(r["ticks"] for r in merged["runs"] if r["layout"] == "conag") == \
+        sorted(r["ticks"] for r in part["runs"])
+    assert {r["layout"]: r["ticks_mean"] for r in merged["rows"] if r["agents"] == 1} == {"circle": 6400, "conag": 3200}
+    assert merged["merged"] == [dict(layouts=["conag"], command=part["command"])]
+    text = team_size.report(merged["rows"], merged["command"], merged["note"], merged["merged"])
+    assert "the runs of conag are from `python3 -m experiments.team_size --layouts conag`" in text
+    # Merging the same layout again replaces the first merge's note too.
+    again = team_size.merge(merged, part)
+    assert len(again["merged"]) == 1 and again["runs"] == merged["runs"]
+
+
+def test_merge_refuses_runs_that_are_not_the_studys_design():
+    full = dict(command="python3 -m experiments.team_size", note="", runs=_study("circle", 6400))
+    part = dict(command="python3 -m experiments.team_size --layouts conag", runs=_study("conag", 3200, seeds=(1,)))
+    with pytest.raises(ValueError, match="do not cover"):
+        team_size.merge(full, part)
+    with pytest.raises(ValueError, match="not layouts of the study"):
+        team_size.merge(full, dict(part, runs=_study("nowhere", 3200)))
+    with pytest.raises(ValueError, match="not a run of --layouts"):
+        team_size.merge(full, dict(part, command="python3 -m experiments.team_size --layouts conag --with x",
+                                   runs=_study("conag", 3200)))
