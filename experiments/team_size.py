@@ -375,8 +375,8 @@ def main(argv: list[str] | None = None) -> int:
                     "runs of those layouts, and write the report again, running nothing")
     args = ap.parse_args(argv)
     if args.merge:
-        if args.out:
-            ap.error("--merge writes into experiments/: leave out --out")
+        if args.out or args.quick or args.layouts or args.teams or args.seeds or args.on or args.without:
+            ap.error("--merge runs nothing and writes into experiments/: give it alone")
         target = ROOT / "experiments" / "team_size.json"
         try:
             data = merge(json.loads(target.read_text(encoding="utf-8")),

@@ -105,3 +105,12 @@ def test_merge_refuses_runs_that_are_not_the_studys_design():
     with pytest.raises(ValueError, match="not a run of --layouts"):
         team_size.merge(full, dict(part, command="python3 -m experiments.team_size --layouts conag --with x",
                                    runs=_study("conag", 3200)))
+
+
+def test_merge_is_given_alone(tmp_path, capsys):
+    with pytest.raises(SystemExit) as stop:
+        team_size.main(["--merge", str(tmp_path), "--layouts", "conag"])
+    assert stop.value.code == 2 and "give it alone" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as stop:                      # no team_size.json there: a usage error
+        team_size.main(["--merge", str(tmp_path)])
+    assert stop.value.code == 2 and "--merge" in capsys.readouterr().err
