@@ -137,7 +137,8 @@ def main(argv: list[str] | None = None) -> int:
             pass
     logging.basicConfig(level=log_level(args), format="%(asctime)s %(name)s %(levelname)s %(message)s")
     try:
-        if getattr(args, "find_run", False) and not getattr(args, "file", None):  # (conag view FILE: no bus)
+        offline = getattr(args, "file", None) or getattr(args, "translate", None)  # view FILE, record --translate
+        if getattr(args, "find_run", False) and not offline:  # (those use no bus)
             apply_run(args)
         return args.func(args)
     except (FileNotFoundError, ValueError) as exc:  # a ScenarioError is a ValueError

@@ -26,10 +26,12 @@ import time
 from pathlib import Path
 
 import pytest
+from mcap.exceptions import EndOfFile
 from mcap.reader import make_reader
+from mcap.records import Channel
 
 from conag.foxglove.convert import MapLayer, Translator, decode_map
-from conag.recording.mcap_log import McapRecorder, read_recording
+from conag.recording.mcap_log import DEFAULT_TICK_NS, McapRecorder, read_end, read_recording
 from protocol import keys
 from protocol.codec import ProtocolError, decode, encode
 from protocol.messages import (
@@ -146,10 +148,11 @@ def _map(tick: int, layer: str = "brick", size: int = 5) -> AgentMap:
     return AgentMap("a1", tick, layer, size, tuple((7 * i + tick) % 128 for i in range(size * size)))
 
 
-def test_a_recording_holds_foxglove_channels_that_an_outside_reader_decodes_as_the_world_says(tmp_path):
-    out = tmp_path / "r.mcap"
+def _bus_messages() -> list[tuple[str, object]]:
+    """A run's bus messages in the order a recorder hears them: an attach, two frames, a view,
+    two map layers, an agent's state and a second view."""
     ranges = tuple(float(c) + 0.25 * s if s != 2 else -1.0 for c in range(len(CHANNELS)) for s in range(4))
-    messages = [
+    return [
         (keys.welcome(W, "a1"), Welcome(W, "a1", 0, 0, 3.2, 4.4, 0.7, False, 0, 4, 6.0, 1.0, (4.5,), (5.5,),
                                         disc_radius=0.5, agent_radius=0.3)),
         (keys.sensors(W, "a1"), SensorFrame("a1", 10, 0.7, 0.0, 0.0, 4, ranges, True)),
@@ -160,6 +163,11 @@ def test_a_recording_holds_foxglove_channels_that_an_outside_reader_decodes_as_t
         (keys.agent_state(W, "a1"), AgentState("a1", 12, "brick_nav", True, 1, "no open site in reach", (0,) * 14)),
         (keys.view(W), _view(20)),
     ]
+
+
+def test_a_recording_holds_foxglove_channels_that_an_outside_reader_decodes_as_the_world_says(tmp_path):
+    out = tmp_path / "r.mcap"
+    messages = _bus_messages()
     with McapRecorder(out, {"seed": "1"}, derive=Translator().feed) as rec:
         for i, (key, msg) in enumerate(messages):
             rec.add(key, encode(msg), 1_000 + i)
@@ -196,6 +204,128 @@ def test_a_recording_holds_foxglove_channels_that_an_outside_reader_decodes_as_t
     # a replay sees the bus's messages only, as before
     assert [e.key for e in read_recording(out).entries] == [k for k, _ in messages]
 
+
+
+def _derived_by_topic(path: Path) -> dict[str, list[tuple[int, int, int, bytes]]]:
+    """topic -> [(log_time, publish_time, sequence, data)] of every non-msgpack message, by sequence."""
+    with open(path, "rb") as f:
+        out: dict[str, list[tuple[int, int, int, bytes]]] = {}
+        for _, channel, m in make_reader(f).iter_messages(log_time_order=False):
+            if channel.message_encoding != "msgpack":
+                out.setdefault(channel.topic, []).append((m.log_time, m.publish_time, m.sequence, bytes(m.data)))
+    return {topic: sorted(ms, key=lambda m: m[2]) for topic, ms in out.items()}
+
+
+def _channel_encodings(path: Path) -> set[str]:
+    """The message encodings of the channels a file (finished or not) holds."""
+    from mcap.stream_reader import StreamReader
+
+    found = set()
+    with open(path, "rb") as f:
+        try:
+            for record in StreamReader(f).records:
+                if isinstance(record, Channel):
+                    found.add(record.message_encoding)
+        except EndOfFile:  # no footer: the file was cut short
+            pass
+    return found
+
+
+def _translated_as_they_come(messages: list[tuple[str, bytes, int]]) -> dict[str, list[tuple[int, int, int, bytes]]]:
+    """What one Translator fed each message in turn makes, as the recorder writes it."""
+    translator, out = Translator(), {}  # type: ignore[var-annotated]
+    for key, data, t in messages:
+        for d in translator.feed(key, data, t):
+            got = out.setdefault(d.topic, [])
+            got.append((t, d.tick * DEFAULT_TICK_NS, len(got) + 1, d.data))
+    return out
+
+
+def _encoded(n: int = 40) -> list[tuple[str, bytes, int]]:
+    """`_bus_messages` over and over, ticks moving on by 20 each round: (key, bytes, log time)."""
+    from dataclasses import replace
+
+    out = []
+    for r in range(n // len(_bus_messages()) + 1):
+        for key, msg in _bus_messages():
+            tick = getattr(msg, "tick", None)
+            msg = msg if tick is None else replace(msg, tick=tick + 20 * r)
+            out.append((key, encode(msg), 1_000 + len(out)))
+    return out[:n]
+
+
+def test_the_foxglove_channels_made_on_close_are_what_a_translator_makes_as_messages_come(tmp_path):
+    # The recorder writes the bus's messages during a run and their Foxglove channels once
+    # stopped, read back from its own file (over many chunks here): the same messages, log
+    # times, ticks and sequences as translating each message as it came.
+    messages = _encoded(40)
+    rec = McapRecorder(tmp_path / "r.mcap", derive=Translator().feed, chunk_size=300)
+    for key, data, t in messages:
+        rec.add(key, data, t)
+    path = rec.close()
+    want = _translated_as_they_come(messages)
+    assert {"/world/scene", "/tf", "/agents/a1/maps/brick", "/log", "/progress"} <= set(want)
+    assert _derived_by_topic(path) == want
+    assert [(e.key, e.data) for e in read_recording(path).entries] == [(k, d) for k, d, _ in messages]
+    assert read_end(path)["derived_messages"] == str(sum(len(v) for v in want.values()))
+    assert "derived_until_tick" not in read_end(path)
+
+
+def test_foxglove_channels_cut_short_say_where_and_translate_makes_them_all(tmp_path, capsys):
+    # Past its deadline the recorder stops making the Foxglove channels and says up to which
+    # tick they go; `conag record OUT --translate IN` makes a copy with them all, the bus's
+    # messages as they were.
+    messages = _encoded(40)
+    rec = McapRecorder(tmp_path / "r.mcap", derive=Translator().feed, chunk_size=300)
+    for key, data, t in messages:
+        rec.add(key, data, t)
+    cut = rec.close(derive_deadline=time.monotonic() - 1.0)
+    assert rec.derived_until == 0 and read_end(cut)["derived_until_tick"] == "0"
+    assert _derived_by_topic(cut) == {}
+
+    from conag.cli import main
+
+    assert main(["record", str(tmp_path / "all.mcap"), "--translate", str(cut)]) == 0
+    assert "wrote" in capsys.readouterr().out
+    full = tmp_path / "all.mcap"
+    assert _derived_by_topic(full) == _translated_as_they_come(messages)
+    assert read_recording(full).entries == read_recording(cut).entries
+    assert read_end(full)["last_tick"] == read_end(cut)["last_tick"] and "derived_until_tick" not in read_end(full)
+
+
+def test_translate_makes_the_foxglove_channels_of_what_a_killed_recorder_left(tmp_path, capsys):
+    messages = _encoded(40)
+    rec = McapRecorder(tmp_path / "r.mcap", derive=Translator().feed)
+    for key, data, t in messages[:24]:
+        rec.add(key, data, t)
+    rec.flush()                                        # the recorder process does this every second
+    for key, data, t in messages[24:]:
+        rec.add(key, data, t)
+    part = tmp_path / "killed.mcap.part"
+    shutil.copy(rec.part, part)                        # what a SIGKILL now leaves: no Foxglove channels yet
+    rec.close()
+    assert _channel_encodings(part) == {"msgpack"}
+
+    from conag.cli import main
+
+    assert main(["record", str(tmp_path / "out.mcap"), "--translate", str(part)]) == 0
+    assert "cut short" in capsys.readouterr().out
+    assert _derived_by_topic(tmp_path / "out.mcap") == _translated_as_they_come(messages[:24])
+    assert [e.data for e in read_recording(tmp_path / "out.mcap").entries] == [d for _, d, _ in messages[:24]]
+
+
+def test_translate_refuses_what_it_cannot_do(tmp_path, capsys):
+    from conag.cli import main
+
+    with McapRecorder(tmp_path / "r.mcap") as rec:
+        rec.add(keys.view(W), encode(_view(10)), 1)
+    for argv, says in ((["record", str(tmp_path / "r.mcap"), "--translate", str(tmp_path / "r.mcap")], "another file"),
+                       (["record", "o.mcap", "--translate", str(tmp_path / "r.mcap"), "--msgpack-only"],
+                        "--msgpack-only"),
+                       (["record", str(tmp_path / "o.mcap"), "--translate", str(tmp_path / "none.mcap")], "none.mcap")):
+        assert main(argv) != 0
+        assert says in capsys.readouterr().err
+    assert not (tmp_path / "o.mcap").exists()
 
 
 def test_a_scene_made_from_kept_primitives_is_the_scene_made_afresh():

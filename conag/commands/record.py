@@ -19,8 +19,9 @@ from conag.common import (
     restore_priority,
     stop_on_signals,
 )
+from conag.foxglove.convert import Translator
 from conag.recording.gaps import describe_lost
-from conag.recording.mcap_log import DEFAULT_TICK_NS
+from conag.recording.mcap_log import DEFAULT_TICK_NS, add_derived_channels
 from conag.recording.recorder import LEASE_MS, RecordReport, run_recorder
 from protocol.bus import open_session
 from world_server.scenario import load_scenario
@@ -39,6 +40,10 @@ def configure(r: argparse.ArgumentParser) -> None:
     r.add_argument("--msgpack-only", action="store_true",
                    help="write the bus's msgpack channels only, without the Foxglove channels beside them "
                         "(docs/how-to/foxglove.md)")
+    r.add_argument("--translate", metavar="IN.mcap",
+                   help="record no world: write IN's bus messages to OUT with the Foxglove channels beside them "
+                        "(for a recording made with --msgpack-only, one whose channels were cut short, or the "
+                        ".part a killed recorder left)")
     r.add_argument("--priority", choices=PRIORITIES, default=RECORDER_PRIORITY,
                    help="the recorder's CPU priority, so the run it records gets the CPU first: idle (the default) "
                         "runs it only when a core would otherwise idle (Linux SCHED_IDLE; starved for a second, "
@@ -48,6 +53,8 @@ def configure(r: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.translate is not None:
+        return translate(args.translate, args.out, args.msgpack_only)
     notes = {}
     for note in args.note:
         key, sep, value = note.partition("=")
@@ -70,6 +77,19 @@ def run(args: argparse.Namespace) -> int:
     print(f"wrote {report.path}: {report.messages} messages, last tick {report.last_tick}", flush=True)
     if report.gaps.gaps:
         print(f"warning: the recording {describe_lost(report.gaps.gaps)}", file=sys.stderr, flush=True)
+    return 0
+
+
+def translate(src: str, out: str, msgpack_only: bool) -> int:
+    """`conag record OUT --translate IN`: IN's bus messages and their Foxglove channels into OUT."""
+    if msgpack_only:
+        raise ValueError("--translate writes the Foxglove channels: it cannot be given with --msgpack-only")
+    if Path(src).resolve() == Path(out).resolve():
+        raise ValueError(f"--translate: OUT must be another file than {src}")
+    rec = add_derived_channels(src, out, Translator().feed)
+    lacks = "" if rec.complete else f" ({src} was cut short: {rec.problem})"
+    print(f"wrote {out}: {len(rec.entries)} messages, last tick {rec.last_tick}, with the Foxglove channels{lacks}",
+          flush=True)
     return 0
 
 

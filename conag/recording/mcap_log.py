@@ -18,35 +18,43 @@ travelled (the one msgpack codec of `protocol`), so a replay re-publishes them u
   whatever the recorder was told) written first, and `conag.end` (message counts, last
   tick) written on close;
 * with `derive` (the recorder passes `conag.foxglove.convert.Translator.feed`), more
-  channels beside those, made from the messages as they are added: Foxglove's well-known
-  schemas (protobuf) and JSON with a JSON schema, each channel with its schema, the same
-  `log_time` as the message it came from, `publish_time` its tick and its own sequence.
-  Reading a recording (`read_recording`) takes the msgpack channels only: a replay never
-  sees the others.
+  channels beside those: Foxglove's well-known schemas (protobuf) and JSON with a JSON
+  schema, each channel with its schema, the same `log_time` as the message it came from,
+  `publish_time` its tick and its own sequence. They are made as the file is closed, from
+  the messages it holds, read back in the order they were added: during a run the
+  recorder then only receives and writes, and translating after it costs the run nothing
+  (while it went on, translating each message as it came was half the recorder's CPU, at
+  a time when its caches were the run's). Reading a recording (`read_recording`) takes
+  the msgpack channels only: a replay never sees the others.
 
 `McapRecorder` writes to `OUT.part` and renames it to `OUT` once the summary and footer
 are written, so `OUT` is always a complete file. A recorder killed outright (SIGKILL)
 leaves `OUT.part`: a chunk is written whole when it fills (`chunk_size`) or when the
 recorder's `flush` ends it (the recorder process does so every second), so
 `read_recording` reads such a file up to its last complete chunk and says it is
-incomplete; only the messages of the chunk in progress are lost.
+incomplete; only the messages of the chunk in progress are lost (and the derived channels,
+which are made on close: `add_derived_channels` makes them for such a file).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import functools
+import io
 import os
+import struct
+import time
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Protocol
 
 import msgpack
-from mcap.exceptions import McapError
+from mcap.exceptions import EndOfFile, McapError
+from mcap.opcode import Opcode
 from mcap.reader import make_reader
-from mcap.records import Channel, Message, Metadata
-from mcap.stream_reader import StreamReader
+from mcap.records import Channel, Chunk, Message, Metadata
+from mcap.stream_reader import StreamReader, get_chunk_data_stream
 from mcap.writer import CompressionType, Writer
 
 from protocol.messages import MESSAGE_TYPES, SCHEMA_VERSION
@@ -133,6 +141,7 @@ class McapRecorder:
         self.derived: dict[str, int] = {}   # derived messages per topic (their sequence numbers so far)
         self._derived_channels: dict[str, int] = {}
         self._schemas: dict[str, int] = {}
+        self.derived_until: int | None = None  # set by `close` when the deadline cut the derived channels short
         self._file: IO[bytes] = open(self.part, "wb")  # noqa: SIM115 -- closed by close()
         self._writer = Writer(self._file, chunk_size=chunk_size, compression=compression)
         self._writer.start(profile=PROFILE, library=f"conag via {_mcap_library()}")
@@ -160,10 +169,24 @@ class McapRecorder:
         self.counts[key] = seq
         self._writer.add_message(channel, log_time=log_time_ns, data=data, publish_time=tick * self.tick_ns,
                                  sequence=seq & 0xFFFFFFFF)
-        if self.derive is not None:
-            for d in self.derive(key, data, log_time_ns):
-                self._add_derived(d, log_time_ns)
         return name, own
+
+    def _derive_recorded(self, deadline: float | None) -> int | None:
+        """Write the derived channels of every message added so far (see the module), reading
+        them back from the file in the order they were added. Stops at `deadline` (a
+        `time.monotonic()` value): returns the tick of the last message derived, or None when
+        all were."""
+        assert self.derive is not None
+        self._writer.flush()  # every message added is in a complete chunk, on disk
+        end = self._file.tell()
+        with open(self.part, "rb") as f:
+            for i, (key, log_time, publish_time, data) in enumerate(
+                    _bus_messages(_Capped(f, end), set(self._channels.values()))):
+                if deadline is not None and i % 1024 == 0 and time.monotonic() > deadline:
+                    return publish_time // self.tick_ns
+                for d in self.derive(key, data, log_time):
+                    self._add_derived(d, log_time)
+        return None
 
     def _add_derived(self, d: DerivedMessage, log_time_ns: int) -> None:
         channel = self._derived_channels.get(d.topic)
@@ -184,8 +207,9 @@ class McapRecorder:
         the recorder being killed outright (the shell calls this every second or so)."""
         self._writer.flush()
 
-    def close(self, end: Mapping[str, str] | None = None) -> Path:
-        """Write the `conag.end` metadata, the summary and the footer; rename `OUT.part` to
+    def close(self, end: Mapping[str, str] | None = None, derive_deadline: float | None = None) -> Path:
+        """Write the derived channels (until `derive_deadline`, a `time.monotonic()` value, if
+        given), the `conag.end` metadata, the summary and the footer; rename `OUT.part` to
         `OUT`. Returns the path of the finished file. A second call does nothing."""
         if self._closed:
             return self.path
@@ -193,7 +217,11 @@ class McapRecorder:
         try:
             meta = {"messages": str(self.messages), "last_tick": str(self.tick), "channels": str(len(self.counts))}
             if self.derive is not None:
+                cut = self._derive_recorded(derive_deadline)
                 meta.update(derived_messages=str(sum(self.derived.values())), derived_channels=str(len(self.derived)))
+                if cut is not None:
+                    self.derived_until = cut
+                    meta.update(derived_until_tick=str(cut))
             meta.update({k: str(v) for k, v in (end or {}).items()})
             self._writer.add_metadata(END_METADATA, meta)
             self._writer.finish()
@@ -336,6 +364,83 @@ def _read_indexed(f: IO[bytes], keep: Callable[[str], bool] | None) -> Recording
               if c.message_encoding == MESSAGE_ENCODING and (keep is None or keep(c.topic))]
     rec.entries = [_entry(channel, message, tick_ns)
                    for _, channel, message in reader.iter_messages(topics=topics, log_time_order=False)]
+    return rec
+
+
+class _Capped(io.RawIOBase):
+    """The first `end` bytes of a file opened for reading: what a writer still appending to
+    it had written when the reading began."""
+
+    def __init__(self, f: IO[bytes], end: int):
+        self.f, self.left = f, end
+
+    def readable(self) -> bool:
+        return True
+
+    def readinto(self, b) -> int:
+        n = self.f.readinto(memoryview(b)[:min(len(b), self.left)]) or 0  # type: ignore[attr-defined]
+        self.left -= n
+        return n
+
+
+def _bus_messages(raw: io.RawIOBase, channel_ids: set[int]) -> Iterator[tuple[str, int, int, bytes]]:
+    """(key, log time, publish time, bytes) of every message of the given channels, in the
+    order the file holds them (a stream read up to its end: no summary or footer needed).
+    The chunks are cut into records here, not by `mcap`, whose Message records took half the
+    time of the translation they fed: most messages (commands, decisions, most frames) are
+    only skipped by it."""
+    topics: dict[int, str] = {}
+    records = StreamReader(io.BufferedReader(raw), skip_magic=False, emit_chunks=True).records
+    while True:
+        try:
+            record = next(records)
+        except (StopIteration, EndOfFile):  # the end of what was written: no footer yet
+            return
+        if isinstance(record, Chunk):
+            stream, size = get_chunk_data_stream(record)
+            yield from _chunk_messages(stream.read(size), channel_ids, topics)
+        elif isinstance(record, Channel) and record.id in channel_ids:
+            topics[record.id] = record.topic
+        elif isinstance(record, Message) and record.channel_id in topics:
+            yield topics[record.channel_id], record.log_time, record.publish_time, bytes(record.data)
+
+
+_RECORD = struct.Struct("<BQ")              # a record's opcode and length
+_MESSAGE = struct.Struct("<HIQQ")           # a Message's channel id, sequence, log and publish times
+_CHANNEL = struct.Struct("<HHI")            # a Channel's id, schema id and topic length
+
+
+def _chunk_messages(data: bytes, channel_ids: set[int],
+                    topics: dict[int, str]) -> Iterator[tuple[str, int, int, bytes]]:
+    """The messages of the given channels in one chunk's records (MCAP's layout: opcode,
+    length, body), learning the channels the chunk declares into `topics`."""
+    pos, end = 0, len(data)
+    while pos < end:
+        opcode, length = _RECORD.unpack_from(data, pos)
+        body = pos + _RECORD.size
+        if opcode == Opcode.MESSAGE:
+            channel, _, log_time, publish_time = _MESSAGE.unpack_from(data, body)
+            key = topics.get(channel)
+            if key is not None:
+                yield key, log_time, publish_time, data[body + _MESSAGE.size:body + length]
+        elif opcode == Opcode.CHANNEL:
+            channel, _, n = _CHANNEL.unpack_from(data, body)
+            if channel in channel_ids:
+                topics[channel] = data[body + _CHANNEL.size:body + _CHANNEL.size + n].decode()
+        pos = body + length
+
+
+def add_derived_channels(src: str | Path, out: str | Path, derive: Derive) -> Recording:
+    """Write `src`'s bus messages to `out` with the derived channels beside them, as a
+    recorder would have (for a recording made without them, or the `.part` a killed
+    recorder left, read up to its last complete chunk). Returns what was read from `src`."""
+    rec = read_recording(src)
+    tick_ns = int(rec.info.get("tick_ns", DEFAULT_TICK_NS))
+    end = {k: v for k, v in rec.metadata.get(END_METADATA, {}).items() if not k.startswith("derived_")}
+    with McapRecorder(out, rec.info, tick_ns=tick_ns, derive=derive) as writer:
+        for e in rec.entries:
+            writer.add(e.key, e.data, e.log_time)
+        writer.close(end)
     return rec
 
 

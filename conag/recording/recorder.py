@@ -14,8 +14,12 @@ then, so the recording holds the run from its first tick. The newest status goes
 the file's closing metadata (scenario name, seed, tick mode, ticks, completed).
 With `maps_every` N, it asks the agents for their map snapshots every N ticks (a maps
 request token, see agent_runtime/feeds.py), so they are recorded too.
-With `foxglove` (the default), each message also goes through a
-`conag.foxglove.convert.Translator`, whose Foxglove channels are written beside the bus's.
+With `foxglove` (the default), the recorded messages then go through a
+`conag.foxglove.convert.Translator`, whose Foxglove channels are written beside the bus's
+once the recorder is stopped (`McapRecorder.close`: during the run the recorder only
+receives and writes), for at most `DERIVE_LIMIT` seconds: past that, the file says up to
+which tick they go (`derived_until_tick`) and `conag record OUT --translate IN` makes them
+all.
 
 A busy machine. The world's frames reach the recorder with congestion control BLOCK: a
 recorder that falls behind holds the world back, but zenoh closes the world's link to it
@@ -63,12 +67,13 @@ from protocol.messages import WorldStatus
 log = logging.getLogger("conag.record")
 
 QUEUE_DEPTH = 65_536   # samples zenoh may hold for the writer; when full, zenoh's receiving thread waits
-IDLE_SLEEP = 0.010     # seconds the writer sleeps when nothing is waiting (2 ms: 15% more of the recorder's CPU;
-                       # 10 ms leaves some 30 messages of a 3-agent run waiting, of QUEUE_DEPTH)
+IDLE_SLEEP = 0.050     # seconds the writer sleeps when nothing is waiting (10 ms: a tenth more of its CPU, the
+                       # batches smaller; 50 ms leaves some 150 messages of a 3-agent run waiting, of QUEUE_DEPTH)
 DRAIN_BATCH = 1024     # messages the loop writes before it turns again (flushes every `flush_every`, watches the world)
 QUIET = 0.5            # once stopped, the recorder writes on until nothing has come for this long ...
 QUIET_LIMIT = 10.0     # ... or for at most this long
 STARVED = 1.0          # seconds the loop went without the CPU: an idle recorder then leaves the idle priority
+DERIVE_LIMIT = 40.0    # seconds the Foxglove channels may take to write once stopped (`conag run` waits 60 for it all)
 LEASE_MS = 60_000      # the recorder session's zenoh lease: how long others wait for it when it is silent
 
 
@@ -161,9 +166,21 @@ def run_recorder(session: zenoh.Session, world_id: str, out: str | Path, stop: t
         end = {} if st is None else {"scenario_name": st.scenario, "seed": st.seed, "mode": st.mode,
                                      "ticks": st.tick, "completed": st.completed}
         end.update(report.gaps.end_metadata())
-        report.path = recorder.close(end)
+        started = time.monotonic()
+        report.path = recorder.close(end, derive_deadline=started + DERIVE_LIMIT)
         report.messages, report.last_tick = recorder.messages, recorder.tick
+        if recorder.derive is not None:
+            _say_derived(recorder, time.monotonic() - started, out)
     return report
+
+
+def _say_derived(recorder: McapRecorder, seconds: float, out: str | Path) -> None:
+    if recorder.derived_until is None:
+        log.info("recorder: wrote %d Foxglove messages in %.1f s", sum(recorder.derived.values()), seconds)
+    else:
+        log.warning("recorder: the Foxglove channels go up to tick %d of %d (writing them took longer than %g s); "
+                    "`conag record OUT.mcap --translate %s` writes a copy with them all", recorder.derived_until,
+                    recorder.tick, DERIVE_LIMIT, out)
 
 
 def drain_until_quiet(drain: Callable[[], int], quiet: float = QUIET, limit: float = QUIET_LIMIT, *,
