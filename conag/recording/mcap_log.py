@@ -27,13 +27,15 @@ travelled (the one msgpack codec of `protocol`), so a replay re-publishes them u
   a time when its caches were the run's). Reading a recording (`read_recording`) takes
   the msgpack channels only: a replay never sees the others.
 
-`McapRecorder` writes to `OUT.part` and renames it to `OUT` once the summary and footer
-are written, so `OUT` is always a complete file. A recorder killed outright (SIGKILL)
-leaves `OUT.part`: a chunk is written whole when it fills (`chunk_size`) or when the
-recorder's `flush` ends it (the recorder process does so every second), so
-`read_recording` reads such a file up to its last complete chunk and says it is
-incomplete; only the messages of the chunk in progress are lost (and the derived channels,
-which are made on close: `add_derived_channels` makes them for such a file).
+The file is written by `conag.recording.mcap_write` (a chunked, indexed MCAP file, in few
+Python steps a message) and read with the `mcap` package. `McapRecorder` writes to
+`OUT.part` and renames it to `OUT` once the summary and footer are written, so `OUT` is
+always a complete file. A recorder killed outright (SIGKILL) leaves `OUT.part`: a chunk is
+written whole when it fills (`chunk_size`) or when the recorder's `flush` ends it (the
+recorder process does so every second), so `read_recording` reads such a file up to its
+last complete chunk and says it is incomplete; only the messages of the chunk in progress
+are lost (and the derived channels, which are made on close: `add_derived_channels` makes
+them for such a file).
 """
 
 from __future__ import annotations
@@ -55,8 +57,8 @@ from mcap.opcode import Opcode
 from mcap.reader import make_reader
 from mcap.records import Channel, Chunk, Message, Metadata
 from mcap.stream_reader import StreamReader, get_chunk_data_stream
-from mcap.writer import CompressionType, Writer
 
+from conag.recording.mcap_write import ChunkedWriter
 from protocol.messages import MESSAGE_TYPES, SCHEMA_VERSION
 
 MESSAGE_ENCODING = "msgpack"
@@ -129,8 +131,7 @@ class McapRecorder:
     """
 
     def __init__(self, out: str | Path, metadata: Mapping[str, str] | None = None, *,
-                 tick_ns: int = DEFAULT_TICK_NS, chunk_size: int = CHUNK_SIZE,
-                 compression: CompressionType = CompressionType.ZSTD, derive: Derive | None = None):
+                 tick_ns: int = DEFAULT_TICK_NS, chunk_size: int = CHUNK_SIZE, derive: Derive | None = None):
         self.path = Path(out)
         self.part = self.path.with_name(self.path.name + ".part")
         self.tick_ns = tick_ns
@@ -143,8 +144,8 @@ class McapRecorder:
         self._schemas: dict[str, int] = {}
         self.derived_until: int | None = None  # set by `close` when the deadline cut the derived channels short
         self._file: IO[bytes] = open(self.part, "wb")  # noqa: SIM115 -- closed by close()
-        self._writer = Writer(self._file, chunk_size=chunk_size, compression=compression)
-        self._writer.start(profile=PROFILE, library=f"conag via {_mcap_library()}")
+        self._writer = ChunkedWriter(self._file, chunk_size=chunk_size)
+        self._writer.start(profile=PROFILE, library=f"conag {_conag_version()} (conag.recording.mcap_write)")
         meta = {"schema_version": str(SCHEMA_VERSION), "tick_ns": str(tick_ns)}
         meta.update({k: str(v) for k, v in (metadata or {}).items()})
         self._writer.add_metadata(METADATA, meta)
@@ -237,10 +238,13 @@ class McapRecorder:
         self.close()
 
 
-def _mcap_library() -> str:
-    from importlib.metadata import version
+def _conag_version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
 
-    return f"mcap-python {version('mcap')}"
+    try:
+        return version("conag")
+    except PackageNotFoundError:
+        return "unknown"
 
 
 # --- reading ----------------------------------------------------------------------------
