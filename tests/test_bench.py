@@ -102,3 +102,14 @@ def test_floor_bench_runs_null_agents_and_prints_the_floor():
     assert not figures["processes"]["last_line"].endswith("total distance 0.0")
     row = next(line for line in r.stdout.splitlines() if line.startswith("| ") and line[2].isdigit())
     assert row.rstrip().endswith("| yes |") and figures["floor"] > 0
+
+
+def test_windows_bench_has_the_recorder_listen_in_turns_and_pairs_the_windows():
+    r = subprocess.run([sys.executable, "-m", "bench.bench_record_windows", "--quick", "--scenario",
+                        "scenarios/large/scale.toml", "--ticks", "2500", "--window", "0.4"], cwd=ROOT,
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr   # non-zero when no window had two measured windows without it beside it
+    [line] = [line for line in r.stdout.splitlines() if "paired slowdown" in line]
+    pairs = int(line.split(" pairs, ")[0].rsplit("; ", 1)[1])
+    assert pairs >= 1, line
+    assert "ticks/s without the recorder" in line and "with it" in line
