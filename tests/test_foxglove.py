@@ -314,6 +314,28 @@ def test_translate_makes_the_foxglove_channels_of_what_a_killed_recorder_left(tm
     assert [e.data for e in read_recording(tmp_path / "out.mcap").entries] == [d for _, d, _ in messages[:24]]
 
 
+def test_a_translation_that_fails_on_close_loses_no_bus_message(tmp_path):
+    # The Foxglove channels are made as the file is closed: should the translation raise,
+    # the file is finished all the same, every bus message in it, and says what went wrong.
+    messages = _encoded(40)
+    seen = []
+
+    def derive(key, data, t):
+        seen.append(key)
+        if len(seen) == 20:
+            raise RuntimeError("a translator bug")
+        return Translator.feed(translator, key, data, t)
+
+    translator = Translator()
+    rec = McapRecorder(tmp_path / "r.mcap", derive=derive, chunk_size=300)
+    for key, data, t in messages:
+        rec.add(key, data, t)
+    path = rec.close()
+    assert path == tmp_path / "r.mcap" and path.exists() and not rec.part.exists()
+    assert [e.data for e in read_recording(path).entries] == [d for _, d, _ in messages]
+    assert read_end(path)["derived_error"] == "RuntimeError: a translator bug" == rec.derive_error
+
+
 def test_translate_refuses_what_it_cannot_do(tmp_path, capsys):
     from conag.cli import main
 

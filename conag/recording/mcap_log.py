@@ -143,6 +143,7 @@ class McapRecorder:
         self._derived_channels: dict[str, int] = {}
         self._schemas: dict[str, int] = {}
         self.derived_until: int | None = None  # set by `close` when the deadline cut the derived channels short
+        self.derive_error = ""                 # ... and this when `derive` failed there (the file is finished)
         self._file: IO[bytes] = open(self.part, "wb")  # noqa: SIM115 -- closed by close()
         self._writer = ChunkedWriter(self._file, chunk_size=chunk_size)
         self._writer.start(profile=PROFILE, library=f"conag {_conag_version()} (conag.recording.mcap_write)")
@@ -218,7 +219,12 @@ class McapRecorder:
         try:
             meta = {"messages": str(self.messages), "last_tick": str(self.tick), "channels": str(len(self.counts))}
             if self.derive is not None:
-                cut = self._derive_recorded(derive_deadline)
+                try:
+                    cut = self._derive_recorded(derive_deadline)
+                except Exception as exc:  # noqa: BLE001 -- the bus's messages are written: finish the file all the same
+                    self.derive_error = f"{type(exc).__name__}: {exc}"
+                    meta.update(derived_error=self.derive_error)
+                    cut = None
                 meta.update(derived_messages=str(sum(self.derived.values())), derived_channels=str(len(self.derived)))
                 if cut is not None:
                     self.derived_until = cut

@@ -175,7 +175,10 @@ def run_recorder(session: zenoh.Session, world_id: str, out: str | Path, stop: t
 
 
 def _say_derived(recorder: McapRecorder, seconds: float, out: str | Path) -> None:
-    if recorder.derived_until is None:
+    if recorder.derive_error:
+        log.warning("recorder: making the Foxglove channels failed (%s); the bus's messages are all written, and "
+                    "`conag record OUT.mcap --translate %s` tries again", recorder.derive_error, out)
+    elif recorder.derived_until is None:
         log.info("recorder: wrote %d Foxglove messages in %.1f s", sum(recorder.derived.values()), seconds)
     else:
         log.warning("recorder: the Foxglove channels go up to tick %d of %d (writing them took longer than %g s); "
