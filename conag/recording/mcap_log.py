@@ -44,7 +44,6 @@ import dataclasses
 import functools
 import io
 import os
-import struct
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
@@ -53,12 +52,11 @@ from typing import IO, Protocol
 
 import msgpack
 from mcap.exceptions import EndOfFile, McapError
-from mcap.opcode import Opcode
 from mcap.reader import make_reader
 from mcap.records import Channel, Chunk, Message, Metadata
 from mcap.stream_reader import StreamReader, get_chunk_data_stream
 
-from conag.recording.mcap_write import ChunkedWriter
+from conag.recording.mcap_write import CHANNEL, CHANNEL_HEAD, MESSAGE, MESSAGE_HEAD, RECORD, ChunkedWriter
 from protocol.messages import MESSAGE_TYPES, SCHEMA_VERSION
 
 MESSAGE_ENCODING = "msgpack"
@@ -415,28 +413,23 @@ def _bus_messages(raw: io.RawIOBase, channel_ids: set[int]) -> Iterator[tuple[st
             yield topics[record.channel_id], record.log_time, record.publish_time, bytes(record.data)
 
 
-_RECORD = struct.Struct("<BQ")              # a record's opcode and length
-_MESSAGE = struct.Struct("<HIQQ")           # a Message's channel id, sequence, log and publish times
-_CHANNEL = struct.Struct("<HHI")            # a Channel's id, schema id and topic length
-
-
 def _chunk_messages(data: bytes, channel_ids: set[int],
                     topics: dict[int, str]) -> Iterator[tuple[str, int, int, bytes]]:
     """The messages of the given channels in one chunk's records (MCAP's layout: opcode,
     length, body), learning the channels the chunk declares into `topics`."""
     pos, end = 0, len(data)
     while pos < end:
-        opcode, length = _RECORD.unpack_from(data, pos)
-        body = pos + _RECORD.size
-        if opcode == Opcode.MESSAGE:
-            channel, _, log_time, publish_time = _MESSAGE.unpack_from(data, body)
+        opcode, length = RECORD.unpack_from(data, pos)
+        body = pos + RECORD.size
+        if opcode == MESSAGE:
+            channel, _, log_time, publish_time = MESSAGE_HEAD.unpack_from(data, body)
             key = topics.get(channel)
             if key is not None:
-                yield key, log_time, publish_time, data[body + _MESSAGE.size:body + length]
-        elif opcode == Opcode.CHANNEL:
-            channel, _, n = _CHANNEL.unpack_from(data, body)
+                yield key, log_time, publish_time, data[body + MESSAGE_HEAD.size:body + length]
+        elif opcode == CHANNEL:
+            channel, _, n = CHANNEL_HEAD.unpack_from(data, body)
             if channel in channel_ids:
-                topics[channel] = data[body + _CHANNEL.size:body + _CHANNEL.size + n].decode()
+                topics[channel] = data[body + CHANNEL_HEAD.size:body + CHANNEL_HEAD.size + n].decode()
         pos = body + length
 
 

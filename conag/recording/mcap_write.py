@@ -34,8 +34,10 @@ HEADER, FOOTER, SCHEMA, CHANNEL, MESSAGE, CHUNK, MESSAGE_INDEX, CHUNK_INDEX = 0x
     0x07, 0x08
 STATISTICS, METADATA, METADATA_INDEX, SUMMARY_OFFSET, DATA_END = 0x0B, 0x0C, 0x0D, 0x0E, 0x0F
 
-_MESSAGE = struct.Struct("<BQHIQQ")   # opcode, length, channel id, sequence, log time, publish time
-_MESSAGE_FIXED = 2 + 4 + 8 + 8       # the message body before its data
+RECORD = struct.Struct("<BQ")           # every record starts with its opcode and the length of its body
+MESSAGE_HEAD = struct.Struct("<HIQQ")   # a Message's body before its data: channel id, sequence, log and publish time
+CHANNEL_HEAD = struct.Struct("<HHI")    # a Channel's body up to its topic: id, schema id, the topic's length
+_MESSAGE = struct.Struct("<BQHIQQ")     # RECORD and MESSAGE_HEAD in one call, as a message is written
 
 
 def _string(s: str) -> bytes:
@@ -70,8 +72,8 @@ class ChunkedWriter:
         self._chunk_indexes: list[bytes] = []
         self._metadata_indexes: list[bytes] = []
         self._counts: dict[int, int] = {}        # messages per channel
-        self._start_time = self._end_time = 0
-        self._messages = 0
+        self._start_time: int | None = None     # the earliest and latest log time of any chunk
+        self._end_time = 0
 
     # --- writing ---------------------------------------------------------------------------------
     def _write(self, data: bytes) -> None:
@@ -112,7 +114,7 @@ class ChunkedWriter:
         if index is None:
             index = self._chunk_index[channel_id] = []
         index.append((log_time, len(chunk)))
-        chunk += _MESSAGE.pack(MESSAGE, _MESSAGE_FIXED + len(data), channel_id, sequence, log_time, publish_time)
+        chunk += _MESSAGE.pack(MESSAGE, MESSAGE_HEAD.size + len(data), channel_id, sequence, log_time, publish_time)
         chunk += data
         self._counts[channel_id] += 1
         if len(chunk) >= self._chunk_size:
@@ -143,15 +145,14 @@ class ChunkedWriter:
         offsets = {}
         for cid, entries in sorted(self._chunk_index.items()):
             offsets[cid] = self._offset
-            pairs = b"".join(struct.pack("<QQ", t, o) for t, o in entries)
+            pairs = struct.pack(f"<{2 * len(entries)}Q", *(x for pair in entries for x in pair))
             self._write(_record(MESSAGE_INDEX, struct.pack("<HI", cid, len(pairs)) + pairs))
         if not self._chunk_index:  # a chunk of schemas and channels alone: no times to index
             self._chunk_start = self._chunk_end = 0
         else:
-            n = sum(len(e) for e in self._chunk_index.values())
-            self._start_time = self._chunk_start if not self._messages else min(self._start_time, self._chunk_start)
+            self._start_time = min(self._chunk_start, self._chunk_start if self._start_time is None
+                                   else self._start_time)
             self._end_time = max(self._end_time, self._chunk_end)
-            self._messages += n
         index_map = b"".join(struct.pack("<HQ", cid, off) for cid, off in offsets.items())
         self._chunk_indexes.append(_record(CHUNK_INDEX, struct.pack("<QQQQ", self._chunk_start, self._chunk_end,
                                                                     chunk_offset, chunk_length)
@@ -187,7 +188,8 @@ class ChunkedWriter:
 
     def _statistics(self) -> bytes:
         counts = b"".join(struct.pack("<HQ", cid, n) for cid, n in sorted(self._counts.items()))
-        return _record(STATISTICS, struct.pack("<QHIIII", self._messages, len(self._schemas), len(self._channels), 0,
-                                               len(self._metadata_indexes), len(self._chunk_indexes))
-                       + struct.pack("<QQ", self._start_time, self._end_time)
+        return _record(STATISTICS, struct.pack("<QHIIII", sum(self._counts.values()), len(self._schemas),
+                                               len(self._channels), 0, len(self._metadata_indexes),
+                                               len(self._chunk_indexes))
+                       + struct.pack("<QQ", self._start_time or 0, self._end_time)
                        + struct.pack("<I", len(counts)) + counts)
